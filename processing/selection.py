@@ -1,0 +1,208 @@
+"""Frequency-line and band selection (article section 3, and automatic bands).
+
+- Reconstruction error (eqs. 15-16): how far each line's FRFs are from a
+  rigid-body motion, ``H - E E^+ H``.
+- Elastic modes: peaks of the non-rigid residual, fitted with a single-mode
+  shape to get their frequency and damping (used to model their leakage).
+- Rigid-body modes: from a quick fit of the apparent mass ``T X^+ = M - K*/w^2``.
+- Bands: the mass line above the rigid-body modes and below the first elastic
+  mode, the stiffness band through the rigid-body modes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+import scipy.signal
+from numpy.typing import NDArray
+
+from processing.data import InputError
+
+__all__ = [
+    "BandChoice",
+    "ElasticPeak",
+    "choose_bands",
+    "elastic_peaks",
+    "mode_shape_basis",
+    "reconstruction_error",
+    "select_lines",
+]
+
+
+def reconstruction_error(
+    H: NDArray[np.complex128], E: NDArray[np.float64], Epinv: NDArray[np.float64] | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-line rigid-body reconstruction error (eq. 15), absolute and relative.
+
+    Returns ``(abs_err, rel_err)``, each (n_f,): the Frobenius norm over all FRFs
+    of ``H_j - E E^+ H_j``, and that divided by the norm of ``H_j``.
+    """
+    n_r, n_e, n_f = H.shape
+    P = E @ (np.linalg.pinv(E) if Epinv is None else Epinv)
+    R = H.reshape(n_r, -1) - P @ H.reshape(n_r, -1)
+    a = np.sqrt(np.sum(np.abs(R.reshape(n_r, n_e, n_f)) ** 2, axis=(0, 1)))
+    h = np.sqrt(np.sum(np.abs(H) ** 2, axis=(0, 1)))
+    return a, a / np.where(h > 0, h, np.inf)
+
+
+def select_lines(rel_err: NDArray[np.float64], in_band: NDArray[np.bool_], level: float) -> (
+    NDArray[np.bool_]
+):
+    """Section 3 rule: keep band lines whose error is below ``level`` x the band's mean error."""
+    if not np.any(in_band):
+        return in_band
+    mean = float(np.mean(rel_err[in_band]))
+    return in_band & (rel_err <= level * mean + 1e-300)
+
+
+@dataclass(frozen=True)
+class ElasticPeak:
+    """An elastic mode seen in the non-rigid residual: frequency (Hz), damping ratio."""
+
+    frequency: float
+    damping: float
+
+
+def mode_shape_basis(w: NDArray[np.float64], peak: ElasticPeak) -> NDArray[np.complex128]:
+    """Frequency shape of a mode's accelerance: ``-w^2 / (w_e^2 - w^2 + 2 j zeta w_e w)``."""
+    we = 2 * np.pi * peak.frequency
+    return np.asarray(-(w**2) / (we**2 - w**2 + 2j * peak.damping * we * w), dtype=complex)
+
+
+def _fit_peak(freq: NDArray[np.float64], R: NDArray[np.complex128], f0: float) -> ElasticPeak:
+    """Fit one mode ``U b(w) + V w^2`` to the residual FRFs R (n, n_f) near ``f0``."""
+    sel = (freq > 0.7 * f0) & (freq < 1.3 * f0)
+    if np.count_nonzero(sel) < 4:
+        sel = np.isin(np.arange(freq.size), np.argsort(np.abs(freq - f0))[:6])
+    f = freq[sel]
+    w = 2 * np.pi * f
+    Rs = R[:, sel]
+
+    def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        b = mode_shape_basis(w, ElasticPeak(p[0], p[1]))
+        A = np.stack([b, w**2 + 0j], axis=1)  # (n_l, 2)
+        Ar = np.concatenate([A.real, A.imag])
+        Yr = np.concatenate([Rs.real.T, Rs.imag.T])
+        coef, *_ = np.linalg.lstsq(Ar, Yr, rcond=None)
+        return np.asarray((Yr - Ar @ coef).ravel())
+
+    best = None
+    for z0 in (0.005, 0.02, 0.06):
+        sol = scipy.optimize.least_squares(
+            resid, x0=[f0, z0], bounds=([0.8 * f0, 1e-4], [1.2 * f0, 0.3]), x_scale=[f0, 0.01]
+        )
+        if best is None or sol.cost < best.cost:
+            best = sol
+    assert best is not None
+    return ElasticPeak(float(best.x[0]), float(best.x[1]))
+
+
+def elastic_peaks(
+    freq: NDArray[np.float64],
+    H: NDArray[np.complex128],
+    E: NDArray[np.float64],
+    *,
+    min_rel: float = 0.01,
+) -> tuple[ElasticPeak, ...]:
+    """Elastic modes seen in the data: peaks of the non-rigid residual.
+
+    A peak counts where the relative reconstruction error
+    stands out of its surroundings by a factor 3 (prominence in log scale) and exceeds
+    both ``min_rel`` and three times the median error (the noise floor).
+    """
+    n_r, n_e, n_f = H.shape
+    if n_r <= 6 or n_f < 5:
+        return ()
+    _, rel = reconstruction_error(H, E)
+    logr = np.log10(np.maximum(rel, 1e-12))
+    idx, _ = scipy.signal.find_peaks(logr, prominence=np.log10(3.0))
+    idx = idx[rel[idx] > max(min_rel, 3.0 * float(np.median(rel)))]
+    if idx.size == 0:
+        return ()
+    P = np.eye(n_r) - E @ np.linalg.pinv(E)
+    R = (P @ H.reshape(n_r, -1)).reshape(n_r * n_e, n_f)
+    # keep the strongest residual directions only, for speed
+    U, _s, _ = np.linalg.svd(R, full_matrices=False)
+    R = (U[:, :4].conj().T @ R) if U.shape[1] > 4 else R
+    return tuple(_fit_peak(freq, R, float(freq[i])) for i in idx)
+
+
+@dataclass(frozen=True)
+class BandChoice:
+    """Bands chosen from the data, with the evidence used."""
+
+    mass_band: tuple[float, float]
+    stiffness_band: tuple[float, float]
+    rigid_mode_max: float
+    rigid_modes: NDArray[np.float64]
+    elastic: tuple[ElasticPeak, ...]
+
+
+def quick_rigid_modes(
+    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Rigid-body mode frequencies (Hz) from a fit of ``Re(T X^+) = M - K / w^2``."""
+    Xl = np.moveaxis(X, -1, 0)
+    Xh = np.conj(np.swapaxes(Xl, 1, 2))
+    A = np.swapaxes(
+        np.linalg.solve(np.swapaxes(Xl @ Xh, 1, 2), np.swapaxes(T[None] @ Xh, 1, 2)), 1, 2
+    )  # apparent mass T X^+ per line (n_l, 6, 6)
+    u = 1.0 / w**2
+    D = np.stack([np.ones_like(u), -u], axis=1)
+    coef, *_ = np.linalg.lstsq(D, A.real.reshape(len(w), 36), rcond=None)
+    M = coef[0].reshape(6, 6)
+    K = coef[1].reshape(6, 6)
+    M = 0.5 * (M + M.T)
+    K = 0.5 * (K + K.T)
+    try:
+        w2 = scipy.linalg.eigh(K, M, eigvals_only=True)
+    except (np.linalg.LinAlgError, ValueError):
+        w2 = np.linalg.eigvals(np.linalg.solve(M, K)).real
+    return np.sort(np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi))
+
+
+def choose_bands(
+    freq: NDArray[np.float64],
+    X: NDArray[np.complex128],
+    T: NDArray[np.float64],
+    elastic: tuple[ElasticPeak, ...],
+    *,
+    rigid_band_top: float | None = None,
+    mass_low_factor: float = 2.0,
+    elastic_margin: float = 0.7,
+) -> BandChoice:
+    """Automatic mass-line and stiffness bands.
+
+    The mass line starts ``mass_low_factor`` times above the highest rigid-body
+    mode and ends at ``elastic_margin`` times the first elastic mode (whose
+    leakage is modelled) or at the rigidity limit ``rigid_band_top`` or the end
+    of the data. The stiffness band runs from the first line to 1.5 times the
+    highest rigid-body mode (not into the mass line).
+    """
+    f_hi = float(freq[-1])
+    if elastic:
+        f_hi = min(f_hi, elastic_margin * min(p.frequency for p in elastic))
+    if rigid_band_top is not None:
+        f_hi = min(f_hi, rigid_band_top)
+    sel = (freq > 0) & (freq <= f_hi)
+    if np.count_nonzero(sel) < 4:
+        raise InputError(
+            f"no usable lines below {f_hi:.1f} Hz (elastic modes or rigidity limit): "
+            "give --mass-band and --stiffness-band"
+        )
+    fr = quick_rigid_modes(X[..., sel], T, 2 * np.pi * freq[sel])
+    f_rig = float(fr[-1])
+    lo = mass_low_factor * f_rig
+    if lo >= 0.8 * f_hi:
+        lo = 1.3 * f_rig
+    if lo >= 0.9 * f_hi or np.count_nonzero((freq >= lo) & (freq <= f_hi)) < 3:
+        raise InputError(
+            f"no mass line found: the rigid-body modes (up to {f_rig:.1f} Hz) reach the "
+            f"elastic/rigidity limit ({f_hi:.1f} Hz); give --mass-band LO HI"
+        )
+    s_hi = min(1.5 * f_rig, lo)
+    s_lo = float(freq[freq > 0][0])
+    return BandChoice((float(lo), float(f_hi)), (s_lo, float(s_hi)), f_rig, fr, elastic)

@@ -1,0 +1,127 @@
+"""System dynamic stiffness at O (article eqs. 12-14) and its fit to K + j w C.
+
+``K*(w) X(w) = w^2 (M X(w) - T)``: per line, ``K*`` follows by a right
+pseudo-inverse of X (eq. 14). Over a band, the real ``K`` and ``C`` of
+``K* = K + j w C`` are fitted directly to these equations in the
+least-squares sense (optionally symmetric), from 6x6 moments of X.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["StiffnessFit", "dynamic_stiffness", "fit_stiffness"]
+
+
+def dynamic_stiffness(
+    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64],
+    M: NDArray[np.float64],
+) -> NDArray[np.complex128]:
+    """Complex dynamic stiffness K*(w) per line, (n_lines, 6, 6) (eq. 14).
+
+    Uses the least-squares right inverse ``X^H (X X^H)^-1`` (the article writes
+    the plain transpose; both are exact on noise-free data, this one is the
+    least-squares solution on noisy data).
+
+    Parameters
+    ----------
+    X : (6, n_exc, n_lines) rigid-body accelerances at O
+    T : (6, n_exc) generalised unit forces
+    w : (n_lines,) rad/s
+    M : (6, 6) mass matrix at O
+    """
+    Xl = np.moveaxis(X, -1, 0)  # (n_l, 6, n_e)
+    Y = (w**2)[:, None, None] * (M @ Xl - T[None])
+    G = Xl @ np.conj(np.swapaxes(Xl, 1, 2))  # X X^H
+    R = Y @ np.conj(np.swapaxes(Xl, 1, 2))  # Y X^H
+    # K* G = R  ->  G^T K*^T = R^T
+    return np.swapaxes(np.linalg.solve(np.swapaxes(G, 1, 2), np.swapaxes(R, 1, 2)), 1, 2)
+
+
+def _duplication() -> NDArray[np.float64]:
+    """vec (row-major) of a symmetric 6x6 from its 21 upper-triangle entries."""
+    iu = np.triu_indices(6)
+    D = np.zeros((36, 21))
+    for n, (i, j) in enumerate(zip(*iu, strict=True)):
+        D[6 * i + j, n] = 1.0
+        D[6 * j + i, n] = 1.0
+    return D
+
+
+_DUP = _duplication()
+
+
+@dataclass(frozen=True)
+class StiffnessFit:
+    """K and C at O fitted over a band; ``rss`` of the (scaled) equations."""
+
+    K: NDArray[np.float64]
+    C: NDArray[np.float64]
+    rss: float
+    n_equations: int
+
+
+def fit_stiffness(
+    X: NDArray[np.complex128],
+    T: NDArray[np.float64],
+    w: NDArray[np.float64],
+    M: NDArray[np.float64],
+    *,
+    weights: NDArray[np.float64] | None = None,
+    row_scale: NDArray[np.float64] | None = None,
+    symmetric: bool = True,
+) -> StiffnessFit:
+    """Real K, C with ``(K + j w C) X_j = w_j^2 (M X_j - T)`` over the lines given.
+
+    Parameters
+    ----------
+    X : (6, n_exc, n_lines) complex, rigid-body accelerances at O
+    T : (6, n_exc) generalised unit forces
+    w : (n_lines,) rad/s
+    M : (6, 6) identified mass matrix at O
+    weights : (n_exc, n_lines), optional non-negative weights
+    row_scale : (6,), optional scale of each equation row
+    symmetric : fit symmetric K and C (21 + 21 unknowns) instead of general 36 + 36
+    """
+    n_e, n_l = X.shape[1:]
+    wt = np.ones((n_e, n_l)) if weights is None else np.asarray(weights, float)
+    Xf = X.reshape(6, -1)
+    wl = np.broadcast_to(w, (n_e, n_l)).ravel()
+    Tf = np.broadcast_to(T[:, :, None], X.shape).reshape(6, -1)
+    Yf = wl**2 * (M @ Xf - Tf)
+    Xw0 = np.conj(Xf) * wt.ravel()
+    Xw1 = Xw0 * wl
+    G0 = Xw0 @ Xf.T
+    G1 = Xw1 @ Xf.T
+    G2 = (Xw1 * wl) @ Xf.T
+    R0 = Xw0 @ Yf.T  # (a, i)
+    R1 = Xw1 @ Yf.T
+    # per-row normal block for [K_i; C_i]
+    Nb = np.block([[G0.real, -G1.imag], [G1.imag, G2.real]])
+    s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
+    rK = R0.real * s2[None, :]  # (a, i)
+    rC = R1.imag * s2[None, :]
+    if symmetric:
+        # unknowns u = [vech K; vech C]; vec is row-major over (i, a)
+        Nfull = np.zeros((72, 72))
+        for i in range(6):  # six fixed blocks, not a data loop
+            idx = np.r_[6 * i:6 * i + 6, 36 + 6 * i:36 + 6 * i + 6]
+            Nfull[np.ix_(idx, idx)] = s2[i] * Nb
+        bfull = np.concatenate([rK.T.ravel(), rC.T.ravel()])
+        D2 = np.zeros((72, 42))
+        D2[:36, :21] = _DUP
+        D2[36:, 21:] = _DUP
+        u = np.linalg.solve(D2.T @ Nfull @ D2, D2.T @ bfull)
+        v = D2 @ u
+        K = v[:36].reshape(6, 6)
+        C = v[36:].reshape(6, 6)
+    else:
+        sol = np.linalg.solve(Nb, np.concatenate([rK, rC], axis=0) / s2[None, :])
+        K = sol[:6].T
+        C = sol[6:].T
+    res = K @ Xf + 1j * wl * (C @ Xf) - Yf
+    rss = float(np.sum(s2[:, None] * wt.ravel()[None] * np.abs(res) ** 2))
+    return StiffnessFit(K, C, rss, 2 * 6 * n_e * n_l)

@@ -1,0 +1,76 @@
+"""Identification engine against the physical model's truth (accuracy table of the issue)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hardware_mocks.benches import Bench, get_bench
+from processing.data import FRFSet, InputError
+from processing.geometry import GeometryError
+from processing.identify import IdentificationResult, IdentifyOptions, identify
+from processing.inertia import inertia_properties
+
+
+def errors(bench: Bench, r: IdentificationResult) -> dict[str, float]:
+    """Errors as the issue defines them: mass %, CoG mm, tensor % of largest principal
+    moment (worst of the tensors about O and the CoG), stiffness % of sqrt(K_ii K_jj)."""
+    m = bench.model
+    truth = inertia_properties(m.theta)
+    p = r.properties
+    jmax = truth.principal_moments.max()
+    K = m.K
+    scale = np.sqrt(np.outer(np.diag(K), np.diag(K)))
+    return {
+        "mass": abs(p.mass - m.mass) / m.mass * 100,
+        "cog": float(np.max(np.abs(p.cog - m.cog)) * 1000),
+        "inertia": float(
+            max(
+                np.max(np.abs(p.inertia_origin - truth.inertia_origin)),
+                np.max(np.abs(p.inertia_cog - truth.inertia_cog)),
+            )
+            / jmax
+            * 100
+        ),
+        "stiffness": float(np.max(np.abs(r.K - K) / scale) * 100),
+    }
+
+
+def within(err: dict[str, float], mass: float, cog: float, inertia: float, stiffness: float):
+    limits = {"mass": mass, "cog": cog, "inertia": inertia, "stiffness": stiffness}
+    bad = {k: (round(err[k], 4), v) for k, v in limits.items() if err[k] > v}
+    assert not bad, f"errors above tolerance (error, limit): {bad}"
+
+
+@pytest.mark.parametrize("name", ["block-rigid", "engine-rigid"])
+@pytest.mark.parametrize("method", ["plain", "improved"])
+def test_rigid_no_noise(name: str, method: str) -> None:
+    bench = get_bench(name)
+    r = identify(bench.frfset(), IdentifyOptions(method=method))
+    within(errors(bench, r), mass=0.01, cog=0.05, inertia=0.05, stiffness=0.3)
+    assert r.properties.physically_consistent
+    assert r.converged
+    np.testing.assert_allclose(r.C, bench.model.C, atol=1e-6 * np.abs(bench.model.C).max())
+
+
+@pytest.mark.parametrize("name", ["block-flexible", "block", "engine"])
+def test_flexible_improved(name: str) -> None:
+    bench = get_bench(name)
+    r = identify(bench.frfset())
+    within(errors(bench, r), mass=0.1, cog=0.3, inertia=0.3, stiffness=1.5)
+    assert r.elastic_modes, "the elastic mode should be found in the data"
+
+
+def test_bad_inputs() -> None:
+    bench = get_bench("engine-rigid")
+    f = bench.frfset()
+    H = f.H.copy()
+    H[0, 0, 10] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        identify(FRFSet(f.freq, H, f.resp_nodes, f.resp_dirs, f.exc_nodes, f.exc_dirs,
+                        f.geometry))
+    with pytest.raises(InputError, match="outside the data"):
+        identify(f, IdentifyOptions(mass_band=(60.0, 500.0), stiffness_band=(3.0, 35.0)))
+    with pytest.raises(GeometryError, match="excitation geometry has rank"):
+        identify(FRFSet(f.freq, f.H[:, :5], f.resp_nodes, f.resp_dirs, f.exc_nodes[:5],
+                        f.exc_dirs[:5], f.geometry))
