@@ -52,7 +52,12 @@ from processing.selection import (
     reconstruction_error,
     select_lines,
 )
-from processing.stiffness import dynamic_stiffness, fit_stiffness
+from processing.stiffness import (
+    StiffnessMoments,
+    dynamic_stiffness,
+    fit_stiffness,
+    stiffness_moments,
+)
 from processing.synthesis import SynthesisError, synthesis_error, synthesise
 
 __all__ = ["IdentificationResult", "IdentifyOptions", "identify", "identify_arrays"]
@@ -345,6 +350,7 @@ def identify_arrays(
     converged = False
     it = 0
     fit = None
+    s_moments: StiffnessMoments | None = None
     for it in range(1, opt.max_iter + 1):  # noqa: B007 - iterations reported
         B = T[:, :, None] + _kstar_times(K, C, wm, X_clean_m) / wm**2
         fit = fit_inertia(Xm, B, weights=Wm, row_scale=row_scale, shapes=shapes_m)
@@ -356,8 +362,11 @@ def identify_arrays(
             leak_all = np.einsum("iks,sl->ikl", Yk, np.array(shapes_c))
             X_clean_m = Xm - leak_all[..., mass_sel]
             X_clean_s = Xs - leak_all[..., stiff_sel]
+            s_moments = None
         if improved:
-            sf = fit_stiffness(X_clean_s, T, ws, M, weights=Ws, row_scale=row_scale,
+            if s_moments is None:
+                s_moments = stiffness_moments(X_clean_s, T, ws, Ws)
+            sf = fit_stiffness(s_moments, T, ws, M, row_scale=row_scale,
                                symmetric=opt.symmetric)
             K, C = sf.K, sf.C
         else:

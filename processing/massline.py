@@ -37,8 +37,6 @@ class MassLineFit:
     theta: NDArray[np.float64]
     #: normal matrix of the (scaled) problem, 10x10
     normal: NDArray[np.float64]
-    #: residual sum of squares of the scaled equations
-    rss: float
     #: number of real equations
     n_equations: int
     #: leakage coefficients (6, n_exc, n_shapes): the fitted ``Z`` of ``M X + Z b = B``
@@ -104,11 +102,6 @@ def fit_inertia(
     rhs = MBs.reshape(10, 36) @ W.ravel()
     theta = np.linalg.solve(N, rhs)
     M = np.tensordot(theta, MB, axes=1)
-    # residual sum of squares from the moments: sum s2 |M x - b|^2
-    bb = np.sum(Bf * Bf, axis=1)
-    MGM = np.einsum("ia,ab,ib->i", M, G, M)
-    MW = np.einsum("ia,ia->i", M, W)
-    rss = float(np.sum(s2 * (bb - 2 * MW + MGM)))
     leakage = None
     if Q is not None:
         # Z b = projection of (B - M X) onto the shapes, per column; coefficients in shape basis
@@ -125,4 +118,4 @@ def fit_inertia(
             r = np.einsum("ikl,sl->iks", R, Sh)
         leakage = np.linalg.solve(A[None], r[..., None])[..., 0]
     n_eq = 2 * n6 * n_e * n_l
-    return MassLineFit(theta, N, max(rss, 0.0), n_eq, leakage)
+    return MassLineFit(theta, N, n_eq, leakage)

@@ -13,7 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["StiffnessFit", "dynamic_stiffness", "fit_stiffness"]
+__all__ = [
+    "StiffnessFit",
+    "StiffnessMoments",
+    "dynamic_stiffness",
+    "fit_stiffness",
+    "stiffness_moments",
+]
 
 
 def dynamic_stiffness(
@@ -52,20 +58,60 @@ def _duplication() -> NDArray[np.float64]:
 
 
 _DUP = _duplication()
+_DUP2 = np.zeros((72, 42))
+_DUP2[:36, :21] = _DUP
+_DUP2[36:, 21:] = _DUP
 
 
 @dataclass(frozen=True)
 class StiffnessFit:
-    """K and C at O fitted over a band; ``rss`` of the (scaled) equations."""
+    """K and C at O fitted over a band, from ``n_equations`` real equations."""
 
     K: NDArray[np.float64]
     C: NDArray[np.float64]
-    rss: float
     n_equations: int
 
 
+@dataclass(frozen=True)
+class StiffnessMoments:
+    """6x6 moments of X over a band; with them each fit for a new M is 6x6 algebra.
+
+    ``Gp = sum wt w^p conj(x) x^T`` and ``Qp = sum wt w^p conj(x) t^T`` over
+    columns and lines, so that ``sum wt w^q conj(x) y^T = G(q+2) M^T - Q(q+2)``
+    for ``y = w^2 (M x - t)``.
+    """
+
+    G0: NDArray[np.complex128]
+    G1: NDArray[np.complex128]
+    G2: NDArray[np.complex128]
+    G3: NDArray[np.complex128]
+    Q2: NDArray[np.complex128]
+    Q3: NDArray[np.complex128]
+    n_equations: int
+
+
+def stiffness_moments(
+    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64],
+    weights: NDArray[np.float64] | None = None,
+) -> StiffnessMoments:
+    """Moments of the stiffness equations (see :class:`StiffnessMoments`)."""
+    n_e, n_l = X.shape[1:]
+    wt = np.ones((n_e, n_l)) if weights is None else np.asarray(weights, float)
+    Xf = X.reshape(6, -1)
+    wl = np.broadcast_to(w, (n_e, n_l)).ravel()
+    Tf = np.broadcast_to(T[:, :, None], X.shape).reshape(6, -1)
+    Xw = np.conj(Xf) * wt.ravel()
+    G = []
+    for _ in range(4):  # powers 0..3 of w
+        G.append(Xw @ Xf.T)
+        Xw = Xw * wl
+    Xw2 = np.conj(Xf) * (wt.ravel() * wl**2)
+    return StiffnessMoments(G[0], G[1], G[2], G[3], Xw2 @ Tf.T, (Xw2 * wl) @ Tf.T,
+                            2 * 6 * n_e * n_l)
+
+
 def fit_stiffness(
-    X: NDArray[np.complex128],
+    X: NDArray[np.complex128] | StiffnessMoments,
     T: NDArray[np.float64],
     w: NDArray[np.float64],
     M: NDArray[np.float64],
@@ -78,7 +124,8 @@ def fit_stiffness(
 
     Parameters
     ----------
-    X : (6, n_exc, n_lines) complex, rigid-body accelerances at O
+    X : (6, n_exc, n_lines) complex rigid-body accelerances at O, or their
+        precomputed :class:`StiffnessMoments` (then ``T``, ``w``, ``weights`` unused)
     T : (6, n_exc) generalised unit forces
     w : (n_lines,) rad/s
     M : (6, 6) identified mass matrix at O
@@ -86,19 +133,10 @@ def fit_stiffness(
     row_scale : (6,), optional scale of each equation row
     symmetric : fit symmetric K and C (21 + 21 unknowns) instead of general 36 + 36
     """
-    n_e, n_l = X.shape[1:]
-    wt = np.ones((n_e, n_l)) if weights is None else np.asarray(weights, float)
-    Xf = X.reshape(6, -1)
-    wl = np.broadcast_to(w, (n_e, n_l)).ravel()
-    Tf = np.broadcast_to(T[:, :, None], X.shape).reshape(6, -1)
-    Yf = wl**2 * (M @ Xf - Tf)
-    Xw0 = np.conj(Xf) * wt.ravel()
-    Xw1 = Xw0 * wl
-    G0 = Xw0 @ Xf.T
-    G1 = Xw1 @ Xf.T
-    G2 = (Xw1 * wl) @ Xf.T
-    R0 = Xw0 @ Yf.T  # (a, i)
-    R1 = Xw1 @ Yf.T
+    mom = X if isinstance(X, StiffnessMoments) else stiffness_moments(X, T, w, weights)
+    R0 = mom.G2 @ M.T - mom.Q2  # (a, i)
+    R1 = mom.G3 @ M.T - mom.Q3
+    G0, G1, G2 = mom.G0, mom.G1, mom.G2
     # per-row normal block for [K_i; C_i]
     Nb = np.block([[G0.real, -G1.imag], [G1.imag, G2.real]])
     s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
@@ -106,22 +144,16 @@ def fit_stiffness(
     rC = R1.imag * s2[None, :]
     if symmetric:
         # unknowns u = [vech K; vech C]; vec is row-major over (i, a)
-        Nfull = np.zeros((72, 72))
-        for i in range(6):  # six fixed blocks, not a data loop
-            idx = np.r_[6 * i:6 * i + 6, 36 + 6 * i:36 + 6 * i + 6]
-            Nfull[np.ix_(idx, idx)] = s2[i] * Nb
+        # full normal matrix over [vec K; vec C] (row-major): row blocks s2_i * Nb
+        Nfull = np.einsum("i,ij,taub->tiaujb", s2, np.eye(6), Nb.reshape(2, 6, 2, 6))
+        Nfull = Nfull.reshape(72, 72)
         bfull = np.concatenate([rK.T.ravel(), rC.T.ravel()])
-        D2 = np.zeros((72, 42))
-        D2[:36, :21] = _DUP
-        D2[36:, 21:] = _DUP
-        u = np.linalg.solve(D2.T @ Nfull @ D2, D2.T @ bfull)
-        v = D2 @ u
+        u = np.linalg.solve(_DUP2.T @ Nfull @ _DUP2, _DUP2.T @ bfull)
+        v = _DUP2 @ u
         K = v[:36].reshape(6, 6)
         C = v[36:].reshape(6, 6)
     else:
         sol = np.linalg.solve(Nb, np.concatenate([rK, rC], axis=0) / s2[None, :])
         K = sol[:6].T
         C = sol[6:].T
-    res = K @ Xf + 1j * wl * (C @ Xf) - Yf
-    rss = float(np.sum(s2[:, None] * wt.ravel()[None] * np.abs(res) ** 2))
-    return StiffnessFit(K, C, rss, 2 * 6 * n_e * n_l)
+    return StiffnessFit(K, C, mom.n_equations)
