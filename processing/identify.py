@@ -84,6 +84,8 @@ class IdentifyOptions:
     #: improved method: model elastic leakage when elastic modes are seen ("auto") or never
     leakage: Literal["auto", "off"] = "auto"
     symmetric: bool = True
+    #: relative FRF noise above which elastic leakage is not modelled
+    leakage_max_noise: float = 0.002
 
 
 @dataclass(frozen=True)
@@ -203,6 +205,19 @@ def _kstar_times(
     return (K @ Xf).reshape(X.shape) + 1j * w * (C @ Xf).reshape(X.shape)
 
 
+def _noise_level(
+    rel_err: NDArray[np.float64], freq: NDArray[np.float64], peaks: tuple[ElasticPeak, ...],
+    n_r: int,
+) -> float:
+    """Relative FRF noise from the rigid-body reconstruction residual (lower quartile over the
+    lines below a third of the first elastic mode, corrected for the 6 fitted DOFs)."""
+    top = min(p.frequency for p in peaks) / 3 if peaks else freq[-1]
+    sel = freq <= top
+    if n_r <= 6 or not np.any(sel):
+        return 0.0
+    return float(np.percentile(rel_err[sel], 25) * np.sqrt(n_r / (n_r - 6)))
+
+
 def _band_mask(freq: NDArray[np.float64], band: tuple[float, float], what: str) -> (
     NDArray[np.bool_]
 ):
@@ -307,10 +322,21 @@ def identify_arrays(
     # --- elastic modes and bands -----------------------------------------------------------------
     _, rel_err = reconstruction_error(H, E, Ep)
     peaks = elastic_peaks(freq, H, E) if n_r > 6 else ()
+    # Leakage terms are free per equation entry: on noisy data the regressors left after
+    # eliminating them are dominated by noise and the fit is biased low (errors in
+    # variables). Model the leakage only when the FRF noise, read off the rigid-body
+    # reconstruction residual well below the first elastic mode, is small.
+    noise = _noise_level(rel_err, freq, peaks, n_r)
+    use_leak = (improved and opt.leakage == "auto" and len(peaks) > 0
+                and noise <= opt.leakage_max_noise)
+    if improved and peaks and not use_leak:
+        warnings.append(
+            f"elastic leakage not modelled (FRF noise {noise * 100:.2f} % > "
+            f"{opt.leakage_max_noise * 100:g} %): mass line kept to half the elastic mode"
+        )
     choice: BandChoice | None = None
     if opt.mass_band is None or opt.stiffness_band is None:
-        choice = choose_bands(freq, X, T, peaks,
-                              elastic_margin=0.7 if improved else 0.5)
+        choice = choose_bands(freq, X, T, peaks, elastic_margin=0.7 if use_leak else 0.5)
     mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
     stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
     in_mass = _band_mask(freq, mass_band, "mass-line")
@@ -334,7 +360,6 @@ def identify_arrays(
     Xs, ws, Ws = X[..., stiff_sel], w_all[stiff_sel], colw[:, stiff_sel]
 
     # leakage shapes (improved method, elastic modes seen)
-    use_leak = improved and opt.leakage == "auto" and len(peaks) > 0
     shapes_c: list[NDArray[np.complex128]] = []
     if use_leak:
         shapes_c = [mode_shape_basis(w_all, p) for p in peaks]

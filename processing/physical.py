@@ -67,4 +67,7 @@ def constrain_physical(
 
     sol = scipy.optimize.least_squares(resid, _params_of(theta_ls), method="lm", xtol=1e-14,
                                        ftol=1e-14, gtol=1e-14, max_nfev=2000)
-    return _theta_of(sol.x)
+    # the optimum lies on the boundary (a singular pseudo-inertia); step just inside it
+    P = pseudo_inertia(_theta_of(sol.x))
+    P += 1e-9 * float(np.max(np.linalg.eigvalsh(P))) * np.eye(4)
+    return from_pseudo_inertia(P)

@@ -85,8 +85,8 @@ class StiffnessMoments:
     G1: NDArray[np.complex128]
     G2: NDArray[np.complex128]
     G3: NDArray[np.complex128]
-    Q2: NDArray[np.complex128]
-    Q3: NDArray[np.complex128]
+    Q2: NDArray[np.complexfloating]
+    Q3: NDArray[np.complexfloating]
     n_equations: int
 
 
@@ -105,7 +105,7 @@ def stiffness_moments(
     for _ in range(4):  # powers 0..3 of w
         G.append(Xw @ Xf.T)
         Xw = Xw * wl
-    Xw2 = np.conj(Xf) * (wt.ravel() * wl**2)
+    Xw2 = np.conj(Xf) * (wt.ravel() * wl**2) + 0j
     return StiffnessMoments(G[0], G[1], G[2], G[3], Xw2 @ Tf.T, (Xw2 * wl) @ Tf.T,
                             2 * 6 * n_e * n_l)
 

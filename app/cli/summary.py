@@ -1,0 +1,117 @@
+"""Readable terminal summaries of identification results (rich tables)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from rich.console import Console
+from rich.table import Table
+
+from processing.identify import IdentificationResult
+from processing.inertia import InertiaProperties
+
+_DOF = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def _ten(p: InertiaProperties) -> list[tuple[str, str, float, float]]:
+    """(label, unit, display value, display scale) for the ten parameters about O."""
+    J = p.inertia_origin
+    return [
+        ("mass", "kg", p.mass, 1.0),
+        ("x_c", "mm", p.cog[0] * 1e3, 1.0),
+        ("y_c", "mm", p.cog[1] * 1e3, 1.0),
+        ("z_c", "mm", p.cog[2] * 1e3, 1.0),
+        ("J_xx (O)", "kg m²", J[0, 0], 1.0),
+        ("J_yy (O)", "kg m²", J[1, 1], 1.0),
+        ("J_zz (O)", "kg m²", J[2, 2], 1.0),
+        ("J_xy (O)", "kg m²", -J[0, 1], 1.0),
+        ("J_xz (O)", "kg m²", -J[0, 2], 1.0),
+        ("J_yz (O)", "kg m²", -J[1, 2], 1.0),
+    ]
+
+
+def inertia_table(result: IdentificationResult, truth: InertiaProperties | None = None) -> Table:
+    t = Table(title=f"Inertia parameters ({result.method} method)")
+    t.add_column("parameter")
+    t.add_column("unit")
+    t.add_column("identified", justify="right")
+    if truth is not None:
+        t.add_column("truth", justify="right")
+        t.add_column("error", justify="right")
+    rows = _ten(result.properties)
+    trows = _ten(truth) if truth is not None else None
+    for n, (label, unit, value, _) in enumerate(rows):
+        cells = [label, unit, f"{value:.4g}"]
+        if trows is not None:
+            tv = trows[n][2]
+            err = (f"{value - tv:+.3f} mm" if unit == "mm"
+                   else f"{(value - tv) / abs(tv) * 100:+.3f} %" if abs(tv) > 1e-9 else "")
+            cells += [f"{tv:.4g}", err]
+        t.add_row(*cells)
+    p = result.properties
+    t.add_row("principal moments (CoG)", "kg m²",
+              ", ".join(f"{v:.4g}" for v in p.principal_moments),
+              *((", ".join(f"{v:.4g}" for v in truth.principal_moments), "")
+                if truth is not None else ()))
+    return t
+
+
+def matrix_table(title: str, A: NDArray[np.float64], truth: NDArray[np.float64] | None = None
+                 ) -> Table:
+    t = Table(title=title)
+    t.add_column("")
+    for d in _DOF:
+        t.add_column(d, justify="right")
+    scale = np.sqrt(np.abs(np.outer(np.diag(truth if truth is not None else A),
+                                    np.diag(truth if truth is not None else A))))
+    for i, d in enumerate(_DOF):
+        cells = []
+        for j in range(6):
+            c = f"{A[i, j]:.4g}"
+            if truth is not None and scale[i, j] > 0:
+                c += f" ({(A[i, j] - truth[i, j]) / scale[i, j] * 100:+.2f}%)"
+            cells.append(c)
+        t.add_row(d, *cells)
+    return t
+
+
+def checks_table(result: IdentificationResult) -> Table:
+    t = Table(title="Checks")
+    t.add_column("check")
+    t.add_column("verdict")
+    t.add_column("figures")
+    for name, c in result.checks().items():
+        figs = ", ".join(
+            f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+            for k, v in c.items() if k != "pass"
+        )
+        t.add_row(name, "[green]pass[/green]" if c["pass"] else "[red]FAIL[/red]", figs)
+    return t
+
+
+def print_result(
+    result: IdentificationResult,
+    console: Console | None = None,
+    *,
+    truth: InertiaProperties | None = None,
+    K_truth: NDArray[np.float64] | None = None,
+    C_truth: NDArray[np.float64] | None = None,
+) -> None:
+    """Print the ten parameters, K and C, the bands and the checks."""
+    con = console or Console()
+    con.print(inertia_table(result, truth))
+    con.print(matrix_table("Stiffness K at O (N/m, N/rad, N m/m, N m/rad)", result.K, K_truth))
+    con.print(matrix_table("Damping C at O (N s/m, ...)", result.C, C_truth))
+    mb, sb = result.mass_band, result.stiffness_band
+    con.print(
+        f"Bands: mass line {mb[0]:.1f}-{mb[1]:.1f} Hz ({len(result.mass_lines)} lines), "
+        f"stiffness {sb[0]:.1f}-{sb[1]:.1f} Hz ({len(result.stiffness_lines)} lines); "
+        f"rigid-body modes {', '.join(f'{f:.1f}' for f in result.rigid_modes_hz)} Hz; "
+        + (
+            "elastic modes " + ", ".join(f"{e.frequency:.1f} Hz" for e in result.elastic_modes)
+            if result.elastic_modes else "no elastic mode in the data"
+        )
+    )
+    con.print(checks_table(result))
+    for w in result.warnings:
+        con.print(f"[yellow]warning:[/yellow] {w}")
