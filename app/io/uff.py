@@ -119,9 +119,9 @@ def _check_finite(
         )
 
 
-def _accelerance(ds: Dataset, x: NDArray[np.float64], units: UnitFactors, where: str) -> NDArray[
-    np.complex128
-]:
+def _accelerance(
+    ds: Dataset, x: NDArray[np.float64], units: UnitFactors, where: str
+) -> NDArray[np.complex128]:
     """One FRF record's values as SI accelerance, (m/s^2)/N."""
     num = int(ds.get("ordinate_spec_data_type", 0) or 0)
     den = int(ds.get("orddenom_spec_data_type", 0) or 0)

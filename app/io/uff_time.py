@@ -51,7 +51,7 @@ _FORCE, _ACCELERATION = 13, 12
 Problem = tuple[int, str]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TimeRun:
     """One excitation run: the force and the accelerations it caused, SI units.
 
@@ -65,6 +65,8 @@ class TimeRun:
     responses : (n_resp, n_samples) accelerations, m/s^2
     resp_nodes : (n_resp,) node of each response
     resp_dirs : (n_resp, 3) unit vector of each response, global frame
+
+    Runs compare by identity (their arrays make field-wise equality ambiguous).
     """
 
     load_case: int
