@@ -1,0 +1,363 @@
+"""Accelerometer front end on CAN / CAN FD (model "FE-16"), decoded with cantools.
+
+Sixteen IEPE inputs digitised at 24 bits. The messages are described in
+``drivers/dbc/insitu_frontend.dbc`` (the single source of truth for the
+layout, see ``docs/protocols.md``):
+
+=======  ================  ==========================================================
+id       name              content
+=======  ================  ==========================================================
+0x100    FE_CMD            host command, multiplexed by OPCODE
+0x101    FE_ACK            answer to every command (opcode, result)
+0x102    FE_INFO           identity: serial number, firmware, number of inputs
+0x110    FE_STATUS         state, buffer overflow, overload mask, sample count (10 Hz)
+0x200    FE_SAMPLES_FD     CAN FD, 64 bytes: 5 samples x 4 inputs of one group
+0x201    FE_SAMPLES        classic CAN, 8 bytes: 1 sample x 2 inputs of one group
+=======  ================  ==========================================================
+
+The transport is any ``can.BusABC`` (socketcan, pcan, kvaser, vector,
+virtual, socketcand...), injected or built from the station file. A reader
+thread decodes the frames; if it dies its error is raised by the next read.
+
+Example
+-------
+>>> fe = CanFrontEnd("fe", channels, fs=1024, bus=can.Bus(interface="socketcan",
+...                  channel="can0", fd=True))  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Sequence
+from importlib.resources import files
+from typing import Any, ClassVar
+
+import can
+import cantools
+import numpy as np
+from cantools.database.can import Database
+
+from drivers.base import AcquisitionFrontEnd, ChannelConfig, StreamHealth, TimeBlock
+from drivers.errors import (
+    DeviceError,
+    DeviceInitializationError,
+    DeviceTimeoutError,
+    ProtocolError,
+)
+from drivers.station import CanTransportConfig, DeviceConfig
+from drivers.stream import SampleBuffer
+from drivers.transports import CanLink
+
+__all__ = ["FULL_SCALE", "CanFrontEnd", "FrameLayout", "load_dbc"]
+
+logger = logging.getLogger(__name__)
+
+FULL_SCALE = 8388607
+OPCODES = {"CONFIG_ACQ": 1, "CONFIG_CHANNEL": 2, "START": 3, "STOP": 4, "STATUS_REQUEST": 5,
+           "IDENTIFY": 6}
+RESULTS = {0: "ok", 1: "bad parameter", 2: "busy", 3: "unknown opcode"}
+ID_CMD, ID_ACK, ID_INFO, ID_STATUS, ID_FD, ID_CLASSIC = 0x100, 0x101, 0x102, 0x110, 0x200, 0x201
+
+
+def load_dbc() -> Database:
+    """The front end's message database, from the DBC file shipped with the package."""
+    text = files("drivers").joinpath("dbc/insitu_frontend.dbc").read_text(encoding="ascii")
+    db = cantools.database.load_string(text, database_format="dbc")
+    assert isinstance(db, Database)
+    return db
+
+
+class FrameLayout:
+    """How sample frames carry samples: per frame, ``samples`` x ``per_group`` inputs."""
+
+    def __init__(self, fd: bool) -> None:
+        self.fd = fd
+        self.frame_id = ID_FD if fd else ID_CLASSIC
+        self.samples = 5 if fd else 1
+        self.per_group = 4 if fd else 2
+        self.seq_modulo = 65536 if fd else 1024
+        self.signals = [[f"S{k}C{j}" for j in range(self.per_group)] for k in range(self.samples)]
+
+
+class CanFrontEnd(AcquisitionFrontEnd):
+    """Driver of the FE-16 CAN accelerometer front end.
+
+    Parameters
+    ----------
+    name : str
+    channels : sequence of ChannelConfig
+        Inputs 0..15; ``range_v`` one of 1, 5, 10 V.
+    fs : float
+        Sampling rate, Hz: one of :attr:`supported_rates`.
+    bus : can.BusABC, optional
+        An open bus to use (not shut down by the driver). Otherwise ``bus_kwargs``
+        are passed to ``can.Bus`` at ``open()``.
+    frame : {"fd", "classic"}
+        CAN FD 64-byte sample frames or classic 8-byte ones.
+    reply_timeout, stall_timeout : float
+        Seconds to wait for a command's answer; seconds without any frame after
+        which a read raises DeviceTimeoutError.
+    """
+
+    supported_rates: ClassVar[tuple[float, ...]] = (256.0, 512.0, 1024.0, 2048.0, 4096.0)
+    ranges_mv: ClassVar[tuple[int, ...]] = (1000, 5000, 10000)
+    n_inputs: ClassVar[int] = 16
+
+    def __init__(self, name: str, channels: Sequence[ChannelConfig], fs: float, *,
+                 bus: can.BusABC | None = None, bus_kwargs: dict[str, Any] | None = None,
+                 frame: str = "fd", reply_timeout: float = 0.5,
+                 stall_timeout: float = 0.5) -> None:
+        super().__init__(name, channels, fs)
+        if frame not in ("fd", "classic"):
+            raise ValueError(f"{name}: frame must be 'fd' or 'classic', got {frame!r}")
+        for ch in self.channels:
+            if round(ch.range_v * 1000) not in self.ranges_mv:
+                raise ValueError(f"{name}: channel {ch.name!r} range {ch.range_v} V not "
+                                 f"supported; choose 1, 5 or 10 V")
+        self.layout = FrameLayout(frame == "fd")
+        self.reply_timeout = reply_timeout
+        self.stall_timeout = stall_timeout
+        self.db = load_dbc()
+        self._msg_cmd = self.db.get_message_by_frame_id(ID_CMD)
+        self._decoders = {m.frame_id: m for m in self.db.messages}
+        self._link = CanLink(bus, name, **(bus_kwargs or {}))
+        self._groups = sorted({ch.input // self.layout.per_group for ch in self.channels})
+        self._rows = np.array([ch.input for ch in self.channels])
+        self._scale = np.array([ch.range_v / FULL_SCALE * 1000.0 / ch.sensitivity
+                                for ch in self.channels])
+        self._buffer = SampleBuffer(len(self.channels), name)
+        self._acks: queue.Queue[tuple[int, int]] = queue.Queue()
+        self._reader: threading.Thread | None = None
+        self._stop_reader = threading.Event()
+        self.serial_number = 0
+        self.last_status: dict[str, int] = {}
+
+    @classmethod
+    def from_config(cls, config: DeviceConfig, **overrides: Any) -> CanFrontEnd:
+        if not isinstance(config.transport, CanTransportConfig):
+            raise ValueError(f"device {config.name!r}: frontend-can needs a CAN interface")
+        opts: dict[str, Any] = {"bus_kwargs": config.transport.bus_kwargs(), **config.options,
+                                **overrides}
+        return cls(config.name, config.channels, config.fs or 1024.0, **opts)
+
+    def decode(self, frame_id: int, data: bytes | bytearray, scaling: bool = True
+               ) -> dict[str, int]:
+        """Signals of one received frame, decoded with cantools (raw integers)."""
+        decoded = self._decoders[frame_id].decode(bytes(data), decode_choices=False,
+                                                  scaling=scaling)
+        if not isinstance(decoded, dict):
+            raise ProtocolError(f"{self.name}: frame {frame_id:#x} is a container", self.name)
+        return {k: int(v) for k, v in decoded.items()}  # type: ignore[arg-type]
+
+    # -- commands ---------------------------------------------------------------------------------
+    def encode_command(self, opcode: str, **fields: int) -> bytes:
+        """The 8 data bytes of an FE_CMD message."""
+        return bytes(self._msg_cmd.encode({"OPCODE": OPCODES[opcode], **fields}, strict=True))
+
+    def _send(self, opcode: str, **fields: int) -> None:
+        data = self.encode_command(opcode, **fields)
+        self._link.send(can.Message(arbitration_id=ID_CMD, data=data, is_extended_id=False))
+
+    def command(self, opcode: str, **fields: int) -> None:
+        """Send a command and wait for its FE_ACK; a refusal raises."""
+        while not self._acks.empty():
+            self._acks.get_nowait()
+        self._send(opcode, **fields)
+        deadline = time.monotonic() + self.reply_timeout
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise DeviceTimeoutError(f"{self.name}: no answer to {opcode} within "
+                                         f"{self.reply_timeout:g} s", self.name)
+            if self._reader is not None and self._reader.is_alive():
+                try:
+                    ack_op, result = self._acks.get(timeout=remaining)
+                except queue.Empty:
+                    continue
+            else:
+                msg = self._link.recv(min(remaining, 0.05))
+                if msg is None or msg.arbitration_id != ID_ACK:
+                    continue
+                ack_op, result = msg.data[0], msg.data[1]
+            if ack_op != OPCODES[opcode]:
+                continue
+            if result != 0:
+                raise DeviceInitializationError(
+                    f"{self.name}: {opcode} {fields} refused: {RESULTS.get(result, result)}",
+                    self.name)
+            return
+
+    def _identify(self) -> dict[str, int]:
+        self._send("IDENTIFY")
+        deadline = time.monotonic() + self.reply_timeout
+        while time.monotonic() < deadline:
+            msg = self._link.recv(0.05)
+            if msg is not None and msg.arbitration_id == ID_INFO:
+                return self.decode(ID_INFO, msg.data)
+        raise DeviceTimeoutError(f"{self.name}: no FE_INFO answer to IDENTIFY within "
+                                 f"{self.reply_timeout:g} s", self.name)
+
+    def _open_internal(self) -> None:
+        self._link.open()
+        try:
+            info = self._identify()
+            self.serial_number = int(info["SERIAL"])
+            self.identity = (f"INSITU,FE-{info['N_INPUTS']},{self.serial_number},"
+                             f"{info['FW_MAJOR']}.{info['FW_MINOR']}")
+            if int(info["N_INPUTS"]) < max(int(r) for r in self._rows) + 1:
+                raise DeviceInitializationError(
+                    f"{self.name}: device has {info['N_INPUTS']} inputs", self.name)
+            self.command("STOP")
+            self.command("CONFIG_ACQ", RATE_HZ=int(self.fs), FRAME_FORMAT=int(self.layout.fd),
+                         GROUP_MASK=sum(1 << g for g in self._groups))
+            for ch in self.channels:
+                self.command("CONFIG_CHANNEL", CHANNEL=ch.input,
+                             RANGE_MV=round(ch.range_v * 1000), IEPE=int(ch.iepe))
+        except BaseException:
+            self._link.close()
+            raise
+
+    def _start_internal(self) -> None:
+        self.health = StreamHealth()
+        self._buffer.reset()
+        self._stop_reader.clear()
+        self.command("START")
+        self._reader = threading.Thread(target=self._read_loop, name=f"{self.name}-reader",
+                                        daemon=True)
+        self._reader.start()
+
+    def _stop_internal(self) -> None:
+        try:
+            self.command("STOP")
+        finally:
+            self._join_reader()
+
+    def _join_reader(self) -> None:
+        self._stop_reader.set()
+        reader, self._reader = self._reader, None
+        if reader is not None and reader is not threading.current_thread():
+            reader.join(1.0)
+
+    def _shutdown_internal(self) -> None:
+        self._join_reader()
+        self._link.close()
+
+    def request_status(self) -> dict[str, int]:
+        """Ask for an FE_STATUS now and return it (while running)."""
+        before = self.last_status.get("_n", 0)
+        self._send("STATUS_REQUEST")
+        deadline = time.monotonic() + self.reply_timeout
+        while self.last_status.get("_n", 0) == before:
+            if time.monotonic() > deadline:
+                raise DeviceTimeoutError(f"{self.name}: no status", self.name)
+            time.sleep(0.005)
+        return self.last_status
+
+    # -- streaming --------------------------------------------------------------------------------
+    def _read_loop(self) -> None:
+        try:
+            self._stream()
+        except DeviceError as err:
+            self._buffer.fail(err)
+        except Exception as err:  # never die silently (see PITFALLS.md on Notifier threads)
+            logger.exception("%s: reader thread failed", self.name)
+            self._buffer.fail(err)
+
+    def _stream(self) -> None:
+        lay = self.layout
+        n_groups = len(self._groups)
+        current: int | None = None  # sequence number of the block being assembled
+        counts = np.zeros((self.n_inputs, lay.samples))
+        got: set[int] = set()
+        ovl: set[int] = set()
+        pending = False  # a block is being assembled and not yet handed over
+        n_status = 0
+
+        def flush(t_rx: float) -> None:
+            missing_groups = set(self._groups) - got
+            block = counts[self._rows] * self._scale[:, None]
+            if missing_groups:
+                for g in missing_groups:
+                    block[(self._rows // lay.per_group) == g] = np.nan
+                self.health.lost_samples += lay.samples
+                self.health.gaps += 1
+                logger.debug("%s: block %s lost group(s) %s", self.name, current,
+                               sorted(missing_groups))
+            rows = frozenset(i for i, r in enumerate(self._rows) if int(r) in ovl)
+            for i in rows:
+                self.health.overloaded.add(self.channels[i].name)
+            self._buffer.append(block, t_rx, rows)
+
+        while not self._stop_reader.is_set():
+            msg = self._link.recv(0.05)
+            if msg is None:
+                continue
+            t_rx = time.monotonic()
+            fid = msg.arbitration_id
+            if fid == ID_ACK:
+                self._acks.put((msg.data[0], msg.data[1]))
+                self._buffer.touch()
+                continue
+            if fid == ID_STATUS:
+                n_status += 1
+                status = self.decode(ID_STATUS, msg.data)
+                status["_n"] = n_status
+                self.last_status = status
+                if status["BUFFER_OVERFLOW"]:
+                    self.health.buffer_overflows += 1
+                    logger.warning("%s: device buffer overflow (samples lost)", self.name)
+                self._buffer.touch()
+                continue
+            if fid != lay.frame_id:
+                continue
+            try:
+                sig = self.decode(fid, msg.data, scaling=False)
+                group, seq = int(sig["GROUP"]), int(sig["SEQ"])
+                if group not in self._groups:
+                    raise ProtocolError(f"{self.name}: frame for group {group} not requested",
+                                        self.name)
+            except (cantools.database.DecodeError, ProtocolError, KeyError, ValueError) as err:
+                self.health.bad_frames += 1
+                logger.debug("%s: bad sample frame %s: %s", self.name, msg.data.hex(), err)
+                continue
+            self.health.frames += 1
+            if seq != current:
+                if pending:
+                    flush(t_rx)  # the block lost some of its frames
+                if current is not None:
+                    lost = (seq - current - 1) % lay.seq_modulo
+                    if lost:
+                        self.health.gaps += 1
+                        self.health.lost_samples += lost * lay.samples
+                        self._buffer.append_missing(lost * lay.samples)
+                current = seq
+                got.clear()
+                ovl.clear()
+                counts[:] = 0.0
+                pending = True
+            elif not pending or group in got:
+                self.health.bad_frames += 1  # duplicate frame
+                continue
+            base = group * lay.per_group
+            for k, names in enumerate(lay.signals):
+                for j, s in enumerate(names):
+                    counts[base + j, k] = sig[s]
+            for j in range(lay.per_group):
+                if sig[f"OVL{j}"]:
+                    ovl.add(base + j)
+            got.add(group)
+            if len(got) == n_groups:
+                flush(t_rx)
+                pending = False
+
+    def _read_block_internal(self, n_samples: int, timeout: float) -> TimeBlock:
+        data, first, missing, ovl = self._buffer.take(n_samples, timeout, self.stall_timeout)
+        return TimeBlock(data, self.fs, self.channels, first, None, missing,
+                         tuple(self.channels[i].name for i in sorted(ovl)))
+
+    def clock_pairs(self) -> list[tuple[float, int]]:
+        """(host arrival time, samples received) per block, for :mod:`drivers.sync`."""
+        return self._buffer.pairs()

@@ -1,0 +1,197 @@
+"""Transports the drivers talk through: a serial link and a CAN bus.
+
+Both are injected into the drivers (a URL for :func:`serial.serial_for_url`, or
+any :class:`can.BusABC`). Wire traffic is logged here, once, at DEBUG level
+on the ``drivers.wire`` logger, as PyMeasure's adapters do.
+
+Example
+-------
+>>> link = SerialLink("loop://", name="demo")
+>>> link.open()
+>>> link.write(b"ID?\\n")
+>>> link.readline(timeout=0.5)
+b'ID?\\n'
+>>> link.close()
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+import can
+import serial
+
+from drivers.errors import DeviceNotAvailableError, DeviceTimeoutError
+
+__all__ = ["CanLink", "SerialLink", "log_wire"]
+
+wire_logger = logging.getLogger("drivers.wire")
+
+
+def log_wire(name: str, direction: str, payload: bytes | str) -> None:
+    """Log one exchange on the wire at DEBUG: ``name`` device, ``direction`` ``>>`` or ``<<``."""
+    if wire_logger.isEnabledFor(logging.DEBUG):
+        text = payload if isinstance(payload, str) else payload.hex(" ")
+        wire_logger.debug("%s %s %s", name, direction, text)
+
+
+class SerialLink:
+    """A serial port opened by URL, with deadlines on every read.
+
+    Parameters
+    ----------
+    url : str
+        Port name or pyserial URL: ``/dev/ttyUSB0``, a pseudo-terminal path,
+        ``loop://``, ``socket://host:port``.
+    baudrate : int
+    name : str
+        Device name for logs and errors.
+    """
+
+    def __init__(self, url: str, baudrate: int = 115200, name: str = "serial") -> None:
+        self.url = url
+        self.baudrate = baudrate
+        self.name = name
+        self._port: serial.SerialBase | None = None
+        self._write_lock = threading.Lock()
+
+    def open(self) -> None:
+        try:
+            self._port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0.05,
+                                               write_timeout=1.0)
+        except (serial.SerialException, OSError, ValueError) as err:
+            raise DeviceNotAvailableError(
+                f"{self.name}: cannot open serial port {self.url!r}: {err}", self.name
+            ) from err
+
+    @property
+    def is_open(self) -> bool:
+        return self._port is not None and self._port.is_open
+
+    def _require(self) -> serial.SerialBase:
+        if self._port is None:
+            raise DeviceNotAvailableError(f"{self.name}: serial port is not open", self.name)
+        return self._port
+
+    def write(self, data: bytes) -> None:
+        port = self._require()
+        log_wire(self.name, ">>", data)
+        try:
+            with self._write_lock:
+                port.write(data)
+                port.flush()
+        except (serial.SerialException, OSError) as err:
+            raise DeviceNotAvailableError(f"{self.name}: write failed: {err}", self.name) from err
+
+    def read_some(self, max_bytes: int = 4096) -> bytes:
+        """Whatever arrives within the port's short timeout (may be empty)."""
+        port = self._require()
+        try:
+            n = max(1, min(max_bytes, port.in_waiting))
+            data = bytes(port.read(n))
+        except (serial.SerialException, OSError, TypeError) as err:
+            # pyserial raises TypeError when the port is closed under a blocked read
+            raise DeviceNotAvailableError(
+                f"{self.name}: serial port lost (unplugged?): {err}", self.name
+            ) from err
+        if data:
+            log_wire(self.name, "<<", data)
+        return data
+
+    def readline(self, timeout: float, terminator: bytes = b"\n") -> bytes:
+        """One line including its terminator; :class:`DeviceTimeoutError` after ``timeout`` s."""
+        port = self._require()
+        deadline = time.monotonic() + timeout
+        buf = bytearray()
+        while not buf.endswith(terminator):
+            if time.monotonic() > deadline:
+                raise DeviceTimeoutError(
+                    f"{self.name}: no reply within {timeout:g} s"
+                    + (f" (got {bytes(buf)!r})" if buf else ""), self.name
+                )
+            try:
+                buf += port.read(1)
+            except (serial.SerialException, OSError, TypeError) as err:
+                raise DeviceNotAvailableError(
+                    f"{self.name}: serial port lost (unplugged?): {err}", self.name
+                ) from err
+        log_wire(self.name, "<<", bytes(buf))
+        return bytes(buf)
+
+    def reset_input(self) -> None:
+        port = self._require()
+        try:
+            port.reset_input_buffer()
+        except (serial.SerialException, OSError) as err:
+            raise DeviceNotAvailableError(f"{self.name}: serial port lost: {err}",
+                                          self.name) from err
+
+    def close(self) -> None:
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except (serial.SerialException, OSError) as err:
+                wire_logger.debug("%s: close failed: %s", self.name, err)
+
+
+class CanLink:
+    """A python-can bus, injected or created from keyword arguments of :class:`can.Bus`.
+
+    Parameters
+    ----------
+    bus : can.BusABC, optional
+        An open bus; the link does not shut it down unless ``own_bus``.
+    name : str
+    **bus_kwargs
+        Passed to ``can.Bus`` when ``bus`` is None (``interface``, ``channel``,
+        ``fd``, ``bitrate``, ``data_bitrate``...).
+    """
+
+    def __init__(self, bus: can.BusABC | None = None, name: str = "can",
+                 **bus_kwargs: object) -> None:
+        self.name = name
+        self._bus = bus
+        self._own_bus = bus is None
+        self._bus_kwargs = bus_kwargs
+
+    def open(self) -> None:
+        if self._bus is not None:
+            return
+        try:
+            self._bus = can.Bus(**self._bus_kwargs)  # type: ignore[arg-type]
+        except (can.CanError, OSError, ValueError, ImportError) as err:
+            raise DeviceNotAvailableError(
+                f"{self.name}: cannot open CAN bus {self._bus_kwargs}: {err}", self.name
+            ) from err
+
+    @property
+    def bus(self) -> can.BusABC:
+        if self._bus is None:
+            raise DeviceNotAvailableError(f"{self.name}: CAN bus is not open", self.name)
+        return self._bus
+
+    def send(self, msg: can.Message) -> None:
+        log_wire(self.name, ">>", f"{msg.arbitration_id:03X} {msg.data.hex(' ')}")
+        try:
+            self.bus.send(msg, timeout=0.5)
+        except (can.CanError, OSError) as err:
+            raise DeviceNotAvailableError(f"{self.name}: CAN send failed: {err}",
+                                          self.name) from err
+
+    def recv(self, timeout: float) -> can.Message | None:
+        try:
+            msg = self.bus.recv(timeout)
+        except (can.CanError, OSError) as err:
+            raise DeviceNotAvailableError(f"{self.name}: CAN receive failed: {err}",
+                                          self.name) from err
+        if msg is not None:
+            log_wire(self.name, "<<", f"{msg.arbitration_id:03X} {msg.data.hex(' ')}")
+        return msg
+
+    def close(self) -> None:
+        bus, self._bus = self._bus, None
+        if bus is not None and self._own_bus:
+            bus.shutdown()

@@ -1,0 +1,329 @@
+"""Simulated FE-16 accelerometer front end: the device side of its CAN protocol.
+
+It listens on a python-can bus (``virtual`` by default, so driver and mock
+share one process), answers commands, and streams sample frames paced by its
+own :class:`~hardware_mocks.physics.DeviceClock`. Inputs are wired to the bench:
+by default inputs 0..11 carry the 12 accelerometer DOFs of the bench and input
+12 the hammer's force. Each hit on the shared :class:`BenchPhysics` is turned
+into the model's accelerations with ``BodyOnMounts.time_response`` on the
+front end's own sample grid, plus sensor noise.
+
+The frames are packed here with ``struct``/numpy, independently of the DBC and
+of cantools, so a layout bug cannot pass on both sides.
+
+Example
+-------
+>>> with FrontEndDevice(channel="bench") as dev:  # doctest: +SKIP
+...     fe = CanFrontEnd("fe", chans, fs=1024, bus_kwargs={"interface": "virtual",
+...                      "channel": "bench"})
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import threading
+import time
+from dataclasses import dataclass
+from types import TracebackType
+
+import can
+import numpy as np
+from numpy.typing import NDArray
+
+from hardware_mocks.benches import get_bench
+from hardware_mocks.physics import BenchPhysics, DeviceClock, sampled_pulse
+
+__all__ = ["FORCE", "FrontEndDevice", "FrontEndFaults"]
+
+logger = logging.getLogger(__name__)
+
+FORCE = -1  #: wiring code: the input carries the hammer force
+FULL = 8388607
+RATES = (256, 512, 1024, 2048, 4096)
+RANGES_MV = (1000, 5000, 10000)
+
+
+@dataclass
+class FrontEndFaults:
+    """Faults the mock can inject; change them at any time.
+
+    Attributes
+    ----------
+    drop_every : int
+        Do not send every n-th sample frame.
+    bad_frame_every : int
+        Send every n-th sample frame truncated to 6 bytes (undecodable).
+    seq_jump : int
+        Add this to the sequence counter once (firmware gap).
+    overflow : int
+        Lose this many samples once inside the device, as a buffer overflow does:
+        the counter jumps and the next status reports BUFFER_OVERFLOW.
+    silent : bool
+        Stop answering and streaming.
+    """
+
+    drop_every: int = 0
+    bad_frame_every: int = 0
+    seq_jump: int = 0
+    overflow: int = 0
+    silent: bool = False
+
+
+class FrontEndDevice:
+    """The front end as seen from the CAN bus.
+
+    Parameters
+    ----------
+    physics : BenchPhysics, optional
+        Shared bench (default: ``engine``).
+    interface, channel : str
+        python-can bus the device sits on.
+    wiring : sequence of int
+        Per input: index of the bench response DOF it measures, or :data:`FORCE`;
+        inputs beyond the list are open. Default: DOFs 0..11 then the force.
+    sensitivity : sequence of float
+        Transducer sensitivities per input, mV/(m/s^2) or mV/N (default 10.2 and 2.25).
+    accel_noise, force_noise : float
+        Sensor noise, m/s^2 RMS and N RMS.
+    ppm, offset : float
+        Clock error and start delay, see :class:`DeviceClock`.
+    tail : float
+        Length of each hit's computed response, s.
+    """
+
+    N_INPUTS = 16
+
+    def __init__(self, physics: BenchPhysics | None = None, *, interface: str = "virtual",
+                 channel: str = "insitu-bench", wiring: list[int] | None = None,
+                 sensitivity: list[float] | None = None, accel_noise: float = 0.0,
+                 force_noise: float = 0.0, ppm: float = 0.0, offset: float = 0.0,
+                 tail: float = 4.0, seed: int = 0, serial_number: int = 4242) -> None:
+        self.physics = physics if physics is not None else BenchPhysics(get_bench("engine"))
+        self.wiring = [*range(12), FORCE] if wiring is None else list(wiring)
+        if sensitivity is None:
+            sensitivity = [2.25 if w == FORCE else 10.2 for w in self.wiring]
+        self.sensitivity = np.zeros(self.N_INPUTS)
+        self.sensitivity[: len(sensitivity)] = sensitivity
+        self.accel_noise = accel_noise
+        self.force_noise = force_noise
+        self.ppm = ppm
+        self.offset = offset
+        self.tail = tail
+        self.serial_number = serial_number
+        self.faults = FrontEndFaults()
+        self.rate = 1024
+        self.fd = True
+        self.group_mask = 0xF
+        self.range_mv = np.full(self.N_INPUTS, 10000)
+        self.iepe = np.ones(self.N_INPUTS, dtype=bool)
+        self.running = False
+        self.frames_sent = 0
+        self.commands: list[bytes] = []
+        self._rng = np.random.default_rng(seed)
+        self._bus = can.Bus(interface=interface, channel=channel, fd=True)
+        self._clock = DeviceClock(self.rate)
+        self._resp_rows = [i for i, w in enumerate(self.wiring) if w != FORCE]
+        self._resp_dofs = [w for w in self.wiring if w != FORCE]
+        self._force_rows = [i for i, w in enumerate(self.wiring) if w == FORCE]
+        self._reset_stream()
+        self._stop = threading.Event()
+        self._unplugged = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="mock-frontend", daemon=True)
+        self._thread.start()
+
+    def _reset_stream(self) -> None:
+        self._produced = 0
+        self._seq = 0
+        self._frame_no = 0
+        self._pending = np.zeros((self.N_INPUTS, 0))
+        self._hit_cursor = len(self.physics.hits())
+        self._overload_mask = 0
+        self._overflow_flag = False
+        self._last_status = time.monotonic()
+
+    def unplug(self) -> None:
+        """Disconnect from the bus: no more frames, no more answers."""
+        self._unplugged.set()
+
+    def shutdown(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2.0)
+        self._bus.shutdown()
+
+    def __enter__(self) -> FrontEndDevice:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.shutdown()
+
+    # -- firmware ---------------------------------------------------------------------------------
+    def _send(self, arbitration_id: int, data: bytes, fd: bool = False) -> None:
+        self._bus.send(can.Message(arbitration_id=arbitration_id, data=data, is_fd=fd,
+                                   is_extended_id=False, bitrate_switch=fd))
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            msg = self._bus.recv(0.003 if self.running else 0.02)
+            if self._unplugged.is_set() or self.faults.silent:
+                continue
+            if msg is not None and msg.arbitration_id == 0x100:
+                self._command(bytes(msg.data))
+            if self.running:
+                self._absorb_hits()
+                self._emit_due()
+                if time.monotonic() - self._last_status >= 0.1:
+                    self._status()
+
+    def _ack(self, opcode: int, result: int) -> None:
+        self._send(0x101, bytes([opcode, result, 0, 0, 0, 0, 0, 0]))
+
+    def _status(self) -> None:
+        flags = 1 if self._overflow_flag else 0
+        data = struct.pack("<BBHI", 1 if self.running else 0, flags, self._overload_mask,
+                           self._produced & 0xFFFFFFFF)
+        self._send(0x110, data)
+        self._overload_mask = 0
+        self._overflow_flag = False
+        self._last_status = time.monotonic()
+
+    def _command(self, data: bytes) -> None:
+        self.commands.append(data)
+        if len(data) < 1:
+            return
+        op = data[0]
+        if op == 6:  # IDENTIFY
+            self._send(0x102, struct.pack("<IBBBB", self.serial_number, 2, 4, self.N_INPUTS, 0))
+        elif op == 4:  # STOP
+            self.running = False
+            self._ack(op, 0)
+        elif op == 5:  # STATUS_REQUEST
+            self._status()
+        elif op in (1, 2, 3) and self.running:
+            self._ack(op, 2)
+        elif op == 1:  # CONFIG_ACQ
+            rate, fmt, mask = struct.unpack_from("<HBB", data, 1)
+            if rate not in RATES or fmt > 1 or mask == 0:
+                self._ack(op, 1)
+                return
+            self.rate, self.fd, self.group_mask = rate, bool(fmt), mask
+            self._ack(op, 0)
+        elif op == 2:  # CONFIG_CHANNEL
+            ch, rng, iepe = struct.unpack_from("<BHB", data, 1)
+            if ch >= self.N_INPUTS or rng not in RANGES_MV:
+                self._ack(op, 1)
+                return
+            self.range_mv[ch], self.iepe[ch] = rng, bool(iepe & 1)
+            self._ack(op, 0)
+        elif op == 3:  # START
+            self._ack(op, 0)
+            self._clock = DeviceClock(self.rate, self.ppm, self.offset)
+            self._clock.start()
+            self._reset_stream()
+            self.running = True
+        else:
+            self._ack(op, 3)
+
+    def _absorb_hits(self) -> None:
+        """Add the response to each new hit to the samples still to be sent."""
+        new = self.physics.hits(self._hit_cursor)
+        self._hit_cursor += len(new)
+        rate = self._clock.true_rate
+        for hit in new:
+            k0 = int(np.floor((hit.t0 - self._clock.t_first) * rate)) - 2
+            n = int(np.ceil(self.tail * rate))
+            force = sampled_pulse(self._clock.instants(k0, n), 1.0 / rate, [hit])
+            acc = self.physics.response(force, hit.exc, rate, self._resp_dofs)
+            signal = np.zeros((self.N_INPUTS, n))
+            signal[self._resp_rows] = acc
+            signal[self._force_rows] = force
+            start = k0 - self._produced
+            if start < 0:
+                logger.warning("mock front end: hit registered %d samples late", -start)
+                signal, start = signal[:, -start:], 0
+            end = start + signal.shape[1]
+            if end > self._pending.shape[1]:
+                grow = np.zeros((self.N_INPUTS, end - self._pending.shape[1]))
+                self._pending = np.concatenate([self._pending, grow], axis=1)
+            self._pending[:, start:end] += signal
+
+    def _physical(self, n: int) -> NDArray[np.float64]:
+        out = np.zeros((self.N_INPUTS, n))
+        k = min(n, self._pending.shape[1])
+        out[:, :k] = self._pending[:, :k]
+        self._pending = self._pending[:, k:]
+        if self.accel_noise:
+            out[self._resp_rows] += self.accel_noise * self._rng.standard_normal(
+                (len(self._resp_rows), n))
+        if self.force_noise:
+            out[self._force_rows] += self.force_noise * self._rng.standard_normal(
+                (len(self._force_rows), n))
+        return out
+
+    def _emit_due(self) -> None:
+        per_frame = 5 if self.fd else 1
+        due = self._clock.due()
+        while due - self._produced >= per_frame:
+            f = self.faults
+            if f.overflow:  # samples lost inside the device
+                lost = f.overflow - f.overflow % per_frame
+                self._physical(lost)
+                self._produced += lost
+                self._seq += lost // per_frame
+                self._overflow_flag = True
+                f.overflow = 0
+                continue
+            if f.seq_jump:
+                self._seq += f.seq_jump
+                f.seq_jump = 0
+            volts = self._physical(per_frame) * self.sensitivity[:, None] / 1000.0
+            counts = np.round(volts / (self.range_mv[:, None] / 1000.0) * FULL).astype(np.int64)
+            over = np.abs(counts) > FULL
+            counts = np.clip(counts, -FULL, FULL)
+            for i in np.flatnonzero(over.any(axis=1)):
+                self._overload_mask |= 1 << int(i)
+            if self.fd:
+                self._send_fd(counts, over)
+            else:
+                self._send_classic(counts, over)
+            self._produced += per_frame
+            self._seq += 1
+
+    def _deliver(self, arbitration_id: int, data: bytes, fd: bool) -> None:
+        f = self.faults
+        self._frame_no += 1
+        if f.drop_every and self._frame_no % f.drop_every == 0:
+            return
+        if f.bad_frame_every and self._frame_no % f.bad_frame_every == 0:
+            data = data[:6]
+        self._send(arbitration_id, data, fd)
+        self.frames_sent += 1
+
+    @staticmethod
+    def _int24(values: NDArray[np.int64]) -> bytes:
+        """Little-endian 24-bit two's complement of each value, in order."""
+        raw = (np.asarray(values, dtype=np.int64) & 0xFFFFFF).astype("<u4")
+        return raw.view(np.uint8).reshape(-1, 4)[:, :3].tobytes()
+
+    def _send_fd(self, counts: NDArray[np.int64], over: NDArray[np.bool_]) -> None:
+        seq = self._seq & 0xFFFF
+        for g in range(4):
+            if not self.group_mask >> g & 1:
+                continue
+            rows = slice(4 * g, 4 * g + 4)
+            ovl = sum(1 << j for j in range(4) if over[4 * g + j].any())
+            # samples in time order, the group's 4 inputs within each sample
+            payload = self._int24(counts[rows].T.reshape(-1))
+            self._deliver(0x200, struct.pack("<HBB", seq, g, ovl) + payload, fd=True)
+
+    def _send_classic(self, counts: NDArray[np.int64], over: NDArray[np.bool_]) -> None:
+        seq = self._seq & 0x3FF
+        for g in range(8):
+            if not self.group_mask >> g & 1:
+                continue
+            a, b = 2 * g, 2 * g + 1
+            head = seq | (int(over[a, 0]) << 10) | (int(over[b, 0]) << 11) | (g << 12)
+            payload = self._int24(np.array([counts[a, 0], counts[b, 0]]))
+            self._deliver(0x201, struct.pack("<H", head) + payload, fd=False)

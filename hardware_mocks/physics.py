@@ -1,0 +1,146 @@
+"""What the mock devices share: the bench's physics on the host's clock, and device clocks.
+
+:class:`BenchPhysics` holds a bench (body on mounts with its geometry) and the
+hits made on it, timed on the host's ``time.monotonic()`` clock. Every mock
+samples this one physical world with its own :class:`DeviceClock`, so the
+hammer digitiser sees the force pulse of a hit and the front end sees the
+accelerations the model predicts for it, each on its own sample grid.
+
+A hit is a half-sine force pulse ``peak * sin(pi (t - t0) / duration)`` for
+``t0 <= t <= t0 + duration``. Devices sample it as its mean over each sample
+interval (an ideal anti-alias box filter), which is exact to integrate.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from hardware_mocks.benches import Bench
+
+__all__ = ["BenchPhysics", "DeviceClock", "Hit", "sampled_pulse"]
+
+
+@dataclass(frozen=True)
+class Hit:
+    """One hammer impact: pulse start ``t0`` (host s), excitation DOF index, peak N, duration s."""
+
+    t0: float
+    exc: int
+    peak: float
+    duration: float
+
+
+def _pulse_integral(t: NDArray[np.float64], hit: Hit) -> NDArray[np.float64]:
+    u = np.clip((t - hit.t0) / hit.duration, 0.0, 1.0)
+    return hit.peak * hit.duration / np.pi * (1.0 - np.cos(np.pi * u))
+
+
+def sampled_pulse(t: ArrayLike, dt: float, hits: list[Hit]) -> NDArray[np.float64]:
+    """Force samples at host instants ``t`` (s): each pulse's mean over ``[t - dt/2, t + dt/2]``."""
+    t = np.asarray(t, dtype=float)
+    out = np.zeros_like(t)
+    for hit in hits:
+        out += (_pulse_integral(t + dt / 2, hit) - _pulse_integral(t - dt / 2, hit)) / dt
+    return out
+
+
+class DeviceClock:
+    """A device's sample clock relative to the host's ``time.monotonic()``.
+
+    Sample ``k`` after a start at host time ``t_start`` is taken at
+    ``t_start + offset + k / (fs * (1 + ppm * 1e-6))``.
+
+    Parameters
+    ----------
+    fs : float
+        Nominal rate, Hz.
+    ppm : float
+        Clock error, parts per million (positive: the device runs fast).
+    offset : float
+        Delay between the start command and the first sample, s.
+    """
+
+    def __init__(self, fs: float, ppm: float = 0.0, offset: float = 0.0) -> None:
+        self.fs = fs
+        self.ppm = ppm
+        self.offset = offset
+        self.t_first = 0.0
+
+    @property
+    def true_rate(self) -> float:
+        return self.fs * (1.0 + self.ppm * 1e-6)
+
+    def start(self, now: float | None = None) -> None:
+        self.t_first = (time.monotonic() if now is None else now) + self.offset
+
+    def due(self, now: float | None = None) -> int:
+        """How many samples have been taken by host time ``now``."""
+        now = time.monotonic() if now is None else now
+        return max(0, int(np.floor((now - self.t_first) * self.true_rate)) + 1)
+
+    def instants(self, first: int, n: int) -> NDArray[np.float64]:
+        """Host times of samples ``first .. first + n - 1``."""
+        return self.t_first + (first + np.arange(n)) / self.true_rate
+
+
+class BenchPhysics:
+    """The bench as the mocks see it: a model, its measurement geometry and the hits made.
+
+    Parameters
+    ----------
+    bench : Bench
+        From :func:`hardware_mocks.benches.get_bench`.
+    """
+
+    def __init__(self, bench: Bench) -> None:
+        self.bench = bench
+        g = bench.geometry
+        self.resp_xyz = g.coordinates(bench.resp_nodes)
+        self.exc_xyz = g.coordinates(bench.exc_nodes)
+        self._hits: list[Hit] = []
+        self._lock = threading.Lock()
+
+    def hit(self, exc: int = 0, peak: float = 200.0, duration: float = 0.004,
+            delay: float = 0.05, double: tuple[float, float] | None = None) -> list[Hit]:
+        """Hit excitation DOF ``exc`` ``delay`` s from now.
+
+        ``double = (gap s, ratio)`` adds a rebound: a second pulse ``gap`` s after
+        the first, ``ratio`` times as strong (a double hit).
+        """
+        if not 0 <= exc < len(self.bench.exc_nodes):
+            n = len(self.bench.exc_nodes)
+            raise ValueError(f"excitation index {exc} out of range 0..{n - 1}")
+        t0 = time.monotonic() + delay
+        hits = [Hit(t0, exc, peak, duration)]
+        if double is not None:
+            gap, ratio = double
+            hits.append(Hit(t0 + gap, exc, peak * ratio, duration))
+        with self._lock:
+            self._hits.extend(hits)
+        return hits
+
+    def hits(self, since: int = 0) -> list[Hit]:
+        """Hits made so far, from index ``since`` on (consumers keep their own cursor)."""
+        with self._lock:
+            return self._hits[since:]
+
+    def force(self, t: ArrayLike, dt: float) -> NDArray[np.float64]:
+        """Hammer force (N) sampled at host instants ``t`` with sample interval ``dt``."""
+        return sampled_pulse(t, dt, self.hits())
+
+    def response(self, hit_force: NDArray[np.float64], exc: int, fs: float,
+                 resp_index: ArrayLike | None = None) -> NDArray[np.float64]:
+        """Accelerations (n_resp, n) for a force history on one excitation DOF, sampled at ``fs``.
+
+        Uses :meth:`BodyOnMounts.time_response`; ``resp_index`` selects response DOFs.
+        """
+        idx = np.arange(len(self.bench.resp_nodes)) if resp_index is None else np.asarray(
+            resp_index, dtype=np.int64)
+        return self.bench.model.time_response(
+            hit_force[None, :], fs, self.resp_xyz[idx], self.bench.resp_dirs[idx],
+            self.exc_xyz[exc : exc + 1], self.bench.exc_dirs[exc : exc + 1])

@@ -1,0 +1,255 @@
+"""Simulated SG-1 shaker signal generator and amplifier: SCPI on a pseudo-terminal.
+
+Commands (LF-terminated; queries answer one LF-terminated line)::
+
+    *IDN?  *RST  *CLS
+    SOUR:FUNC RAND|BRAN|CHIRP|SIN     SOUR:FUNC?
+    SOUR:FREQ <Hz>                    (sine)
+    SOUR:FREQ:STAR <Hz>  SOUR:FREQ:STOP <Hz>   (random band, chirp sweep)
+    SOUR:PER <s>  SOUR:BURS:DCYC <0..1>        (chirp and burst period, burst duty)
+    SOUR:VOLT <V>                     SOUR:VOLT?   (V RMS random, V peak sine/chirp)
+    OUTP ON|OFF                       OUTP?        (1 while on or ramping up)
+    OUTP:RAMP <s>                     OUTP:LEV?    (ramp time; present output level)
+    SYST:ERR?                         -> <code>,"<text>"   (0,"No error" when empty)
+    SYST:HEART:TIM <s>                (watchdog; 0 disables)
+    SYST:HEART                        (heartbeat, no reply)
+
+The output ramps linearly to the level over the ramp time and back to 0 when
+turned off. It goes off by itself on any command error, when heartbeats stop
+for longer than the watchdog time, when the host closes the port, and on an
+amplifier fault; each of these leaves an error in the queue.
+
+Example
+-------
+>>> with ShakerDevice() as dev:  # doctest: +SKIP
+...     print(dev.path)  # open with drivers.shaker_scpi.ScpiShaker
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from types import TracebackType
+
+from hardware_mocks.pty_port import PtyPort
+
+__all__ = ["ShakerDevice", "ShakerFaults"]
+
+ERRORS = {
+    -100: "Command error",
+    -113: "Undefined header",
+    -222: "Data out of range",
+    -224: "Illegal parameter value",
+    -350: "Queue overflow",
+    101: "Heartbeat lost; output off",
+    102: "Host disconnected; output off",
+    103: "Amplifier fault; output off",
+}
+FUNCTIONS = ("RAND", "BRAN", "CHIRP", "SIN")
+
+
+@dataclass
+class ShakerFaults:
+    """Faults the mock can inject. ``silent``: stop answering (output keeps its state)."""
+
+    silent: bool = False
+
+
+class ShakerDevice:
+    """The generator/amplifier as seen from its serial port.
+
+    Parameters
+    ----------
+    max_level : float
+        Highest level the amplifier accepts, V.
+    serial_number : str
+    """
+
+    def __init__(self, *, max_level: float = 2.0, serial_number: str = "0007") -> None:
+        self.max_level = max_level
+        self.serial_number = serial_number
+        self.faults = ShakerFaults()
+        self.commands: list[str] = []
+        self.heartbeats = 0
+        self._port = PtyPort()
+        self._errors: deque[int] = deque()
+        self._rx = bytearray()
+        self._lock = threading.Lock()
+        self._reset()
+        self._last_update = time.monotonic()
+        self._stop = threading.Event()
+        self._unplug = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="mock-shaker", daemon=True)
+        self._thread.start()
+
+    def _reset(self) -> None:
+        self.function = "SIN"
+        self.frequency = 100.0
+        self.f_start = 5.0
+        self.f_stop = 200.0
+        self.period = 1.0
+        self.duty = 0.5
+        self.level = 0.0
+        self.ramp = 1.0
+        self.output = False
+        self.level_now = 0.0
+        self.watchdog = 0.0
+        self._last_heartbeat = time.monotonic()
+
+    @property
+    def path(self) -> str:
+        return self._port.path
+
+    @property
+    def errors(self) -> list[int]:
+        """Codes waiting in the error queue."""
+        with self._lock:
+            return list(self._errors)
+
+    def amplifier_fault(self) -> None:
+        """Trip the amplifier: output off, error 103 queued."""
+        with self._lock:
+            self._fail(103)
+
+    def unplug(self) -> None:
+        """Pull the cable; the device sees no host and turns its output off."""
+        self._unplug.set()
+        deadline = time.monotonic() + 1.0
+        while not self._port.closed and time.monotonic() < deadline:
+            time.sleep(0.005)
+
+    def shutdown(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2.0)
+        self._port.close()
+
+    def __enter__(self) -> ShakerDevice:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.shutdown()
+
+    # -- firmware ---------------------------------------------------------------------------------
+    def _fail(self, code: int) -> None:
+        if len(self._errors) >= 10:
+            self._errors[-1] = -350
+        else:
+            self._errors.append(code)
+        self.output = False  # any error turns the output off (it ramps down)
+
+    def _update_ramp(self) -> None:
+        now = time.monotonic()
+        dt, self._last_update = now - self._last_update, now
+        target = self.level if self.output else 0.0
+        step = (self.level / self.ramp * dt) if self.ramp > 0 else float("inf")
+        if self.level_now < target:
+            self.level_now = min(target, self.level_now + max(step, 1e-9))
+        elif self.level_now > target:
+            down = (self.level_now / self.ramp * dt) if self.ramp > 0 else float("inf")
+            self.level_now = max(target, self.level_now - max(step, down, 1e-9))
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            if self._unplug.is_set() and not self._port.closed:
+                self._port.close()
+            data = self._port.read(0.005) if not self._port.closed else b""
+            with self._lock:
+                if self._port.closed or self._port.hung_up:
+                    if self.output:
+                        self._fail(102)
+                    if self._port.hung_up:
+                        time.sleep(0.005)
+                elif not self.faults.silent:
+                    self._rx += data
+                    while b"\n" in self._rx:
+                        line, _, rest = self._rx.partition(b"\n")
+                        self._rx = bytearray(rest)
+                        self._command(line.decode("ascii", "replace").strip())
+                if (self.watchdog > 0 and self.output
+                        and time.monotonic() - self._last_heartbeat > self.watchdog):
+                    self._fail(101)
+                self._update_ramp()
+            if self._port.closed:
+                time.sleep(0.005)
+
+    def _reply(self, text: str) -> None:
+        self._port.write(text.encode("ascii") + b"\n")
+
+    def _number(self, arg: str, low: float, high: float) -> float | None:
+        try:
+            value = float(arg)
+        except ValueError:
+            self._fail(-224)
+            return None
+        if not low <= value <= high:
+            self._fail(-222)
+            return None
+        return value
+
+    def _command(self, cmd: str) -> None:
+        if not cmd:
+            return
+        self.commands.append(cmd)
+        head, _, arg = cmd.partition(" ")
+        head = head.upper()
+        arg = arg.strip()
+        if head == "SYST:HEART":
+            self.heartbeats += 1
+            self._last_heartbeat = time.monotonic()
+        elif head == "*IDN?":
+            self._reply(f"INSITU,SG-1,{self.serial_number},2.1")
+        elif head == "*RST":
+            self._reset()
+        elif head == "*CLS":
+            self._errors.clear()
+        elif head == "SYST:ERR?":
+            code = self._errors.popleft() if self._errors else 0
+            self._reply(f'{code},"{ERRORS.get(code, "No error")}"')
+        elif head == "SOUR:FUNC":
+            if arg.upper() in FUNCTIONS:
+                self.function = arg.upper()
+            else:
+                self._fail(-224)
+        elif head == "SOUR:FUNC?":
+            self._reply(self.function)
+        elif head == "SOUR:VOLT?":
+            self._reply(f"{self.level:.6g}")
+        elif head == "OUTP?":
+            self._reply("1" if self.output else "0")
+        elif head == "OUTP:LEV?":
+            self._reply(f"{self.level_now:.6g}")
+        elif head == "OUTP":
+            if arg.upper() in ("ON", "1"):
+                self.output = True
+                self._last_heartbeat = time.monotonic()
+            elif arg.upper() in ("OFF", "0"):
+                self.output = False
+            else:
+                self._fail(-224)
+        else:
+            self._setting(head, arg)
+
+    def _setting(self, head: str, arg: str) -> None:
+        limits = {
+            "SOUR:FREQ": ("frequency", 0.1, 20000.0),
+            "SOUR:FREQ:STAR": ("f_start", 0.0, 20000.0),
+            "SOUR:FREQ:STOP": ("f_stop", 0.1, 20000.0),
+            "SOUR:PER": ("period", 0.01, 100.0),
+            "SOUR:BURS:DCYC": ("duty", 0.0, 1.0),
+            "SOUR:VOLT": ("level", 0.0, self.max_level),
+            "OUTP:RAMP": ("ramp", 0.0, 60.0),
+            "SYST:HEART:TIM": ("watchdog", 0.0, 60.0),
+        }
+        if head not in limits:
+            self._fail(-113)
+            return
+        attr, low, high = limits[head]
+        value = self._number(arg, low, high)
+        if value is not None:
+            setattr(self, attr, value)
+            if attr == "watchdog":
+                self._last_heartbeat = time.monotonic()

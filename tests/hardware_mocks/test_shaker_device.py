@@ -1,0 +1,171 @@
+"""The simulated SG-1 shaker: raw SCPI, then the driver against it with each fault."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+import serial
+
+from drivers.errors import DeviceNotAvailableError, DeviceTimeoutError
+from drivers.shaker_scpi import ScpiShaker, ShakerError
+from hardware_mocks.shaker_device import ShakerDevice
+
+
+@pytest.fixture
+def device() -> Iterator[ShakerDevice]:
+    dev = ShakerDevice()
+    yield dev
+    dev.shutdown()
+
+
+def wait_for(predicate, timeout: float) -> float:
+    t0 = time.monotonic()
+    while not predicate():
+        if time.monotonic() - t0 > timeout:
+            raise AssertionError("condition not met in time")
+        time.sleep(0.005)
+    return time.monotonic() - t0
+
+
+def test_raw_scpi(device: ShakerDevice) -> None:
+    with serial.Serial(device.path, timeout=0.5) as port:
+        port.write(b"*IDN?\n")
+        assert port.read_until(b"\n") == b"INSITU,SG-1,0007,2.1\n"
+        port.write(b"SYST:ERR?\n")
+        assert port.read_until(b"\n") == b'0,"No error"\n'
+        port.write(b"SOUR:WOBBLE 3\nSOUR:VOLT 9\nSOUR:FUNC CHIRP\nSOUR:FUNC?\n")
+        assert port.read_until(b"\n") == b"CHIRP\n"
+        port.write(b"SYST:ERR?\nSYST:ERR?\nSYST:ERR?\n")
+        assert port.read_until(b"\n") == b'-113,"Undefined header"\n'
+        assert port.read_until(b"\n") == b'-222,"Data out of range"\n'
+        assert port.read_until(b"\n") == b'0,"No error"\n'
+
+
+@pytest.fixture
+def shaker(device: ShakerDevice) -> Iterator[ScpiShaker]:
+    s = ScpiShaker("shaker", device.path, heartbeat=0.2, ramp=0.2)
+    s.open()
+    s.set_waveform("burst-random", f_start=5.0, f_stop=150.0, period=2.0, burst=0.6)
+    s.set_level(1.0)
+    yield s
+    s.shutdown()
+
+
+def test_output_ramps_up_and_down(device: ShakerDevice, shaker: ScpiShaker) -> None:
+    assert (device.function, device.f_stop, device.duty) == ("BRAN", 150.0, 0.6)
+    shaker.start()
+    time.sleep(0.08)
+    assert 0.1 < shaker.output_level() < 0.9  # still ramping
+    shaker.wait_ramp()
+    assert device.level_now == 1.0
+    shaker.stop()
+    assert device.level_now > 0.2  # ramps down, not a step
+    assert 0.1 < wait_for(lambda: device.level_now == 0.0, 1.0) < 0.3
+
+
+def test_heartbeat_keeps_output_on(device: ShakerDevice, shaker: ScpiShaker) -> None:
+    shaker.start()
+    time.sleep(0.6)  # three watchdog periods
+    assert device.output and device.heartbeats >= 8 and not device.errors
+
+
+def test_output_off_when_heartbeats_stop(device: ShakerDevice, shaker: ScpiShaker) -> None:
+    shaker.start()
+    shaker._beat_stop.set()  # the application hangs: no more heartbeats
+    assert wait_for(lambda: not device.output, 1.0) < 0.35
+    assert device.errors == [101]
+    with pytest.raises(ShakerError, match="101 Heartbeat lost"):
+        shaker.set_level(0.5)
+
+
+def test_shutdown_turns_output_off(device: ShakerDevice, shaker: ScpiShaker) -> None:
+    shaker.start()
+    shaker.shutdown()
+    assert not device.output
+    assert device.commands[-2:] == ["OUTP OFF", "SYST:HEART:TIM 0"]
+
+
+def test_amplifier_fault_is_reported(device: ShakerDevice, shaker: ScpiShaker) -> None:
+    shaker.start()
+    device.amplifier_fault()
+    assert not device.output
+    with pytest.raises(ShakerError) as info:
+        shaker.set_level(0.8)
+    assert info.value.code == 103
+
+
+def test_silent_device_times_out(device: ShakerDevice, shaker: ScpiShaker) -> None:
+    device.faults.silent = True
+    t0 = time.monotonic()
+    with pytest.raises(DeviceTimeoutError):
+        shaker.set_level(0.3)
+    assert time.monotonic() - t0 < 1.0
+    device.faults.silent = False
+
+
+def test_unplug_turns_output_off(device: ShakerDevice, shaker: ScpiShaker) -> None:
+    shaker.start()
+    device.unplug()
+    assert not device.output and device.errors[-1] == 102
+    with pytest.raises(DeviceNotAvailableError):
+        shaker.set_level(0.3)
+
+
+APP = """
+import sys, time
+from drivers.shaker_scpi import ScpiShaker
+s = ScpiShaker("shaker", sys.argv[1], heartbeat=0.3, ramp=0.0)
+s.open()
+s.set_waveform("sine", frequency=50.0)
+s.set_level(0.5)
+s.start()
+print("on", flush=True)
+if sys.argv[2] == "exit":
+    sys.exit(0)  # no shutdown(): the atexit hook must turn the output off
+time.sleep(30)
+"""
+
+
+@contextmanager
+def run_app(path: str, mode: str) -> Iterator[subprocess.Popen[str]]:
+    """The shaker driven by another process, which the test may end as it likes."""
+    with subprocess.Popen([sys.executable, "-c", APP, path, mode], stdout=subprocess.PIPE,
+                          text=True) as proc:
+        try:
+            assert proc.stdout is not None
+            assert proc.stdout.readline() == "on\n"
+            yield proc
+        finally:
+            if proc.poll() is None:
+                os.kill(proc.pid, signal.SIGKILL)
+                os.kill(proc.pid, signal.SIGCONT)
+            proc.wait(10)
+
+
+def test_application_exit_turns_output_off(device: ShakerDevice) -> None:
+    with run_app(device.path, "exit") as proc:
+        assert proc.wait(10) == 0
+    assert not device.output and "OUTP OFF" in device.commands and not device.errors
+
+
+def test_application_killed_turns_output_off(device: ShakerDevice) -> None:
+    with run_app(device.path, "sleep") as proc:
+        assert device.output
+        proc.kill()
+        proc.wait(10)
+        wait_for(lambda: not device.output, 1.0)
+    assert device.errors == [102]  # host gone: the port hung up
+
+
+def test_application_frozen_turns_output_off(device: ShakerDevice) -> None:
+    with run_app(device.path, "sleep") as proc:
+        os.kill(proc.pid, signal.SIGSTOP)  # alive, port open, no heartbeats
+        assert wait_for(lambda: not device.output, 1.5) < 0.6
+        assert device.errors == [101]
