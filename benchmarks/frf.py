@@ -1,0 +1,252 @@
+"""Benchmark: H1 spectra of 1 force + 24 accelerations, our accumulator against its references.
+
+For each sample rate and sample type, on the same samples (120 s by default):
+
+- ours: :class:`processing.spectral.SpectralAccumulator` fed block by block as the
+  signal is generated (the recording is never held whole), ``workers`` threads;
+- floor: the bare rfft of the same segments, blocked like ours, one core; no
+  estimator can be faster than this;
+- (a) scipy: a per-channel loop of ``scipy.signal.csd`` / ``welch`` on the whole recording;
+- (b) pyFRF (if installed): ``pyFRF.FRF(..., window='hann').get_H1()`` on the whole recording.
+
+Peak memory is measured in a fresh child process per method (resident-set high-water mark
+above the child's baseline). Results are compared with (a) element by element.
+
+Run: ``.venv/bin/python benchmarks/frf.py`` (``--duration 20`` for a quick look).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import scipy.fft
+import scipy.signal
+from numpy.lib.stride_tricks import sliding_window_view
+from rich.console import Console
+from rich.table import Table
+
+from processing.spectral import SpectralAccumulator, h1
+
+N_RESP = 24
+NPERSEG = 8192
+GROUP = 4
+
+
+def blocks(fs: float, duration: float, block_s: float, dtype: str, seed: int = 0) -> Iterator[
+    np.ndarray
+]:
+    """The recording (25, n) block by block: random force, resonant responses plus noise."""
+    rng = np.random.default_rng(seed)
+    sos = scipy.signal.butter(2, [0.01 * fs, 0.1 * fs], "bandpass", fs=fs, output="sos")
+    zi = np.zeros((sos.shape[0], 2))
+    gains = np.linspace(0.5, 3.0, N_RESP)
+    n_total, n_block = round(duration * fs), round(block_s * fs)
+    done = 0
+    while done < n_total:  # few temporaries: the generator's memory counts in the peak
+        n = min(n_block, n_total - done)
+        out = np.empty((N_RESP + 1, n), dtype=dtype)
+        rng.standard_normal(dtype=dtype, out=out[0])
+        y, zi = scipy.signal.sosfilt(sos, out[0], zi=zi)
+        x = out[1:]
+        rng.standard_normal(dtype=dtype, out=x)
+        x *= 0.05
+        for i in range(N_RESP):
+            x[i] += gains[i] * y
+        yield out
+        done += n
+
+
+def whole(fs: float, duration: float, block_s: float, dtype: str) -> np.ndarray:
+    return np.concatenate(list(blocks(fs, duration, block_s, dtype)), axis=-1)
+
+
+def run_ours(fs: float, duration: float, block_s: float, dtype: str, workers: int):
+    acc = SpectralAccumulator(fs, NPERSEG, group=GROUP, workers=workers)
+    t = 0.0
+    for b in blocks(fs, duration, block_s, dtype):
+        t0 = time.perf_counter()
+        acc.update(b)
+        t += time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sp = acc.spectra()
+    H = h1(sp)
+    t += time.perf_counter() - t0
+    return t, sp, H
+
+
+def run_floor(fs: float, duration: float, block_s: float, dtype: str) -> float:
+    """Bare rfft of every segment, GROUP segments of all channels per call, one worker."""
+    step = NPERSEG // 2
+    tail = np.empty((N_RESP + 1, 0), dtype=dtype)
+    t = 0.0
+    for b in blocks(fs, duration, block_s, dtype):
+        data = np.concatenate([tail, b], axis=-1)
+        n_seg = 0 if data.shape[-1] < NPERSEG else (data.shape[-1] - NPERSEG) // step + 1
+        segs = sliding_window_view(data, NPERSEG, axis=-1)[:, ::step][:, :n_seg]
+        t0 = time.perf_counter()
+        for g in range(0, n_seg, GROUP):
+            scipy.fft.rfft(segs[:, g:g + GROUP], axis=-1, workers=1)
+        t += time.perf_counter() - t0
+        tail = data[:, n_seg * step:]
+    return t
+
+
+def run_scipy(x: np.ndarray, fs: float):
+    t0 = time.perf_counter()
+    kw = {"fs": fs, "nperseg": NPERSEG}
+    Pfx = np.array([scipy.signal.csd(x[0], x[i], **kw)[1] for i in range(1, x.shape[0])])
+    Pxx = np.array([scipy.signal.welch(x[i], **kw)[1] for i in range(1, x.shape[0])])
+    Pff = scipy.signal.welch(x[0], **kw)[1]
+    return time.perf_counter() - t0, Pff, Pfx, Pxx
+
+
+def run_pyfrf(x: np.ndarray, fs: float) -> float:
+    import pyFRF  # benchmark-only reference, not a dependency
+
+    t0 = time.perf_counter()
+    frf = pyFRF.FRF(int(fs), exc=x[None, :1], resp=x[None, 1:], window="hann",
+                    nperseg=NPERSEG, noverlap=NPERSEG // 2, fft_len=NPERSEG)
+    with np.errstate(all="ignore"):
+        frf.get_H1()
+    return time.perf_counter() - t0
+
+
+def _rss_mb(field: str = "VmRSS") -> float:
+    """Resident set (VmRSS) or its high-water mark (VmHWM) of this process, MB.
+
+    Not ``ru_maxrss``: Linux carries that over from the parent across fork and exec.
+    """
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1024
+    raise RuntimeError(f"{field} not in /proc/self/status")
+
+
+def child(method: str, fs: float, duration: float, block_s: float, dtype: str,
+          workers: int) -> None:
+    """Run one method in this (fresh) process; print its peak memory above baseline, MB."""
+    x = None
+    if method in ("scipy", "pyfrf"):
+        x = whole(fs, duration, block_s, dtype)
+    base = _rss_mb()
+    if method == "ours":
+        run_ours(fs, duration, block_s, dtype, workers)
+    elif method == "scipy":
+        assert x is not None
+        run_scipy(x, fs)
+    else:
+        assert x is not None
+        run_pyfrf(x, fs)
+    print(json.dumps({"peak_mb": _rss_mb("VmHWM") - base}))
+
+
+def peak_memory(method: str, fs: float, args: argparse.Namespace, dtype: str) -> float | None:
+    cmd = [sys.executable, __file__, "--child", method, "--rate", str(fs), "--dtype", dtype,
+           "--duration", str(args.duration), "--block", str(args.block),
+           "--workers", str(args.workers)]
+    out = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if out.returncode != 0:
+        return None
+    return float(json.loads(out.stdout.strip().splitlines()[-1])["peak_mb"])
+
+
+def rel_err(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest element-wise relative difference (elements above 1e-12 of the largest)."""
+    a, b = np.asarray(a), np.asarray(b)
+    m = np.abs(b) > 1e-12 * np.abs(b).max()
+    return float(np.max(np.abs(a[m] - b[m]) / np.abs(b[m])))
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--duration", type=float, default=120.0, help="recording length, s")
+    p.add_argument("--rates", type=float, nargs="+", default=[25600.0, 51200.0])
+    p.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
+    p.add_argument("--block", type=float, default=1.0, help="block length, s")
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--repeat", type=int, default=3, help="best of n runs (floor and ours)")
+    p.add_argument("--no-references", action="store_true", help="skip scipy and pyFRF")
+    p.add_argument("--child", help=argparse.SUPPRESS)
+    p.add_argument("--rate", type=float, help=argparse.SUPPRESS)
+    p.add_argument("--dtype", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.child:
+        child(args.child, args.rate, args.duration, args.block, args.dtype, args.workers)
+        return 0
+    try:
+        import pyFRF  # noqa: F401
+
+        have_pyfrf = not args.no_references
+        pyfrf_note = ""
+    except ImportError:
+        have_pyfrf = False
+        pyfrf_note = "pyFRF is not installed: (b) not measured (pip install pyFRF)"
+
+    console = Console(width=200)
+    table = Table(title=f"H1 spectra, 1 force + {N_RESP} accelerations, {args.duration:g} s, "
+                        f"nperseg {NPERSEG}, 50 % overlap, ours with {args.workers} threads")
+    for col in ("rate", "dtype", "floor ms", "ours ms", "ours/floor", "real time",
+                "(a) scipy ms", "(a)/ours", "(b) pyFRF ms", "(b)/ours", "ours MB", "(a) MB",
+                "(b) MB", "max rel. diff to (a)"):
+        table.add_column(col, justify="right")
+    for fs in args.rates:
+        for dtype in args.dtypes:
+            floor = min(run_floor(fs, args.duration, args.block, dtype) for _ in range(args.repeat))
+            t_ours = float("inf")
+            for _ in range(args.repeat):
+                t, sp, H = run_ours(fs, args.duration, args.block, dtype, args.workers)
+                t_ours = min(t_ours, t)
+            mem_ours = peak_memory("ours", fs, args, dtype)
+            t_a = t_b = mem_a = mem_b = None
+            diff = "-"
+            if not args.no_references:
+                x = whole(fs, args.duration, args.block, dtype)
+                t_a, Pff, Pfx, Pxx = run_scipy(x, fs)
+                diff = f"{max(rel_err(sp.Sfx[0], Pfx), rel_err(sp.Sxx, Pxx), rel_err(sp.Sff[0, 0].real, Pff), rel_err(H[:, 0], Pfx / Pff)):.1e}"  # noqa: E501
+                del x
+                mem_a = peak_memory("scipy", fs, args, dtype)
+                if have_pyfrf:
+                    x = whole(fs, args.duration, args.block, dtype)
+                    try:
+                        t_b = run_pyfrf(x, fs)
+                    except Exception as err:  # a reference failing is reported, not fatal
+                        pyfrf_note = f"pyFRF failed: {err}"
+                    del x
+                    mem_b = peak_memory("pyfrf", fs, args, dtype) if t_b else None
+
+            def ms(t: float | None) -> str:
+                return "-" if t is None else f"{1e3 * t:.0f}"
+
+            def ratio(t: float | None, ref: float = t_ours) -> str:
+                return "-" if t is None else f"{t / ref:.1f}x"
+
+            def mb(m: float | None) -> str:
+                return "-" if m is None else f"{m:.0f}"
+
+            table.add_row(f"{fs / 1000:g} kHz", dtype, ms(floor), ms(t_ours),
+                          f"{t_ours / floor:.2f}", f"{args.duration / t_ours:.0f}x",
+                          ms(t_a), ratio(t_a), ms(t_b), ratio(t_b), mb(mem_ours), mb(mem_a),
+                          mb(mem_b), diff)
+            console.print(f"done {fs:g} Hz {dtype}", style="dim")
+    console.print(table)
+    console.print(
+        "floor: bare rfft of the same segments, one core, groups of "
+        f"{GROUP} segments x 25 channels; real time: recording length / our time; "
+        "MB: peak resident memory above the process baseline (fresh process); float32 is "
+        "transformed in single precision, so its difference to scipy (which also works in "
+        "single precision) is at float32 level."
+    )
+    if pyfrf_note:
+        console.print(pyfrf_note, style="bold yellow")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,391 @@
+"""Impact (hammer) tests: trigger, per-hit checks, windows and FRFs averaged over accepted hits.
+
+One recording holds the force channel and the responses of one excitation point,
+hit several times. Each trigger on the force (level, slope) opens one record of
+``record_length`` samples starting ``pretrigger`` samples before the trigger;
+a new trigger is armed only after the record ends. Every hit gets a verdict:
+
+- *accepted*;
+- *double hit*: after the force has fallen below half the double-hit level, it rises
+  again above ``double_hit_ratio`` times the peak within the record;
+- *overload* on a named channel: a peak at or above 99 % of its range, or a clipped
+  (flat-topped) waveform: ``clip_samples`` consecutive samples at the channel's peak;
+- *incomplete*: the record runs past the end (or start) of the data.
+
+Accepted hits are windowed (force window times exponential window on the force,
+the exponential window on the responses, see :mod:`processing.windows`) and averaged
+into H1 (or H2, Hv) with the coherence over hits. The exponential window's time
+constant is reported so the damping it adds can be removed from identified
+results (:func:`processing.windows.correct_dynamic_stiffness`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from processing.data import FRFSet, Geometry, InputError
+from processing.spectral import CrossSpectra, combine, frf, record_spectra
+from processing.windows import exponential_window, force_window
+
+__all__ = [
+    "HitVerdict",
+    "ImpactResult",
+    "ImpactSettings",
+    "find_triggers",
+    "impact_frfset",
+    "merge_results",
+    "process_impacts",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ImpactSettings:
+    """How hits are found, checked and windowed.
+
+    Attributes
+    ----------
+    level : float
+        Trigger level on the force channel, force unit (N); crossed with ``slope``.
+    record_length : int
+        Samples per hit record (line spacing ``fs / record_length`` Hz).
+    pretrigger : int
+        Samples kept before the trigger.
+    slope : {'rising', 'falling'}
+        A hammer pushing along the excitation direction gives a rising force.
+    exp_tau : float or None
+        Exponential window time constant, s (None: no exponential window).
+    force_window : float or None
+        Force window length after the trigger, s; None sizes it from each pulse
+        (pulse end plus one pulse width, then a half-cosine of one pulse width).
+    double_hit_ratio : float
+        A second rise above this fraction of the peak force is a double hit.
+    clip_samples : int
+        Consecutive samples at a channel's peak that mean clipping.
+    """
+
+    level: float
+    record_length: int
+    pretrigger: int = 0
+    slope: Literal["rising", "falling"] = "rising"
+    exp_tau: float | None = None
+    force_window: float | None = None
+    double_hit_ratio: float = 0.1
+    clip_samples: int = 3
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.level) or self.level == 0:
+            raise InputError(f"trigger level must be a non-zero force, got {self.level}")
+        if self.record_length < 8:
+            raise InputError(f"record_length must be >= 8 samples, got {self.record_length}")
+        if not 0 <= self.pretrigger < self.record_length:
+            raise InputError(
+                f"pretrigger must be in [0, record_length), got {self.pretrigger}"
+            )
+        if self.slope not in ("rising", "falling"):
+            raise InputError(f"slope must be 'rising' or 'falling', got {self.slope!r}")
+        if self.exp_tau is not None and not self.exp_tau > 0:
+            raise InputError(f"exp_tau must be positive (s) or None, got {self.exp_tau}")
+        if self.force_window is not None and not self.force_window > 0:
+            raise InputError(f"force_window must be positive (s) or None, got {self.force_window}")
+        if not 0 < self.double_hit_ratio < 1:
+            raise InputError(f"double_hit_ratio must be in (0, 1), got {self.double_hit_ratio}")
+        if self.clip_samples < 2:
+            raise InputError(f"clip_samples must be >= 2, got {self.clip_samples}")
+
+
+@dataclass(frozen=True)
+class HitVerdict:
+    """One hit: trigger sample, record start, peak force (N), accepted or the reason why not."""
+
+    index: int
+    trigger: int
+    start: int
+    peak_force: float
+    accepted: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class ImpactResult:
+    """FRF column of one excitation point from its accepted hits.
+
+    Attributes
+    ----------
+    freq : (n_f,) Hz
+    H : (n_resp, 1, n_f) complex, response unit per force unit, or None if no hit was accepted
+    coherence : (n_resp, 1, n_f) coherence over the accepted hits (1 for a single hit)
+    verdicts : one per hit found
+    spectra : averaged spectra of the accepted hits (to merge with other recordings)
+    estimator : 'H1', 'H2' or 'Hv'
+    exp_tau : exponential window time constant, s (None if none was applied)
+    """
+
+    freq: NDArray[np.float64]
+    H: NDArray[np.complex128] | None
+    coherence: NDArray[np.float64] | None
+    verdicts: tuple[HitVerdict, ...]
+    spectra: CrossSpectra | None
+    estimator: str
+    exp_tau: float | None
+    meta: dict[str, object] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        if (self.H is None) != (self.coherence is None) or (self.H is None) != (
+            self.spectra is None
+        ):
+            raise InputError("H, coherence and spectra must all be given or all be None")
+        if self.H is not None and self.coherence is not None:
+            if self.H.ndim != 3 or self.H.shape[1] != 1 or self.H.shape[-1] != self.freq.size:
+                raise InputError(
+                    f"H must have shape (n_resp, 1, {self.freq.size}), got {self.H.shape}"
+                )
+            if self.coherence.shape != self.H.shape:
+                raise InputError("coherence and H shapes differ")
+
+    @property
+    def n_accepted(self) -> int:
+        return sum(v.accepted for v in self.verdicts)
+
+    @property
+    def rejected(self) -> tuple[HitVerdict, ...]:
+        return tuple(v for v in self.verdicts if not v.accepted)
+
+
+def find_triggers(force: ArrayLike, settings: ImpactSettings) -> NDArray[np.int64]:
+    """Sample indices where the force crosses the trigger level with the slope, one per record.
+
+    A crossing inside the record of the previous trigger is not a new hit.
+    """
+    f = np.asarray(force, dtype=float).ravel()
+    sign = 1.0 if settings.slope == "rising" else -1.0
+    g, lvl = sign * f, sign * settings.level
+    crossings = np.flatnonzero((g[:-1] < lvl) & (g[1:] >= lvl)) + 1
+    out: list[int] = []
+    next_ok = -1
+    for c in crossings.tolist():  # loop over hits (few), each re-arming after its record
+        if c >= next_ok:
+            out.append(c)
+            next_ok = c + settings.record_length
+    return np.asarray(out, dtype=np.int64)
+
+
+def _max_run_at_peak(x: NDArray[np.float64], k: int) -> NDArray[np.bool_]:
+    """True where a record channel has ``k`` consecutive samples at its absolute peak."""
+    a = np.abs(x)
+    peak = a.max(axis=-1, keepdims=True)
+    at = (a >= peak * (1 - 1e-9)) & (peak > 0)
+    c = np.cumsum(at, axis=-1)
+    c = np.concatenate([np.zeros((*c.shape[:-1], 1), c.dtype), c], axis=-1)
+    return np.any(c[..., k:] - c[..., :-k] >= k, axis=-1)
+
+
+def _pulse_edges(
+    g: NDArray[np.float64], ratio: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """First sample above, first back below (half the level) and the first re-rise, per record.
+
+    ``g`` (n_hit, n) is the force with the slope's sign; a re-rise index of ``n`` means none.
+    """
+    n = g.shape[-1]
+    peak = g.max(axis=-1, keepdims=True)
+    above = g > ratio * peak
+    below = g < 0.5 * ratio * peak
+    idx = np.arange(n)
+    first_above = np.argmax(above, axis=-1)
+    after = idx > first_above[:, None]
+    fall = np.where(np.any(below & after, axis=-1), np.argmax(below & after, axis=-1), n)
+    again = above & (idx > fall[:, None])
+    rerise = np.where(np.any(again, axis=-1), np.argmax(again, axis=-1), n)
+    return first_above, fall, rerise
+
+
+def process_impacts(
+    data: ArrayLike,
+    fs: float,
+    settings: ImpactSettings,
+    *,
+    force_channel: int = 0,
+    channel_names: Sequence[str] | None = None,
+    ranges: ArrayLike | None = None,
+    estimator: str = "H1",
+) -> ImpactResult:
+    """Find, check, window and average the hits of one impact recording.
+
+    Parameters
+    ----------
+    data : (n_ch, n) array
+        Force channel (N) and responses (m/s^2), float32 or float64.
+    fs : float
+        Sample rate, Hz.
+    settings : ImpactSettings
+    force_channel : int
+        Index of the force channel; the other channels are the responses, in order.
+    channel_names : sequence of str, optional
+        Names used in verdicts (default ``'channel i'``).
+    ranges : (n_ch,) array, optional
+        Full-scale input range of each channel, in its unit, for overload detection.
+    estimator : {'H1', 'H2', 'Hv'}
+
+    Returns
+    -------
+    ImpactResult
+        ``H`` and ``coherence`` are None when no hit was accepted; the verdicts say why.
+    """
+    x = np.asarray(data)
+    if x.ndim != 2 or x.shape[0] < 2:
+        raise InputError(f"impact data must have shape (n_ch >= 2, n_samples), got {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise InputError("impact data contain NaN or infinite samples")
+    if not np.isfinite(fs) or fs <= 0:
+        raise InputError(f"sample rate must be positive, got {fs}")
+    n_ch, n = x.shape
+    if not 0 <= force_channel < n_ch:
+        raise InputError(f"force channel {force_channel} out of range for {n_ch} channels")
+    names = [f"channel {i}" for i in range(n_ch)] if channel_names is None else list(channel_names)
+    if len(names) != n_ch:
+        raise InputError(f"{len(names)} channel names for {n_ch} channels")
+    rng_arr = None
+    if ranges is not None:
+        rng_arr = np.asarray(ranges, dtype=float).ravel()
+        if rng_arr.size != n_ch or np.any(rng_arr <= 0):
+            raise InputError(f"ranges must be {n_ch} positive full-scale values")
+    L, pre = settings.record_length, settings.pretrigger
+    sign = 1.0 if settings.slope == "rising" else -1.0
+
+    triggers = find_triggers(x[force_channel], settings)
+    starts = triggers - pre
+    complete = (starts >= 0) & (starts + L <= n)
+    ok_starts = starts[complete]
+    # records (n_hit, n_ch, L) of the complete hits, one fancy-indexing gather
+    rec = x[:, ok_starts[:, None] + np.arange(L)].transpose(1, 0, 2).astype(float)
+    g = sign * rec[:, force_channel]
+    peak_force = g.max(axis=-1) if rec.shape[0] else np.zeros(0)
+    first_above, fall, rerise = _pulse_edges(g, settings.double_hit_ratio)
+    double = rerise < L
+    clipped = _max_run_at_peak(rec, settings.clip_samples)  # (n_hit, n_ch)
+    if rng_arr is not None:
+        over = np.abs(rec).max(axis=-1) >= 0.99 * rng_arr
+    else:
+        over = np.zeros_like(clipped)
+
+    verdicts: list[HitVerdict] = []
+    accepted = np.zeros(ok_starts.size, dtype=bool)  # per complete record
+    k = 0
+    for i, (trig, start, comp) in enumerate(zip(triggers, starts, complete, strict=True)):
+        if not comp:
+            where = "start" if start < 0 else "end"
+            verdicts.append(HitVerdict(i, int(trig), int(start), float("nan"), False,
+                                       f"record incomplete: it runs past the {where} of the data"))
+            continue
+        reasons = []
+        if over[k].any():
+            ch = names[int(np.argmax(over[k]))]
+            reasons.append(f"overload on {ch} (peak at or above 99 % of its range)")
+        elif clipped[k].any():
+            ch = names[int(np.argmax(clipped[k]))]
+            reasons.append(f"overload on {ch} (clipped: flat top at its peak)")
+        if double[k]:
+            dt = (rerise[k] - first_above[k]) / fs * 1e3
+            reasons.append(f"double hit (second impact {dt:.1f} ms after the first)")
+        accepted[k] = not reasons
+        verdicts.append(HitVerdict(i, int(trig), int(start), float(peak_force[k]),
+                                   not reasons, "; ".join(reasons)))
+        k += 1
+    for v in verdicts:
+        if not v.accepted:
+            log.info("hit %d at sample %d rejected: %s", v.index, v.trigger, v.reason)
+
+    freq = np.asarray(np.fft.rfftfreq(L, 1.0 / fs), dtype=np.float64)
+    meta: dict[str, object] = {"fs": float(fs), "record_length": L, "pretrigger": pre}
+    if not accepted.any():
+        return ImpactResult(freq, None, None, tuple(verdicts), None, estimator, settings.exp_tau,
+                            meta)
+    rec_a = rec[accepted]
+    windows = np.ones((rec_a.shape[0], n_ch, L))
+    if settings.exp_tau is not None:
+        windows *= exponential_window(L, fs, settings.exp_tau)
+    if settings.force_window is not None:
+        stop = np.full(rec_a.shape[0], pre + round(settings.force_window * fs))
+        taper = np.zeros_like(stop)
+    else:
+        width = np.maximum(fall[accepted] - first_above[accepted], 1)
+        stop = fall[accepted] + width
+        taper = width
+    windows[:, force_channel] *= force_window(L, np.minimum(stop, L), taper)
+    sp = record_spectra(rec_a, fs, windows, references=(force_channel,))
+    H, coh = frf(sp, estimator)
+    meta["n_averages"] = int(accepted.sum())
+    return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta)
+
+
+def merge_results(results: Sequence[ImpactResult]) -> ImpactResult:
+    """One result from several recordings of the same excitation point (hits averaged together)."""
+    if not results:
+        raise InputError("no impact result to merge")
+    first = results[0]
+    for r in results[1:]:
+        if r.exp_tau != first.exp_tau or r.estimator != first.estimator:
+            raise InputError("impact results to merge must share window and estimator")
+    verdicts = tuple(v for r in results for v in r.verdicts)
+    spectra = [r.spectra for r in results if r.spectra is not None]
+    if not spectra:
+        return ImpactResult(first.freq, None, None, verdicts, None, first.estimator,
+                            first.exp_tau, dict(first.meta))
+    sp = spectra[0]
+    for other in spectra[1:]:
+        sp = combine(sp, other)
+    H, coh = frf(sp, first.estimator)
+    return ImpactResult(sp.freq, H, coh, verdicts, sp, first.estimator, first.exp_tau,
+                        {**first.meta, "n_averages": sp.n_averages})
+
+
+def impact_frfset(
+    results: Sequence[ImpactResult],
+    geometry: Geometry,
+    resp_nodes: ArrayLike,
+    resp_dirs: ArrayLike,
+    exc_nodes: ArrayLike,
+    exc_dirs: ArrayLike,
+) -> FRFSet:
+    """An :class:`FRFSet` with one column per excitation point, in the order of ``results``.
+
+    Raises InputError naming the excitation without any accepted hit.
+    """
+    en = np.asarray(exc_nodes).ravel()
+    if len(results) != en.size:
+        raise InputError(f"{len(results)} impact results for {en.size} excitation DOFs")
+    cols, cohs = [], []
+    for j, r in enumerate(results):
+        if r.H is None or r.coherence is None:
+            why = "; ".join(sorted({v.reason for v in r.verdicts})) or "no hit found"
+            raise InputError(f"excitation {j} (node {en[j]}) has no accepted hit: {why}")
+        if not np.array_equal(r.freq, results[0].freq):
+            raise InputError("impact results have different frequency lines")
+        cols.append(r.H)
+        cohs.append(r.coherence)
+    taus = {r.exp_tau for r in results}
+    meta: dict[str, object] = {
+        "estimator": results[0].estimator,
+        "excitation": "impact",
+        "exponential_tau": taus.pop() if len(taus) == 1 else [r.exp_tau for r in results],
+        "n_averages": [r.n_accepted for r in results],
+    }
+    return FRFSet(
+        freq=results[0].freq,
+        H=np.concatenate(cols, axis=1),
+        resp_nodes=np.asarray(resp_nodes),
+        resp_dirs=np.asarray(resp_dirs),
+        exc_nodes=en,
+        exc_dirs=np.asarray(exc_dirs),
+        geometry=geometry,
+        coherence=np.concatenate(cohs, axis=1),
+        meta=meta,
+    )

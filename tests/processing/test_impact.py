@@ -1,0 +1,162 @@
+"""Impact processing against the physical model: hits, verdicts, windows, averaged H1."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from hardware_mocks.benches import get_bench
+from hardware_mocks.signals import frf_laplace, half_sine, impulse_response, simulate
+from processing.data import FRFSet, InputError
+from processing.impact import (
+    ImpactSettings,
+    find_triggers,
+    impact_frfset,
+    merge_results,
+    process_impacts,
+)
+
+FS = 2048.0
+L = 2048  # 1 s records, 1 Hz lines
+PRE = 64
+TAU = 0.1  # s: the engine's slowest mode (0.46 s) has died out (6e-6) by the record end
+SPACING = 5.0  # s between hits: the previous hit has died out too
+PULSE = 0.003  # s, half-sine
+
+
+@pytest.fixture(scope="module")
+def engine():
+    b = get_bench("engine")
+    g = b.geometry
+    rx, rd = g.coordinates(b.resp_nodes), b.resp_dirs
+    ex, ed = g.coordinates(b.exc_nodes[:1]), b.exc_dirs[:1]
+    return b, rx, rd, ex, ed, impulse_response(b.model, FS, rx, rd, ex, ed)
+
+
+def _hammer(ir, peaks, *, double_at=None, clip_at=None, seed=1, force_noise=0.05,
+            resp_noise=2e-5):
+    """Recording (1 + n_resp, n): hits every SPACING s from 1 s, optional double and clipped hit."""
+    rng = np.random.default_rng(seed)
+    n = int((len(peaks) * SPACING + 1.0) * FS)
+    t_hits = 1.0 + SPACING * np.arange(len(peaks))
+    f = sum(half_sine(n, FS, t, PULSE, p) for t, p in zip(t_hits, peaks, strict=True))
+    if double_at is not None:
+        f = f + half_sine(n, FS, t_hits[double_at] + 0.03, PULSE, 0.4 * peaks[double_at])
+    x = simulate(ir, f[None])
+    f_m = f + force_noise * rng.standard_normal(n)
+    x_m = x + resp_noise * np.abs(x).max() * rng.standard_normal(x.shape)
+    if clip_at is not None:
+        i0 = int(t_hits[clip_at] * FS) - 5
+        f_m[i0:i0 + 20] = np.minimum(f_m[i0:i0 + 20], 0.7 * peaks[clip_at])
+    return np.vstack([f_m, x_m])
+
+
+@pytest.fixture(scope="module")
+def recording(engine):
+    *_, ir = engine
+    peaks = np.random.default_rng(0).uniform(150, 250, 11)
+    return _hammer(ir, peaks, double_at=4, clip_at=5)
+
+
+def test_triggers_one_per_hit_with_holdoff():
+    f = np.zeros(10000)
+    for t0 in (1000, 1010, 4000, 9000):  # 1010: the same hit's ringing re-crossing the level
+        f[t0:t0 + 5] = 100.0
+    s = ImpactSettings(level=50.0, record_length=2000, pretrigger=10)
+    assert find_triggers(f, s).tolist() == [1000, 4000, 9000]
+    falling = ImpactSettings(level=-50.0, record_length=2000, slope="falling")
+    assert find_triggers(-f, falling).tolist() == [1000, 4000, 9000]
+
+
+def test_verdicts_double_hit_clipping_incomplete(recording):
+    data = recording[:, : -int(4.5 * FS)]  # cut inside the last record
+    res = process_impacts(data, FS, ImpactSettings(20.0, L, PRE, exp_tau=TAU),
+                          channel_names=["hammer", *(f"acc{i}" for i in range(12))])
+    reasons = {v.index: v.reason for v in res.verdicts if not v.accepted}
+    assert set(reasons) == {4, 5, 10}
+    assert reasons[4].startswith("double hit (second impact 29.8 ms after")
+    assert "overload on hammer" in reasons[5] and "clipped" in reasons[5]
+    assert "incomplete" in reasons[10]
+    assert res.n_accepted == 8
+    assert res.meta["n_averages"] == 8
+
+
+def test_clean_noisy_hits_are_not_double_hits(engine):
+    *_, ir = engine
+    data = _hammer(ir, [200.0, 180.0, 220.0], force_noise=1.0)  # 0.5 % force noise
+    res = process_impacts(data, FS, ImpactSettings(20.0, L, PRE, exp_tau=TAU))
+    assert [v.accepted for v in res.verdicts] == [True, True, True]
+
+
+def test_response_overload_names_the_channel(recording):
+    ranges = np.full(recording.shape[0], 1e9)
+    ranges[3] = 0.5 * np.abs(recording[3, : int(6 * FS)]).max()  # first hit overloads acc 3
+    res = process_impacts(recording, FS, ImpactSettings(20.0, L, PRE, exp_tau=TAU),
+                          ranges=ranges)
+    assert not res.verdicts[0].accepted
+    assert res.verdicts[0].reason.startswith("overload on channel 3")
+
+
+def test_h1_matches_the_exponentially_windowed_model(engine, recording):
+    bench, rx, rd, ex, ed, _ = engine
+    res = process_impacts(recording, FS, ImpactSettings(20.0, L, PRE, exp_tau=TAU))
+    assert res.H is not None and res.coherence is not None and res.spectra is not None
+    # the window turns the FRF into the model's at s = j omega + 1/tau (processing.windows)
+    He = frf_laplace(bench.model, 2j * np.pi * res.freq + 1 / TAU, rx, rd, ex, ed)
+    Sff = res.spectra.Sff[0, 0].real
+    # where the hammer excites (force spectrum within 20 dB of its top), above the lowest
+    # lines (accelerance 60 dB below the mass line) and in the front end's band
+    band = (Sff > 0.01 * Sff.max()) & (res.freq >= 5.0) & (res.freq < FS / 2.56)
+    m = (res.coherence > 0.99) & band
+    assert m.mean() > 0.3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mag = np.abs(np.abs(res.H) / np.abs(He) - 1)[m]
+        ph = np.degrees(np.abs(np.angle(res.H / He)))[m]
+    assert mag.max() < 0.01 and ph.max() < 1.0
+
+
+def test_noise_free_hit_is_exact_and_float32_accepted(engine):
+    bench, rx, rd, ex, ed, ir = engine
+    data = _hammer(ir, [200.0, 150.0], force_noise=0.0, resp_noise=0.0)
+    res = process_impacts(data.astype(np.float32), FS,
+                          ImpactSettings(20.0, L, PRE, exp_tau=TAU, force_window=0.02))
+    He = frf_laplace(bench.model, 2j * np.pi * res.freq + 1 / TAU, rx, rd, ex, ed)
+    band = (res.freq >= 5.0) & (res.freq < 400.0)
+    assert res.H is not None
+    assert_allclose(res.H[..., band], He[..., band], rtol=1e-3, atol=1e-5 * np.abs(He).max())
+
+
+def test_merge_and_frfset(engine, recording):
+    bench, *_ = engine
+    settings = ImpactSettings(20.0, L, PRE, exp_tau=TAU)
+    cut = int(13.5 * FS)
+    a = process_impacts(recording[:, :cut], FS, settings)
+    b = process_impacts(recording[:, cut:], FS, settings)
+    whole = process_impacts(recording, FS, settings)
+    merged = merge_results([a, b])
+    assert merged.n_accepted == whole.n_accepted
+    assert merged.H is not None and whole.H is not None
+    assert_allclose(merged.H, whole.H, rtol=1e-10)
+    fs_set = impact_frfset([merged, merged], bench.geometry, bench.resp_nodes, bench.resp_dirs,
+                           bench.exc_nodes[:2], bench.exc_dirs[:2])
+    assert isinstance(fs_set, FRFSet)
+    assert fs_set.H.shape == (12, 2, L // 2 + 1)
+    assert fs_set.meta["exponential_tau"] == TAU
+    assert fs_set.coherence is not None
+
+
+def test_no_accepted_hit_is_reported_not_raised(recording):
+    res = process_impacts(recording[:, : int(1.2 * FS)], FS, ImpactSettings(20.0, L, PRE))
+    assert res.H is None and res.n_accepted == 0
+    with pytest.raises(InputError, match="no accepted hit: record incomplete"):
+        impact_frfset([res], get_bench("engine").geometry, [1], [[1, 0, 0]], [11], [[1, 0, 0]])
+
+
+def test_settings_are_checked():
+    with pytest.raises(InputError, match="pretrigger"):
+        ImpactSettings(10.0, 100, pretrigger=100)
+    with pytest.raises(InputError, match="slope"):
+        ImpactSettings(10.0, 100, slope="up")  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="NaN"):
+        process_impacts(np.full((2, 100), np.nan), FS, ImpactSettings(10.0, 50))

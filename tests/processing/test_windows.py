@@ -1,0 +1,60 @@
+"""Force and exponential windows; exact removal of the damping the exponential window adds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from hardware_mocks.benches import get_bench
+from processing.windows import (
+    correct_dynamic_stiffness,
+    correct_modal_damping,
+    exponential_tau,
+    exponential_window,
+    force_window,
+)
+
+
+def test_force_window_shapes():
+    w = force_window(10, stop=[3, 5], taper=[2, 0], start=[0, 1])
+    assert w.shape == (2, 10)
+    assert_allclose(w[0], [1, 1, 1, 0.75, 0.25, 0, 0, 0, 0, 0])
+    assert_allclose(w[1], [0, 1, 1, 1, 1, 0, 0, 0, 0, 0])
+    with pytest.raises(ValueError, match="taper"):
+        force_window(10, stop=2, taper=-1)
+
+
+def test_exponential_window_and_tau():
+    tau = exponential_tau(2.0, 0.01)
+    w = exponential_window(2049, 1024.0, tau)
+    assert w[0] == 1.0 and w[-1] == pytest.approx(0.01)
+    with pytest.raises(ValueError, match="positive"):
+        exponential_window(10, 1.0, 0.0)
+
+
+def test_modal_damping_correction_moves_the_pole_back():
+    f, z, tau = 12.0, 0.03, 0.5
+    wn = 2 * np.pi * f
+    pole = -z * wn + 1j * wn * np.sqrt(1 - z**2) - 1 / tau  # what the windowed data show
+    f_m, z_m = abs(pole) / (2 * np.pi), -pole.real / abs(pole)
+    assert z_m == pytest.approx(z + 1 / (tau * wn), rel=0.01)  # first order
+    f_c, z_c = correct_modal_damping(f_m, z_m, tau)
+    assert f_c == pytest.approx(f, rel=1e-12) and z_c == pytest.approx(z, rel=1e-10)
+
+
+def test_dynamic_stiffness_correction_recovers_k_and_c():
+    model = get_bench("engine").model
+    tau = 0.2
+    freq = np.linspace(1.0, 40.0, 60)
+    s = 2j * np.pi * freq + 1 / tau
+    # windowed accelerance at O for unit generalised forces (T = I): X_w = s^2 Z(s)^-1
+    Z = model.K[None] + s[:, None, None] * model.C[None] + (s**2)[:, None, None] * model.M[None]
+    Xw = (s**2)[:, None, None] * np.linalg.inv(Z)
+    w = 2 * np.pi * freq
+    # the article's eq. 14 with T = I: K* = w^2 (M X - I) X^-1
+    Km = (w**2)[:, None, None] * (model.M[None] - np.linalg.inv(Xw))
+    K_true = model.K[None] + 1j * w[:, None, None] * model.C[None]
+    assert np.abs(Km - K_true).max() > 0.1 * np.abs(model.K).max()  # the window matters
+    Kc = correct_dynamic_stiffness(np.moveaxis(Km, 0, -1), freq, tau)
+    assert_allclose(np.moveaxis(Kc, -1, 0), K_true, atol=1e-6 * np.abs(model.K).max())
