@@ -376,6 +376,18 @@ def identify_arrays(
     it = 0
     fit = None
     s_moments: StiffnessMoments | None = None
+
+    def stiffness_step(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """K, C for the current mass matrix on the current (leakage-cleaned) stiffness lines."""
+        nonlocal s_moments
+        if improved:  # direct symmetric fit; moments reused until X_clean_s changes
+            if s_moments is None:
+                s_moments = stiffness_moments(X_clean_s, T, ws, Ws)
+            sf = fit_stiffness(s_moments, T, ws, M, row_scale=row_scale, symmetric=opt.symmetric)
+            return sf.K, sf.C
+        Ks = dynamic_stiffness(X_clean_s, T, ws, M)  # the article: eq. 14 per line, averaged
+        return Ks.real.mean(axis=0), (Ks.imag / ws[:, None, None]).mean(axis=0)
+
     for it in range(1, opt.max_iter + 1):  # noqa: B007 - iterations reported
         B = T[:, :, None] + _kstar_times(K, C, wm, X_clean_m) / wm**2
         fit = fit_inertia(Xm, B, weights=Wm, row_scale=row_scale, shapes=shapes_m)
@@ -388,16 +400,7 @@ def identify_arrays(
             X_clean_m = Xm - leak_all[..., mass_sel]
             X_clean_s = Xs - leak_all[..., stiff_sel]
             s_moments = None
-        if improved:
-            if s_moments is None:
-                s_moments = stiffness_moments(X_clean_s, T, ws, Ws)
-            sf = fit_stiffness(s_moments, T, ws, M, row_scale=row_scale,
-                               symmetric=opt.symmetric)
-            K, C = sf.K, sf.C
-        else:
-            Ks = dynamic_stiffness(X_clean_s, T, ws, M)
-            K = Ks.real.mean(axis=0)
-            C = (Ks.imag / ws[:, None, None]).mean(axis=0)
+        K, C = stiffness_step(M)
         change = np.max(np.abs(new - theta) / np.maximum(np.abs(new), 1e-12 * abs(new[0])))
         theta = new
         if change < opt.tol:
@@ -410,15 +413,7 @@ def identify_arrays(
         physical_enforced = not np.array_equal(theta_c, theta)
         if physical_enforced:
             theta = theta_c
-            M = mass_matrix(theta)
-            if improved:
-                sf = fit_stiffness(X_clean_s, T, ws, M, weights=Ws, row_scale=row_scale,
-                                   symmetric=opt.symmetric)
-                K, C = sf.K, sf.C
-            else:
-                Ks = dynamic_stiffness(X_clean_s, T, ws, M)
-                K = Ks.real.mean(axis=0)
-                C = (Ks.imag / ws[:, None, None]).mean(axis=0)
+            K, C = stiffness_step(mass_matrix(theta))
     M = mass_matrix(theta)
     props = inertia_properties(theta)
     if not props.physically_consistent:
