@@ -29,6 +29,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from processing._kernels import real_times_complex
 from processing.data import FRFSet, InputError
 from processing.geometry import (
     DEFAULT_MAX_COND_T,
@@ -40,7 +41,7 @@ from processing.geometry import (
     scaling,
 )
 from processing.inertia import InertiaProperties, inertia_properties, mass_matrix
-from processing.massline import fit_inertia, stack_real
+from processing.massline import MassLineProblem, stack_real
 from processing.physical import constrain_physical
 from processing.selection import (
     BandChoice,
@@ -54,8 +55,8 @@ from processing.selection import (
 )
 from processing.stiffness import (
     StiffnessMoments,
-    dynamic_stiffness,
     fit_stiffness,
+    line_operators,
     stiffness_moments,
 )
 from processing.synthesis import SynthesisError, synthesis_error, synthesise
@@ -196,15 +197,6 @@ def _jsonable(obj: Any) -> Any:
     return obj
 
 
-def _kstar_times(
-    K: NDArray[np.float64], C: NDArray[np.float64], w: NDArray[np.float64],
-    X: NDArray[np.complex128],
-) -> NDArray[np.complex128]:
-    """(K + j w C) X for X (6, n_e, n_l)."""
-    Xf = X.reshape(6, -1)
-    return (K @ Xf).reshape(X.shape) + 1j * w * (C @ Xf).reshape(X.shape)
-
-
 def _noise_level(
     rel_err: NDArray[np.float64], freq: NDArray[np.float64], peaks: tuple[ElasticPeak, ...],
     n_r: int,
@@ -287,10 +279,11 @@ def identify_arrays(
         raise InputError(f"the FRFs hold {n_bad} NaN or infinite values: re-measure or drop them")
     if not np.all(np.isfinite(freq)) or np.any(np.diff(freq) <= 0):
         raise InputError("frequencies must be finite and strictly increasing")
-    pos = freq > 0
-    freq, H = freq[pos], H[..., pos]
+    k0 = int(np.searchsorted(freq, 0.0, side="right"))  # lines at 0 Hz carry no mass line
+    H_all = np.ascontiguousarray(H)
+    freq, H = freq[k0:], H_all[..., k0:]
     if coherence is not None:
-        coherence = np.asarray(coherence, float)[..., pos]
+        coherence = np.asarray(coherence, float)[..., k0:]
         if not np.all(np.isfinite(coherence)):
             raise InputError("the coherence holds NaN values: re-measure or drop it")
     if freq.size < 8:
@@ -307,7 +300,7 @@ def identify_arrays(
     T = excitation_matrix(exc_xyz, exc_dirs)
     n_r, n_e, n_f = H.shape
     Ep = np.asarray(np.linalg.pinv(E), dtype=np.float64)
-    X = (Ep @ H.reshape(n_r, -1)).reshape(6, n_e, n_f)
+    X = real_times_complex(Ep, H_all.reshape(n_r, -1)).reshape(6, n_e, -1)[..., k0:]
     w_all = 2 * np.pi * freq
     improved = opt.method == "improved"
     L = geo.length
@@ -320,8 +313,8 @@ def identify_arrays(
         line_ok = np.ones(n_f, bool)
 
     # --- elastic modes and bands -----------------------------------------------------------------
-    _, rel_err = reconstruction_error(H, E, Ep)
-    peaks = elastic_peaks(freq, H, E) if n_r > 6 else ()
+    _, rel_err = reconstruction_error(H, E, Ep, X)
+    peaks = elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep) if n_r > 6 else ()
     # Leakage terms are free per equation entry: on noisy data the regressors left after
     # eliminating them are dominated by noise and the fit is biased low (errors in
     # variables). Model the leakage only when the FRF noise, read off the rigid-body
@@ -377,6 +370,10 @@ def identify_arrays(
     fit = None
     s_moments: StiffnessMoments | None = None
 
+    ops = line_operators(X[..., in_stiff], T, w_all[in_stiff])  # eq. 14 operators, per line
+    mean_stiffness = ops.mean_kc(stiff_sel[in_stiff])
+    problem = MassLineProblem(Xm, weights=Wm, row_scale=row_scale, shapes=shapes_m)
+
     def stiffness_step(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """K, C for the current mass matrix on the current (leakage-cleaned) stiffness lines."""
         nonlocal s_moments
@@ -385,12 +382,17 @@ def identify_arrays(
                 s_moments = stiffness_moments(X_clean_s, T, ws, Ws)
             sf = fit_stiffness(s_moments, T, ws, M, row_scale=row_scale, symmetric=opt.symmetric)
             return sf.K, sf.C
-        Ks = dynamic_stiffness(X_clean_s, T, ws, M)  # the article: eq. 14 per line, averaged
-        return Ks.real.mean(axis=0), (Ks.imag / ws[:, None, None]).mean(axis=0)
+        return mean_stiffness(M)  # the article: eq. 14 per line, averaged
 
-    for it in range(1, opt.max_iter + 1):  # noqa: B007 - iterations reported
-        B = T[:, :, None] + _kstar_times(K, C, wm, X_clean_m) / wm**2
-        fit = fit_inertia(Xm, B, weights=Wm, row_scale=row_scale, shapes=shapes_m)
+    if not improved:
+        # the article's iteration is affine in theta here: its limit is solved directly
+        fit = problem.fixed_point_affine(T, mean_stiffness.w2, mean_stiffness.KB,
+                                         mean_stiffness.C, wm)
+        theta = fit.theta
+        K, C = stiffness_step(mass_matrix(theta))
+        it, converged = 1, True
+    for it in range(1, opt.max_iter + 1) if improved else ():  # noqa: B007 - reported
+        fit = problem.solve_kc(T, K, C, X_clean_m, wm)
         new = fit.theta
         M = mass_matrix(new)
         if fit.leakage is not None:
@@ -432,7 +434,7 @@ def identify_arrays(
     H_syn = synthesise(freq, E, T, M, K, C)
     syn_band = (float(freq[0]), float(mass_band[1]))
     syn = synthesis_error(freq, H, H_syn, syn_band)
-    Ks_line = dynamic_stiffness(X[..., in_stiff], T, w_all[in_stiff], M)
+    Ks_line = ops.stiffness(M)
     return IdentificationResult(
         method=opt.method,
         theta=theta,

@@ -47,6 +47,7 @@ def _basis() -> NDArray[np.float64]:
 #: M(theta) = sum_p theta_p MASS_BASIS[p]; shape (10, 6, 6).
 MASS_BASIS: NDArray[np.float64] = _basis()
 MASS_BASIS.setflags(write=False)
+_BASIS_FLAT = MASS_BASIS.reshape(10, 36)
 
 
 def mass_matrix(theta: ArrayLike) -> NDArray[np.float64]:
@@ -58,7 +59,7 @@ def mass_matrix(theta: ArrayLike) -> NDArray[np.float64]:
     >>> M[0, 0], M[3, 3]
     (np.float64(2.0), np.float64(1.0))
     """
-    return np.tensordot(np.asarray(theta, dtype=float), MASS_BASIS, axes=1)
+    return (np.asarray(theta, dtype=float) @ _BASIS_FLAT).reshape(6, 6)
 
 
 def tensor_from_theta(theta: ArrayLike) -> NDArray[np.float64]:

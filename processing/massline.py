@@ -18,11 +18,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import NDArray
 
-from processing.inertia import MASS_BASIS
+from processing.inertia import MASS_BASIS, mass_matrix
 
-__all__ = ["MassLineFit", "fit_inertia", "stack_real"]
+__all__ = ["MassLineFit", "MassLineProblem", "fit_inertia", "stack_real"]
 
 
 def stack_real(Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
@@ -50,6 +51,178 @@ def _project(A: NDArray[np.float64], Q: NDArray[np.float64]) -> NDArray[np.float
     return np.swapaxes(P, 0, 1)
 
 
+class MassLineProblem:
+    """The mass-line least-squares problem for fixed accelerances X, solved for many B.
+
+    Everything that depends on X only (weights, leakage projection, the 10x10
+    normal matrix and its factorisation) is computed once here; each
+    :meth:`solve` then costs one (6 x 2 n_exc n_lines) by (.. x 6) product, and
+    :meth:`solve_kc` (the iteration's right-hand side ``T + (K + j w C) Xc / w^2``)
+    only 6x6 algebra once the moments of ``Xc`` are known.
+
+    Parameters
+    ----------
+    X : (6, n_exc, n_lines) complex
+        Rigid-body accelerances at O (eq. 6) on the selected lines, (m/s^2)/N.
+    weights : (n_exc, n_lines), optional
+        Non-negative weight of each column and line (0 drops it).
+    row_scale : (6,), optional
+        Scale of each equation row (e.g. ``1/L`` for the moment equations).
+    shapes : (n_shapes, 2 n_lines), optional
+        Real-stacked frequency shapes of free leakage terms (see :func:`stack_real`).
+    """
+
+    def __init__(
+        self,
+        X: NDArray[np.complex128],
+        *,
+        weights: NDArray[np.float64] | None = None,
+        row_scale: NDArray[np.float64] | None = None,
+        shapes: NDArray[np.float64] | None = None,
+    ) -> None:
+        n6, n_e, n_l = X.shape
+        self.X = X
+        self.shape = X.shape
+        self.weights = weights
+        self.shapes = None if shapes is None or not len(shapes) else np.asarray(shapes, float)
+        self.n_equations = 2 * n6 * n_e * n_l
+        Xr = stack_real(X)
+        self._sw = (np.sqrt(np.concatenate([weights, weights], axis=-1))
+                    if weights is not None else None)
+        if self._sw is not None:
+            Xr = Xr * self._sw
+        self._Q: NDArray[np.float64] | None = None
+        if self.shapes is not None:
+            # per-column weighted shapes (n_e, 2 n_l, n_s), orthonormalised per column
+            Sw = self.shapes.T[None, :, :] * (self._sw[:, :, None] if self._sw is not None
+                                              else 1.0)
+            Sw = np.broadcast_to(Sw, (n_e, *self.shapes.T.shape))
+            self._Q, _ = np.linalg.qr(Sw)
+            Xr = Xr - _project(Xr, self._Q)
+        # B enters only through W = sum Bw Xp^T: the projection is symmetric and idempotent,
+        # so B needs no projection of its own
+        self._Xp = Xr.reshape(6, -1)
+        s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
+        G = self._Xp @ self._Xp.T
+        self._MBs = (MASS_BASIS * s2[None, :, None]).reshape(10, 36)
+        self.normal = (_normal_operator_cached(s2) @ G.ravel()).reshape(10, 10)
+        # theta = N^-1 MBs vec(W): the (10, 36) operator is formed once
+        try:
+            factor = scipy.linalg.cho_factor(self.normal, check_finite=False)
+            self._solver = scipy.linalg.cho_solve(factor, self._MBs, check_finite=False)
+        except np.linalg.LinAlgError:  # singular: the minimum-norm solution
+            self._solver = np.linalg.pinv(self.normal) @ self._MBs
+        self._kc_key: object = None
+        self._kc: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None
+
+    def _weighted(self, Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
+        """Real-stacked, weighted (6, n_e * 2 n_l) form of Z (6, n_e, n_l)."""
+        Zr = stack_real(np.broadcast_to(Z, self.shape))
+        if self._sw is not None:
+            Zr = Zr * self._sw
+        return Zr.reshape(6, -1)
+
+    def _finish(self, W: NDArray[np.float64], B: NDArray[np.complexfloating] | None) -> MassLineFit:
+        theta = self._solver @ W.ravel()
+        leakage = None
+        if self._Q is not None and self.shapes is not None and B is not None:
+            leakage = self._leakage(theta, B)
+        return MassLineFit(theta, self.normal, self.n_equations, leakage)
+
+    def _leakage(self, theta: NDArray[np.float64], B: NDArray[np.complexfloating]) -> (
+        NDArray[np.float64]
+    ):
+        """Leakage coefficients: ``Z b`` = projection of ``B - M X`` on the shapes, per column."""
+        assert self.shapes is not None
+        n_e = self.shape[1]
+        M = mass_matrix(theta)
+        Xs = stack_real(self.X)
+        Bs = stack_real(np.broadcast_to(B, self.shape))
+        R = Bs - (M @ Xs.reshape(6, -1)).reshape(Xs.shape)  # (6, n_e, 2 n_l) unweighted
+        Sh = self.shapes
+        if self.weights is not None:
+            wf = np.concatenate([self.weights, self.weights], axis=-1)  # (n_e, 2 n_l)
+            A = np.einsum("sl,kl,tl->kst", Sh, wf, Sh)
+            r = np.einsum("ikl,kl,sl->iks", R, wf, Sh)
+        else:
+            A = np.broadcast_to(Sh @ Sh.T, (n_e, Sh.shape[0], Sh.shape[0]))
+            r = np.einsum("ikl,sl->iks", R, Sh)
+        return np.asarray(np.linalg.solve(A[None], r[..., None])[..., 0])
+
+    def solve(self, B: NDArray[np.complexfloating]) -> MassLineFit:
+        """Ten parameters from ``M(theta) X_j (+ Z b_j) = B_j``, B broadcastable to X."""
+        return self._finish(self._weighted(B) @ self._Xp.T, B)
+
+    def solve_kc(
+        self,
+        T: NDArray[np.float64],
+        K: NDArray[np.float64],
+        C: NDArray[np.float64],
+        Xc: NDArray[np.complex128],
+        w: NDArray[np.float64],
+    ) -> MassLineFit:
+        """:meth:`solve` for ``B = T + (K + j w C) Xc / w^2`` (the iteration of section 2.2).
+
+        The moments of ``Xc`` are kept while the same array is passed again, so
+        each further iteration is 6x6 algebra.
+        """
+        if self._Q is not None:  # leakage coefficients need B itself
+            Xf = Xc.reshape(6, -1)
+            KX = (K @ Xf).reshape(Xc.shape) + 1j * w * (C @ Xf).reshape(Xc.shape)
+            return self.solve(T[:, :, None] + KX / w**2)
+        if self._kc_key is not Xc or self._kc is None:
+            WT = self._weighted(T[:, :, None] + 0j) @ self._Xp.T
+            P2 = self._weighted(Xc / w**2) @ self._Xp.T
+            P1 = self._weighted(1j * Xc / w) @ self._Xp.T
+            self._kc_key, self._kc = Xc, (WT, P2, P1)
+        WT, P2, P1 = self._kc
+        return self._finish(WT + K @ P2 + C @ P1, None)
+
+
+    def fixed_point_affine(
+        self,
+        T: NDArray[np.float64],
+        w2: float,
+        KB: NDArray[np.float64],
+        C: NDArray[np.float64],
+        w: NDArray[np.float64],
+    ) -> MassLineFit:
+        """The limit of ``theta -> solve_kc(T, w2 M(theta) - KB, C, X, w)``, solved directly.
+
+        With the article's stiffness step (eq. 14 averaged over lines), K is affine in
+        M and C does not depend on it, so the iteration of section 2.2 is an affine
+        map of theta whose fixed point is one 10x10 solve. No leakage shapes.
+        """
+        if self._Q is not None:
+            raise ValueError("fixed_point_affine is for problems without leakage shapes")
+        self.solve_kc(T, np.zeros((6, 6)), np.zeros((6, 6)), self.X, w)  # moments of X
+        assert self._kc is not None
+        WT, P2, P1 = self._kc
+        a = self._solver @ (WT - KB @ P2 + C @ P1).ravel()
+        J = w2 * (self._solver @ (MASS_BASIS @ P2).reshape(10, 36).T)
+        theta = np.linalg.solve(np.eye(10) - J, a)
+        return MassLineFit(theta, self.normal, self.n_equations, None)
+
+
+def _normal_operator(s2: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(100, 36) map from vec(G) to the 10x10 normal matrix for row scales s2."""
+    MB = MASS_BASIS
+    return np.einsum("pia,qib->pqab", MB * s2[None, :, None], MB).reshape(100, 36)
+
+
+_NORMAL_CACHE: dict[bytes, NDArray[np.float64]] = {}
+
+
+def _normal_operator_cached(s2: NDArray[np.float64]) -> NDArray[np.float64]:
+    key = s2.tobytes()
+    op = _NORMAL_CACHE.get(key)
+    if op is None:
+        if len(_NORMAL_CACHE) > 64:
+            _NORMAL_CACHE.clear()
+        op = _NORMAL_CACHE[key] = _normal_operator(s2)
+    return op
+
+
 def fit_inertia(
     X: NDArray[np.complex128],
     B: NDArray[np.complex128],
@@ -58,64 +231,9 @@ def fit_inertia(
     row_scale: NDArray[np.float64] | None = None,
     shapes: NDArray[np.float64] | None = None,
 ) -> MassLineFit:
-    """Least-squares ten parameters from ``M(theta) X_j (+ Z b_j) = B_j``.
+    """Least-squares ten parameters from ``M(theta) X_j (+ Z b_j) = B_j`` (one solve).
 
-    Parameters
-    ----------
-    X : (6, n_exc, n_lines) complex
-        Rigid-body accelerances at O (eq. 6) on the selected lines, (m/s^2)/N.
-    B : (6, n_exc, n_lines) complex
-        Right-hand sides ``T + K*_j X_j / w_j^2`` (eq. 8), broadcastable.
-    weights : (n_exc, n_lines), optional
-        Non-negative weight of each column and line (0 drops it).
-    row_scale : (6,), optional
-        Scale of each equation row (e.g. ``1/L`` for the moment equations).
-    shapes : (n_shapes, 2 n_lines), optional
-        Real-stacked frequency shapes of free leakage terms (see :func:`stack_real`).
+    Parameters as :class:`MassLineProblem`; ``B`` (6, n_exc, n_lines) complex
+    right-hand sides ``T + K*_j X_j / w_j^2`` (eq. 8), broadcastable.
     """
-    n6, n_e, n_l = X.shape
-    B = np.broadcast_to(B, X.shape)
-    Xr = stack_real(X)
-    Br = stack_real(B)
-    if weights is not None:
-        sw = np.sqrt(np.concatenate([weights, weights], axis=-1))
-        Xr = Xr * sw
-        Br = Br * sw
-    s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
-    Q = None
-    if shapes is not None and len(shapes):
-        Sh = np.asarray(shapes, float)
-        # per-column weighted shapes (n_e, 2 n_l, n_s), orthonormalised per column
-        Sw = Sh.T[None, :, :] * (sw[:, :, None] if weights is not None else 1.0)
-        Sw = np.broadcast_to(Sw, (n_e, *Sh.T.shape))
-        Q, _ = np.linalg.qr(Sw)
-        Xr = Xr - _project(Xr, Q)
-        Br = Br - _project(Br, Q)
-    Xf = Xr.reshape(6, -1)
-    Bf = Br.reshape(6, -1)
-    G = Xf @ Xf.T
-    W = Bf @ Xf.T
-    MB = MASS_BASIS
-    MBs = MB * s2[None, :, None]
-    N = np.einsum("pia,qib->pqab", MBs, MB).reshape(100, 36) @ G.ravel()
-    N = N.reshape(10, 10)
-    rhs = MBs.reshape(10, 36) @ W.ravel()
-    theta = np.linalg.solve(N, rhs)
-    M = np.tensordot(theta, MB, axes=1)
-    leakage = None
-    if Q is not None:
-        # Z b = projection of (B - M X) onto the shapes, per column; coefficients in shape basis
-        Xs = stack_real(X)
-        Bs = stack_real(np.broadcast_to(B, X.shape))
-        R = Bs - (M @ Xs.reshape(6, -1)).reshape(Xs.shape)  # (6, n_e, 2 n_l) unweighted
-        Sh = np.asarray(shapes, float)
-        if weights is not None:
-            wf = np.concatenate([weights, weights], axis=-1)  # (n_e, 2 n_l)
-            A = np.einsum("sl,kl,tl->kst", Sh, wf, Sh)
-            r = np.einsum("ikl,kl,sl->iks", R, wf, Sh)
-        else:
-            A = np.broadcast_to(Sh @ Sh.T, (n_e, Sh.shape[0], Sh.shape[0]))
-            r = np.einsum("ikl,sl->iks", R, Sh)
-        leakage = np.linalg.solve(A[None], r[..., None])[..., 0]
-    n_eq = 2 * n6 * n_e * n_l
-    return MassLineFit(theta, N, n_eq, leakage)
+    return MassLineProblem(X, weights=weights, row_scale=row_scale, shapes=shapes).solve(B)

@@ -19,7 +19,9 @@ import scipy.optimize
 import scipy.signal
 from numpy.typing import NDArray
 
+from processing._kernels import real_times_complex, sumsq_columns
 from processing.data import InputError
+from processing.stiffness import line_operators
 
 __all__ = [
     "BandChoice",
@@ -33,19 +35,29 @@ __all__ = [
 
 
 def reconstruction_error(
-    H: NDArray[np.complex128], E: NDArray[np.float64], Epinv: NDArray[np.float64] | None = None
+    H: NDArray[np.complex128],
+    E: NDArray[np.float64],
+    Epinv: NDArray[np.float64] | None = None,
+    X: NDArray[np.complex128] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per-line rigid-body reconstruction error (eq. 15), absolute and relative.
 
     Returns ``(abs_err, rel_err)``, each (n_f,): the Frobenius norm over all FRFs
-    of ``H_j - E E^+ H_j``, and that divided by the norm of ``H_j``.
+    of ``H_j - E E^+ H_j``, and that divided by the norm of ``H_j``. Computed as
+    ``||H||^2 - ||E X||^2`` (``E E^+`` is an orthogonal projection) from the
+    rigid-body motions ``X = E^+ H`` (passed when already known), so no array
+    the size of H is formed; relative errors below about 1e-7 are rounding.
     """
     n_r, n_e, n_f = H.shape
-    P = E @ (np.linalg.pinv(E) if Epinv is None else Epinv)
-    R = H.reshape(n_r, -1) - P @ H.reshape(n_r, -1)
-    a = np.sqrt(np.sum(np.abs(R.reshape(n_r, n_e, n_f)) ** 2, axis=(0, 1)))
-    h = np.sqrt(np.sum(np.abs(H) ** 2, axis=(0, 1)))
-    return a, a / np.where(h > 0, h, np.inf)
+    if X is None:
+        Ep = np.linalg.pinv(E) if Epinv is None else Epinv
+        X = real_times_complex(Ep, np.ascontiguousarray(H).reshape(n_r, -1)).reshape(6, n_e, n_f)
+    L = np.linalg.cholesky(E.T @ E)  # ||E x||^2 = ||L^T x||^2
+    Y = real_times_complex(L.T, np.ascontiguousarray(X).reshape(6, -1))
+    h2 = sumsq_columns(H)
+    a2 = np.clip(h2 - sumsq_columns(Y.reshape(6, n_e, n_f)), 0.0, None)
+    a = np.sqrt(a2)
+    return a, a / np.where(h2 > 0, np.sqrt(h2), np.inf)
 
 
 def select_lines(rel_err: NDArray[np.float64], in_band: NDArray[np.bool_], level: float) -> (
@@ -106,23 +118,27 @@ def elastic_peaks(
     E: NDArray[np.float64],
     *,
     min_rel: float = 0.01,
+    rel_err: NDArray[np.float64] | None = None,
+    Epinv: NDArray[np.float64] | None = None,
 ) -> tuple[ElasticPeak, ...]:
     """Elastic modes seen in the data: peaks of the non-rigid residual.
 
     A peak counts where the relative reconstruction error
     stands out of its surroundings by a factor 3 (prominence in log scale) and exceeds
     both ``min_rel`` and three times the median error (the noise floor).
+    ``rel_err`` and ``Epinv`` may be passed when already computed.
     """
     n_r, n_e, n_f = H.shape
     if n_r <= 6 or n_f < 5:
         return ()
-    _, rel = reconstruction_error(H, E)
+    Ep = np.asarray(np.linalg.pinv(E) if Epinv is None else Epinv, dtype=np.float64)
+    rel = reconstruction_error(H, E, Ep)[1] if rel_err is None else rel_err
     logr = np.log10(np.maximum(rel, 1e-12))
     idx, _ = scipy.signal.find_peaks(logr, prominence=np.log10(3.0))
     idx = idx[rel[idx] > max(min_rel, 3.0 * float(np.median(rel)))]
     if idx.size == 0:
         return ()
-    P = np.eye(n_r) - E @ np.linalg.pinv(E)
+    P = np.eye(n_r) - E @ Ep
     R = (P @ H.reshape(n_r, -1)).reshape(n_r * n_e, n_f)
     # keep the strongest residual directions only, for speed
     U, _s, _ = np.linalg.svd(R, full_matrices=False)
@@ -145,11 +161,7 @@ def quick_rigid_modes(
     X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """Rigid-body mode frequencies (Hz) from a fit of ``Re(T X^+) = M - K / w^2``."""
-    Xl = np.moveaxis(X, -1, 0)
-    Xh = np.conj(np.swapaxes(Xl, 1, 2))
-    A = np.swapaxes(
-        np.linalg.solve(np.swapaxes(Xl @ Xh, 1, 2), np.swapaxes(T[None] @ Xh, 1, 2)), 1, 2
-    )  # apparent mass T X^+ per line (n_l, 6, 6)
+    A = line_operators(X, T, w).B  # apparent mass T X^+ per line (n_l, 6, 6)
     u = 1.0 / w**2
     D = np.stack([np.ones_like(u), -u], axis=1)
     coef, *_ = np.linalg.lstsq(D, A.real.reshape(len(w), 36), rcond=None)

@@ -14,12 +14,66 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "LineOperators",
+    "MeanStiffness",
     "StiffnessFit",
     "StiffnessMoments",
     "dynamic_stiffness",
     "fit_stiffness",
+    "line_operators",
     "stiffness_moments",
 ]
+
+
+@dataclass(frozen=True)
+class LineOperators:
+    """Per-line operators of eq. 14: ``K*_j = w_j^2 (M - B_j)`` for any mass matrix M.
+
+    ``B_j = T X_j^+`` is the apparent mass of line j, with the least-squares right
+    inverse ``X^+ = X^H (X X^H)^-1`` (so ``X_j X_j^+ = I``); (n_lines, 6, 6)
+    complex. ``w`` in rad/s.
+    """
+
+    B: NDArray[np.complex128]
+    w: NDArray[np.float64]
+
+    def stiffness(self, M: NDArray[np.float64]) -> NDArray[np.complex128]:
+        """K*(w) per line (n_lines, 6, 6) for the mass matrix M."""
+        return (self.w**2)[:, None, None] * (M[None] - self.B)
+
+    def mean_kc(self, lines: NDArray[np.bool_] | None = None) -> MeanStiffness:
+        """The article's K and C (mean over lines of Re K*_j and Im K*_j / w_j), as a map of M."""
+        sel = slice(None) if lines is None else lines
+        w, B = self.w[sel], self.B[sel]
+        return MeanStiffness(
+            float(np.mean(w**2)),
+            np.mean((w**2)[:, None, None] * B.real, axis=0),
+            -np.mean(w[:, None, None] * B.imag, axis=0),
+        )
+
+
+@dataclass(frozen=True)
+class MeanStiffness:
+    """``K = w2 M - KB`` and ``C`` (independent of M): the line average of eq. 14."""
+
+    w2: float
+    KB: NDArray[np.float64]
+    C: NDArray[np.float64]
+
+    def __call__(self, M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        return self.w2 * M - self.KB, self.C
+
+
+def line_operators(
+    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64]
+) -> LineOperators:
+    """:class:`LineOperators` of X (6, n_exc, n_lines) and T (6, n_exc), w (n_lines,) rad/s."""
+    Xl = np.moveaxis(X, -1, 0)  # (n_l, 6, n_e)
+    Xh = np.conj(np.swapaxes(Xl, 1, 2))
+    G = Xl @ Xh  # X X^H (n_l, 6, 6), Hermitian
+    # B = T X^H G^-1: solve G^T B^T = (T X^H)^T
+    B = np.swapaxes(np.linalg.solve(np.swapaxes(G, 1, 2), np.swapaxes(T[None] @ Xh, 1, 2)), 1, 2)
+    return LineOperators(B, np.asarray(w, dtype=float))
 
 
 def dynamic_stiffness(
@@ -39,12 +93,7 @@ def dynamic_stiffness(
     w : (n_lines,) rad/s
     M : (6, 6) mass matrix at O
     """
-    Xl = np.moveaxis(X, -1, 0)  # (n_l, 6, n_e)
-    Y = (w**2)[:, None, None] * (M @ Xl - T[None])
-    G = Xl @ np.conj(np.swapaxes(Xl, 1, 2))  # X X^H
-    R = Y @ np.conj(np.swapaxes(Xl, 1, 2))  # Y X^H
-    # K* G = R  ->  G^T K*^T = R^T
-    return np.swapaxes(np.linalg.solve(np.swapaxes(G, 1, 2), np.swapaxes(R, 1, 2)), 1, 2)
+    return line_operators(X, T, w).stiffness(M)
 
 
 def _duplication() -> NDArray[np.float64]:
