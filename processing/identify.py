@@ -22,6 +22,7 @@ physical consistency (``physical=True``).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -43,6 +44,8 @@ from processing.geometry import (
 from processing.inertia import InertiaProperties, inertia_properties, mass_matrix
 from processing.massline import MassLineProblem, stack_real
 from processing.physical import constrain_physical
+from processing.refine import point_offsets
+from processing.rigidity import rigidity_check
 from processing.selection import (
     BandChoice,
     ElasticPeak,
@@ -55,11 +58,13 @@ from processing.selection import (
 )
 from processing.stiffness import (
     StiffnessMoments,
+    dynamic_stiffness,
     fit_stiffness,
     line_operators,
     stiffness_moments,
 )
 from processing.synthesis import SynthesisError, synthesis_error, synthesise
+from processing.windows import correct_dynamic_stiffness
 
 __all__ = ["IdentificationResult", "IdentifyOptions", "identify", "identify_arrays"]
 
@@ -87,6 +92,10 @@ class IdentifyOptions:
     symmetric: bool = True
     #: relative FRF noise above which elastic leakage is not modelled
     leakage_max_noise: float = 0.002
+    #: rounds of response-point location refinement (:mod:`processing.refine`); 0 = off
+    refine_points: int = 0
+    #: bound the automatic mass-line band by the rigidity check (article section 5.1)
+    use_rigidity: bool = True
 
 
 @dataclass(frozen=True)
@@ -116,6 +125,8 @@ class IdentificationResult:
     physical_enforced: bool
     warnings: tuple[str, ...] = ()
     stiffness_per_line: NDArray[np.complex128] | None = field(default=None, repr=False)
+    #: estimated response-point location errors (n_resp, 3), m, when refined
+    point_corrections: NDArray[np.float64] | None = None
 
     def checks(self) -> dict[str, dict[str, Any]]:
         """Named pass/fail checks with their figures (result JSON ``checks``)."""
@@ -182,6 +193,8 @@ class IdentificationResult:
                 "mass_line": len(self.mass_lines), "stiffness": len(self.stiffness_lines)
             },
             "warnings": list(self.warnings),
+            "response_point_corrections": (None if self.point_corrections is None
+                                           else self.point_corrections.tolist()),
         }
 
 
@@ -246,15 +259,39 @@ def _line_weights(
 def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
     """Identify the ten inertia parameters and K, C at O from an :class:`FRFSet`.
 
+    Uses what the FRF set carries besides H: its coherence (lines below the
+    threshold are kept out of the fit), the rigidity check of its response nodes
+    (bounds the automatic mass-line band) and ``meta["exponential_tau"]`` (the
+    damping an exponential window added is removed from C).
+
     Raises
     ------
     InputError, GeometryError
         With a one-line message naming the problem and what to do.
     """
-    return identify_arrays(
+    opt = options or IdentifyOptions()
+    rigid_top: float | None = None
+    notes: list[str] = []
+    if opt.use_rigidity and (opt.mass_band is None or opt.stiffness_band is None):
+        try:
+            rc = rigidity_check(frf, fmin=float(frf.freq[frf.freq > 0][0]))
+        except (GeometryError, IndexError):
+            rc = None  # fewer than 3 response nodes: the elastic-mode detection still bounds it
+        if rc is not None:
+            if rc.band is None:
+                notes.append("rigidity check: no rigid band found (check sensor mounting "
+                             "and coordinates)")
+            elif rc.band[1] < frf.freq[-1]:
+                rigid_top = rc.band[1]
+    tau = frf.meta.get("exponential_tau") if frf.meta else None
+    result = identify_arrays(
         frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
-        coherence=frf.coherence, options=options,
+        coherence=frf.coherence, options=opt, rigid_band_top=rigid_top,
+        exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0 else None,
     )
+    if notes:
+        result = dataclasses.replace(result, warnings=(*result.warnings, *notes))
+    return result
 
 
 def identify_arrays(
@@ -267,8 +304,50 @@ def identify_arrays(
     *,
     coherence: NDArray[np.float64] | None = None,
     options: IdentifyOptions | None = None,
+    rigid_band_top: float | None = None,
+    exponential_tau: float | None = None,
 ) -> IdentificationResult:
-    """:func:`identify` on plain arrays (shapes as in :class:`FRFSet`)."""
+    """:func:`identify` on plain arrays (shapes as in :class:`FRFSet`).
+
+    ``rigid_band_top`` (Hz) bounds the automatic mass-line band; ``exponential_tau``
+    (s) is the time constant of an exponential window applied to the records.
+    """
+    opt = options or IdentifyOptions()
+    extra = {"rigid_band_top": rigid_band_top, "exponential_tau": exponential_tau}
+    result = _identify_once(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs,
+                            coherence=coherence, options=opt, **extra)
+    if opt.refine_points <= 0:
+        return result
+    # alternate identification and response-point refinement on the mass-line lines
+    xyz = np.array(resp_xyz, dtype=float)
+    T = excitation_matrix(exc_xyz, exc_dirs)
+    freq = np.asarray(freq, dtype=float)
+    for _ in range(opt.refine_points):
+        lines = np.isin(freq, result.mass_lines)
+        w = 2 * np.pi * freq[lines]
+        shapes = [mode_shape_basis(w, p) for p in result.elastic_modes]
+        shapes.append(np.asarray(w**2, dtype=np.complex128))  # quasi-static, modes above
+        xyz = xyz - point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
+                                  result.M, result.K, result.C, shapes=np.array(shapes))
+        result = _identify_once(freq, H, xyz, resp_dirs, exc_xyz, exc_dirs,
+                                coherence=coherence, options=opt, **extra)
+    return dataclasses.replace(result, point_corrections=np.asarray(resp_xyz, float) - xyz)
+
+
+def _identify_once(
+    freq: NDArray[np.float64],
+    H: NDArray[np.complex128],
+    resp_xyz: NDArray[np.float64],
+    resp_dirs: NDArray[np.float64],
+    exc_xyz: NDArray[np.float64],
+    exc_dirs: NDArray[np.float64],
+    *,
+    coherence: NDArray[np.float64] | None = None,
+    options: IdentifyOptions | None = None,
+    rigid_band_top: float | None = None,
+    exponential_tau: float | None = None,
+) -> IdentificationResult:
+    """One identification with the given geometry."""
     opt = options or IdentifyOptions()
     freq = np.asarray(freq, dtype=float)
     H = np.asarray(H)
@@ -329,7 +408,13 @@ def identify_arrays(
         )
     choice: BandChoice | None = None
     if opt.mass_band is None or opt.stiffness_band is None:
-        choice = choose_bands(freq, X, T, peaks, elastic_margin=0.7 if use_leak else 0.5)
+        # bands from the lines where every FRF is coherent and T stays usable
+        clean = line_ok & np.all(colw > 0, axis=0)
+        if np.count_nonzero(clean) < 8:
+            clean = np.ones(n_f, bool)
+        choice = choose_bands(freq[clean], X[..., clean], T, peaks,
+                              elastic_margin=0.7 if use_leak else 0.5,
+                              rigid_band_top=rigid_band_top)
     mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
     stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
     in_mass = _band_mask(freq, mass_band, "mass-line")
@@ -377,6 +462,11 @@ def identify_arrays(
     def stiffness_step(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """K, C for the current mass matrix on the current (leakage-cleaned) stiffness lines."""
         nonlocal s_moments
+        if a_exp:  # per line, undo the window's pole shift, then average (viscous model)
+            P = -(s_s**2 / ws**2)[:, None, None] * dynamic_stiffness(X_clean_s, T, ws, M)
+            C_ = np.tensordot(ws, P.imag, axes=1) / np.sum(ws**2)  # least squares, Im P = w C
+            K_ = np.mean(P.real, axis=0) - a_exp * C_
+            return (0.5 * (K_ + K_.T), 0.5 * (C_ + C_.T)) if opt.symmetric else (K_, C_)
         if improved:  # direct symmetric fit; moments reused until X_clean_s changes
             if s_moments is None:
                 s_moments = stiffness_moments(X_clean_s, T, ws, Ws)
@@ -384,15 +474,25 @@ def identify_arrays(
             return sf.K, sf.C
         return mean_stiffness(M)  # the article: eq. 14 per line, averaged
 
-    if not improved:
+    # An exponential window exp(-a t) on force and responses measures H(j w + a): the
+    # stiffness seen is K*_m = -(w^2 / s^2) (K + a C + j w C) with s = j w + a.
+    a_exp = 1.0 / exponential_tau if exponential_tau else 0.0
+    s_s = 1j * ws + a_exp
+    s_m = 1j * wm + a_exp
+    if not improved and not a_exp:
         # the article's iteration is affine in theta here: its limit is solved directly
         fit = problem.fixed_point_affine(T, mean_stiffness.w2, mean_stiffness.KB,
                                          mean_stiffness.C, wm)
         theta = fit.theta
         K, C = stiffness_step(mass_matrix(theta))
         it, converged = 1, True
-    for it in range(1, opt.max_iter + 1) if improved else ():  # noqa: B007 - reported
-        fit = problem.solve_kc(T, K, C, X_clean_m, wm)
+    for it in range(1, opt.max_iter + 1) if improved or a_exp else ():  # noqa: B007
+        if a_exp:  # B = T + K*_m X / w^2 with the windowed K*_m
+            Xf = X_clean_m.reshape(6, -1)
+            KX = ((K + a_exp * C) @ Xf).reshape(Xm.shape) + 1j * wm * (C @ Xf).reshape(Xm.shape)
+            fit = problem.solve(T[:, :, None] - KX / s_m**2 + 0j)
+        else:
+            fit = problem.solve_kc(T, K, C, X_clean_m, wm)
         new = fit.theta
         M = mass_matrix(new)
         if fit.leakage is not None:
@@ -417,6 +517,9 @@ def identify_arrays(
             theta = theta_c
             K, C = stiffness_step(mass_matrix(theta))
     M = mass_matrix(theta)
+    if exponential_tau:
+        warnings.append(f"exponential window (tau = {exponential_tau:g} s): its damping "
+                        "was removed from C")
     props = inertia_properties(theta)
     if not props.physically_consistent:
         warnings.append(
@@ -435,6 +538,9 @@ def identify_arrays(
     syn_band = (float(freq[0]), float(mass_band[1]))
     syn = synthesis_error(freq, H, H_syn, syn_band)
     Ks_line = ops.stiffness(M)
+    if exponential_tau:
+        Ks_line = np.moveaxis(correct_dynamic_stiffness(
+            np.moveaxis(Ks_line, 0, -1), freq[in_stiff], exponential_tau), -1, 0)
     return IdentificationResult(
         method=opt.method,
         theta=theta,

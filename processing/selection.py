@@ -160,11 +160,20 @@ class BandChoice:
 def quick_rigid_modes(
     X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """Rigid-body mode frequencies (Hz) from a fit of ``Re(T X^+) = M - K / w^2``."""
+    """Rigid-body mode frequencies (Hz) from a fit of ``Re(T X^+) = M - K / w^2``.
+
+    Lines whose apparent mass is far above the mass line's (the lowest lines,
+    where K / w^2 dominates and leakage or an exponential window distort the
+    estimate most) are weighted down in proportion, so they cannot swamp the fit.
+    """
     A = line_operators(X, T, w).B  # apparent mass T X^+ per line (n_l, 6, 6)
+    size = np.linalg.norm(A.reshape(len(w), 36), axis=1)
+    ref = float(np.median(size[w >= np.median(w)]))
+    wt = np.minimum(1.0, ref / np.maximum(size, 1e-300))
     u = 1.0 / w**2
     D = np.stack([np.ones_like(u), -u], axis=1)
-    coef, *_ = np.linalg.lstsq(D, A.real.reshape(len(w), 36), rcond=None)
+    coef, *_ = np.linalg.lstsq(D * wt[:, None], A.real.reshape(len(w), 36) * wt[:, None],
+                               rcond=None)
     M = coef[0].reshape(6, 6)
     K = coef[1].reshape(6, 6)
     M = 0.5 * (M + M.T)

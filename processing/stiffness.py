@@ -8,7 +8,7 @@ least-squares sense (optionally symmetric), from 6x6 moments of X.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -137,6 +137,25 @@ class StiffnessMoments:
     Q2: NDArray[np.complexfloating]
     Q3: NDArray[np.complexfloating]
     n_equations: int
+    #: solvers of the normal equations per (row scale, symmetric), filled on first use
+    _solvers: dict[tuple[bytes, bool], NDArray[np.float64]] = field(
+        default_factory=dict, compare=False, repr=False)
+
+    def solver(self, s2: NDArray[np.float64], symmetric: bool) -> NDArray[np.float64]:
+        """Matrix S with ``[vec K; vec C] = S [vec rK; vec rC]`` (row-major vecs)."""
+        key = (s2.tobytes(), symmetric)
+        S = self._solvers.get(key)
+        if S is None:
+            Nb = np.block([[self.G0.real, -self.G1.imag], [self.G1.imag, self.G2.real]])
+            # full normal matrix over [vec K; vec C] (row-major): row blocks s2_i * Nb
+            Nfull = np.einsum("i,ij,taub->tiaujb", s2, np.eye(6), Nb.reshape(2, 6, 2, 6))
+            Nfull = Nfull.reshape(72, 72)
+            if symmetric:  # unknowns [vech K; vech C] through the duplication matrix
+                S = _DUP2 @ np.linalg.solve(_DUP2.T @ Nfull @ _DUP2, _DUP2.T)
+            else:
+                S = np.linalg.inv(Nfull)
+            self._solvers[key] = S
+        return S
 
 
 def stiffness_moments(
@@ -185,24 +204,8 @@ def fit_stiffness(
     mom = X if isinstance(X, StiffnessMoments) else stiffness_moments(X, T, w, weights)
     R0 = mom.G2 @ M.T - mom.Q2  # (a, i)
     R1 = mom.G3 @ M.T - mom.Q3
-    G0, G1, G2 = mom.G0, mom.G1, mom.G2
-    # per-row normal block for [K_i; C_i]
-    Nb = np.block([[G0.real, -G1.imag], [G1.imag, G2.real]])
     s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
     rK = R0.real * s2[None, :]  # (a, i)
     rC = R1.imag * s2[None, :]
-    if symmetric:
-        # unknowns u = [vech K; vech C]; vec is row-major over (i, a)
-        # full normal matrix over [vec K; vec C] (row-major): row blocks s2_i * Nb
-        Nfull = np.einsum("i,ij,taub->tiaujb", s2, np.eye(6), Nb.reshape(2, 6, 2, 6))
-        Nfull = Nfull.reshape(72, 72)
-        bfull = np.concatenate([rK.T.ravel(), rC.T.ravel()])
-        u = np.linalg.solve(_DUP2.T @ Nfull @ _DUP2, _DUP2.T @ bfull)
-        v = _DUP2 @ u
-        K = v[:36].reshape(6, 6)
-        C = v[36:].reshape(6, 6)
-    else:
-        sol = np.linalg.solve(Nb, np.concatenate([rK, rC], axis=0) / s2[None, :])
-        K = sol[:6].T
-        C = sol[6:].T
-    return StiffnessFit(K, C, mom.n_equations)
+    v = mom.solver(s2, symmetric) @ np.concatenate([rK.T.ravel(), rC.T.ravel()])
+    return StiffnessFit(v[:36].reshape(6, 6), v[36:].reshape(6, 6), mom.n_equations)

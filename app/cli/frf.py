@@ -34,7 +34,16 @@ def add_parser(sub: Any) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", type=Path, help="UFF file with geometry and time records (58, type 1)")
     p.add_argument("--out", type=Path, required=True, help="UFF file to write the FRFs to")
-    p.add_argument("--method", choices=("random", "impact"), default="random")
+    add_processing_arguments(p, method_alias=True)
+    p.add_argument("--binary", action="store_true", help="write binary 58b records")
+    p.set_defaults(run=run)
+
+
+def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
+    """The options that turn time records into FRFs (shared with ``insitu identify``)."""
+    flags = ("--excitation", "--method") if method_alias else ("--excitation",)
+    p.add_argument(*flags, dest="excitation", choices=("random", "impact"),
+                   default="random", help="time data: shaker random or hammer impact")
     p.add_argument("--estimator", choices=ESTIMATORS, default="H1")
     p.add_argument("--nperseg", type=int, default=2048,
                    help="random: samples per segment (line spacing fs/nperseg)")
@@ -47,8 +56,9 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--exp-tau", type=float,
                    help="impact: exponential window time constant, s (default: none)")
     p.add_argument("--coherence", type=float, default=0.8, help="coherence gate threshold")
-    p.add_argument("--binary", action="store_true", help="write binary 58b records")
-    p.set_defaults(run=run)
+    p.add_argument("--fmax", type=float,
+                   help="highest line kept, Hz (default fs / 2.56, the anti-alias filters' "
+                        "usable band)")
 
 
 def _random_spectra(force: np.ndarray, responses: np.ndarray, fs: float,
@@ -76,14 +86,24 @@ def _impact(force: np.ndarray, responses: np.ndarray, fs: float,
 
 
 def run(args: argparse.Namespace) -> int:
+    out = frfset_from_time_uff(args.file, args)
+    write_frf_uff(args.out, out, binary=args.binary, coherence=True)
+    print(f"{out.H.shape[0]} x {out.H.shape[1]} FRFs ({args.estimator}), {out.freq.size} lines, "
+          f"written to {args.out}")
+    return 0
+
+
+def frfset_from_time_uff(path: Path, args: argparse.Namespace) -> FRFSet:
+    """FRFs with coherence and geometry from the time runs of a UFF file; prints per-run
+    verdicts, the coherence gate and the rigidity check."""
     if not 0 <= args.overlap < 1:
         raise UserError(f"--overlap must be in [0, 1), got {args.overlap}")
-    runs, problems = read_time_uff(args.file, strict=False)
+    runs, problems = read_time_uff(path, strict=False)
     for case, msg in problems:
         print(f"load case {case} skipped: {msg}")
     if not runs:
-        raise UserError(f"{args.file}: no usable time run")
-    geometry, _ = read_geometry_uff(args.file)
+        raise UserError(f"{path}: no usable time run")
+    geometry, _ = read_geometry_uff(path)
     first = runs[0]
     for r in runs[1:]:
         if (r.fs != first.fs or not np.array_equal(r.resp_nodes, first.resp_nodes)
@@ -102,11 +122,11 @@ def run(args: argparse.Namespace) -> int:
             groups[key] = []
         groups[key].append(i)
 
-    cols, cohs, taus = [], [], set()
+    cols, cohs = [], []
     freq = None
     for key in keys:
         members = [runs[i] for i in groups[key]]
-        if args.method == "impact":
+        if args.excitation == "impact":
             results = [_impact(r.force, r.responses, r.fs, args) for r in members]
             res = merge_results(results)
             for r, one in zip(members, results, strict=True):
@@ -117,7 +137,6 @@ def run(args: argparse.Namespace) -> int:
             if res.H is None or res.coherence is None:
                 raise UserError(f"excitation node {key[0]}: no accepted hit")
             H, coh, f = res.H, res.coherence, res.freq
-            taus.add(args.exp_tau)
         else:
             sp = _random_spectra(members[0].force, members[0].responses, members[0].fs, args)
             for r in members[1:]:
@@ -129,29 +148,29 @@ def run(args: argparse.Namespace) -> int:
         cohs.append(coh)
         freq = f
     assert freq is not None
-    frfset = FRFSet(
-        freq=freq, H=np.concatenate(cols, axis=1), resp_nodes=first.resp_nodes,
+    H_all = np.concatenate(cols, axis=1)
+    coh_all = np.concatenate(cohs, axis=1)
+    # 0 Hz carries no accelerance information (and NaN estimates): start at the first line;
+    # above fs / 2.56 the DAQ's anti-alias filters shape the data
+    fmax = args.fmax if args.fmax is not None else first.fs / 2.56
+    keep = (freq > 0) & (freq <= fmax)
+    if np.count_nonzero(keep) < 8:
+        raise UserError(f"fewer than 8 lines between 0 and --fmax {fmax:g} Hz: raise --fmax "
+                        "or the record length")
+    if not np.all(np.isfinite(H_all[..., keep])):
+        raise UserError("some FRF lines are undefined (no force at those frequencies)")
+    out = FRFSet(
+        freq=freq[keep], H=H_all[..., keep], resp_nodes=first.resp_nodes,
         resp_dirs=first.resp_dirs, exc_nodes=np.array([k[0] for k in keys]),
         exc_dirs=np.array([k[1] for k in keys]), geometry=geometry,
-        coherence=np.concatenate(cohs, axis=1),
-        meta={"estimator": args.estimator, "excitation": args.method,
-              "exponential_tau": args.exp_tau if args.method == "impact" else None},
+        coherence=np.nan_to_num(coh_all[..., keep]),
+        meta={"estimator": args.estimator, "excitation": args.excitation,
+              "exponential_tau": args.exp_tau if args.excitation == "impact" else None},
     )
-    # 0 Hz carries no accelerance information (and NaN estimates): start at the first line
-    keep = frfset.freq > 0
-    assert frfset.coherence is not None
-    if not np.all(np.isfinite(frfset.H[..., keep])):
-        raise UserError("some FRF lines are undefined (no force at those frequencies)")
-    out = FRFSet(frfset.freq[keep], frfset.H[..., keep], frfset.resp_nodes, frfset.resp_dirs,
-                 frfset.exc_nodes, frfset.exc_dirs, frfset.geometry,
-                 np.nan_to_num(frfset.coherence[..., keep]), dict(frfset.meta))
     assert out.coherence is not None
     print(coherence_gate(out.coherence, out.freq, args.coherence).summary())
     try:
         print(rigidity_check(out).summary())
     except GeometryError as err:
         print(f"rigidity check not possible: {err}")
-    write_frf_uff(args.out, out, binary=args.binary, coherence=True)
-    print(f"{out.H.shape[0]} x {out.H.shape[1]} FRFs ({args.estimator}), {out.freq.size} lines, "
-          f"written to {args.out}")
-    return 0
+    return out

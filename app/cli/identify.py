@@ -1,4 +1,11 @@
-"""``insitu identify FILE.uff``: inertia parameters and mount-system stiffness from FRFs."""
+"""``insitu identify FILE.uff``: inertia parameters and mount-system stiffness from FRFs.
+
+The file holds FRFs (dataset 58, function type 4) with geometry, or time records
+(function type 1, one run per excitation, see ``insitu frf``): then the FRFs and
+their coherence are computed first with the time-data options below, the coherence
+gate keeps low-coherence lines out of the fit, and an exponential window's damping
+is removed from C.
+"""
 
 from __future__ import annotations
 
@@ -9,8 +16,11 @@ from typing import Any
 
 from rich.console import Console
 
+from app.cli.common import UserError
+from app.cli.frf import add_processing_arguments, frfset_from_time_uff
 from app.cli.summary import print_result
 from app.io.uff import read_frf_uff
+from app.io.uff_time import uff_holds_time_data
 from processing.identify import IdentifyOptions, identify
 
 
@@ -27,6 +37,10 @@ def add_parser(sub: Any) -> None:
                    help="constrain the inertia to physically consistent values")
     p.add_argument("--method", choices=("improved", "plain"), default="improved",
                    help="improved (default) or the article's plain method")
+    p.add_argument("--refine-points", type=int, default=0, metavar="N",
+                   help="rounds of response-point location refinement from the data (e.g. 3)")
+    add_processing_arguments(p.add_argument_group(
+        "time data (UFF 58 time records instead of FRFs: FRFs are computed first)"))
     p.set_defaults(run=run)
 
 
@@ -36,11 +50,19 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
         mass_band=tuple(args.mass_band) if args.mass_band else None,
         stiffness_band=tuple(args.stiffness_band) if args.stiffness_band else None,
         physical=args.physical,
+        refine_points=args.refine_points,
+        coherence_threshold=args.coherence,
     )
 
 
 def run(args: argparse.Namespace) -> int:
-    frf = read_frf_uff(args.file)
+    if args.refine_points < 0:
+        raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
+    if uff_holds_time_data(args.file):
+        print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")
+        frf = frfset_from_time_uff(args.file, args)
+    else:
+        frf = read_frf_uff(args.file)
     result = identify(frf, options_from(args))
     console = Console()
     console.print(f"[bold]{args.file}[/bold]: {frf.H.shape[0]} response DOFs x "

@@ -41,7 +41,7 @@ from app.io._uff_write import AxisInfo, open_for_writing
 from app.io.uff_geometry import assign_node_frames, read_geometry
 from processing.data import Geometry, InputError
 
-__all__ = ["TimeRun", "read_time_uff", "write_time_uff"]
+__all__ = ["TimeRun", "read_time_uff", "uff_holds_time_data", "write_time_uff"]
 
 log = logging.getLogger(__name__)
 
@@ -356,3 +356,10 @@ def write_time_uff(
                     even=True if exact else None,
                 )
     log.info("wrote %d runs to %s", len(runs), path)
+
+
+def uff_holds_time_data(path: str | Path) -> bool:
+    """True when the file's dataset-58 records are time records (function type 1) and it
+    holds no FRF (type 4): such a file needs FRFs computed before identification."""
+    kinds = {int(ds.get("func_type", 0)) for ds in load_sets(path, only=(58,))}
+    return _TIME in kinds and 4 not in kinds

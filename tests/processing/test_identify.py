@@ -117,3 +117,24 @@ def test_physical_constraint_repairs_inconsistent_fit() -> None:
     bench = get_bench("engine-rigid")
     r = identify(bench.frfset(), IdentifyOptions(physical=True))
     assert not r.physical_enforced and r.properties.physically_consistent
+
+
+def test_point_refinement_reduces_location_error_effects() -> None:
+    """Refining the response-point locations from the data (3 rounds) lowers the mean CoG
+    and inertia errors of the noisy row over 10 draws, and leaves exact data exact."""
+    bench = get_bench("engine-rigid")
+    base, ref = [], []
+    for s in range(10):
+        f = bench.frfset(0.02, 0.003, seed=s)
+        base.append(errors(bench, identify(f)))
+        r = identify(f, IdentifyOptions(refine_points=3))
+        assert r.point_corrections is not None
+        ref.append(errors(bench, r))
+    mean = {k: (np.mean([e[k] for e in base]), np.mean([e[k] for e in ref])) for k in base[0]}
+    assert mean["cog"][1] < 0.85 * mean["cog"][0]
+    assert mean["inertia"][1] < 0.95 * mean["inertia"][0]
+    within({k: v[1] for k, v in mean.items()}, mass=0.7, cog=2.0, inertia=1.0, stiffness=5.0)
+    for name in ("engine", "block-flexible"):  # elastic leakage is not taken for an offset
+        b = get_bench(name)
+        r = identify(b.frfset(), IdentifyOptions(refine_points=3))
+        within(errors(b, r), mass=0.1, cog=0.3, inertia=0.3, stiffness=1.5)
