@@ -28,6 +28,9 @@
     transport = { url = "/dev/ttyUSB1", baudrate = 115200 }
     options = { heartbeat = 0.5, ramp = 1.0 }
 
+A top-level ``[extra]`` table is kept as it is (:attr:`StationConfig.extra`) for
+tools that share the file (``insitu mock-bench`` puts its control address there).
+
 Every error is one line naming the key, e.g.
 ``station.toml: devices.frontend.channels[2].sensitivity: must be > 0, got -1``.
 
@@ -110,11 +113,12 @@ class DeviceConfig:
 
 @dataclass(frozen=True)
 class StationConfig:
-    """The whole station: a name and its devices by name."""
+    """The whole station: a name, its devices by name, and the free-form ``[extra]`` table."""
 
     name: str
     devices: Mapping[str, DeviceConfig]
     source: str = "station.toml"
+    extra: Mapping[str, Any] = field(default_factory=dict)
 
 
 _DEVICE_KEYS = {"backend", "transport", "fs", "channels", "options"}
@@ -245,7 +249,8 @@ def parse_station(data: Mapping[str, Any], source: str = "station.toml",
                   check_backends: bool = True) -> StationConfig:
     """Validate a parsed station file; raises :class:`StationConfigError` naming the bad key."""
     ctx = _Ctx(source)
-    ctx.unknown(data, {"station", "devices"}, "(top level)")
+    ctx.unknown(data, {"station", "devices", "extra"}, "(top level)")
+    extra = ctx.table(data.get("extra", {}), "extra")
     station = ctx.table(data.get("station", {}), "station")
     ctx.unknown(station, {"name"}, "station")
     name = station.get("name", Path(source).stem)
@@ -268,7 +273,7 @@ def parse_station(data: Mapping[str, Any], source: str = "station.toml",
                                f"channel name {ch.name!r} already used by device "
                                f"{owner[ch.name]!r}")
             owner[ch.name] = dev.name
-    return StationConfig(name, devices, source)
+    return StationConfig(name, devices, source, dict(extra))
 
 
 def load_station(path: str | Path) -> StationConfig:

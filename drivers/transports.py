@@ -30,6 +30,22 @@ __all__ = ["CanLink", "SerialLink", "log_wire"]
 wire_logger = logging.getLogger("drivers.wire")
 
 
+class _SplitMessageFilter(logging.Filter):
+    """Drop python-can socketcand's warnings about elements split across TCP reads.
+
+    Its client reads 1024 bytes at a time and logs a WARNING ("Got incomplete
+    message => waiting for more data") every time a read ends inside an
+    element, which at a few thousand frames per second is most reads; the element
+    is reassembled correctly. Other warnings pass.
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith("Got incomplete message")
+
+
+_socketcand_filter = _SplitMessageFilter()
+
+
 def log_wire(name: str, direction: str, payload: bytes | str) -> None:
     """Log one exchange on the wire at DEBUG: ``name`` device, ``direction`` ``>>`` or ``<<``."""
     if wire_logger.isEnabledFor(logging.DEBUG):
@@ -160,6 +176,9 @@ class CanLink:
     def open(self) -> None:
         if self._bus is not None:
             return
+        if self._bus_kwargs.get("interface") == "socketcand":
+            logging.getLogger("can.interfaces.socketcand.socketcand").addFilter(
+                _socketcand_filter)  # adding the same filter twice is a no-op
         try:
             self._bus = can.Bus(**self._bus_kwargs)  # type: ignore[arg-type]
         except (can.CanError, OSError, ValueError, ImportError) as err:

@@ -4,9 +4,16 @@ It listens on a python-can bus (``virtual`` by default, so driver and mock
 share one process), answers commands, and streams sample frames paced by its
 own :class:`~hardware_mocks.physics.DeviceClock`. Inputs are wired to the bench:
 by default inputs 0..11 carry the 12 accelerometer DOFs of the bench and input
-12 the hammer's force. Each hit on the shared :class:`BenchPhysics` is turned
-into the model's accelerations with ``BodyOnMounts.time_response`` on the
-front end's own sample grid, plus sensor noise.
+12 the force (the hammer's, plus the force sensor of a shaker attached to the
+bench). Each hit on the shared :class:`BenchPhysics` and the force of every
+attached continuous source (a shaker) are turned into the model's
+accelerations by linear convolution with the model's band-limited impulse
+responses (:func:`hardware_mocks.signals.simulate`, nothing wraps around) on the
+front end's own sample grid, plus sensor noise. Continuous forces are sampled
+in blocks of ``source_block`` s, :data:`LOOKAHEAD` samples ahead of the
+samples being sent: the response starting more than that many samples before
+its force (below 1e-5 of the peak) is left out, and a change of the shaker's
+output shows up within ``source_block`` s.
 
 The frames are packed here with ``struct``/numpy, independently of the DBC and
 of cantools, so a layout bug cannot pass on both sides.
@@ -33,8 +40,9 @@ from numpy.typing import NDArray
 
 from hardware_mocks.benches import get_bench
 from hardware_mocks.physics import BenchPhysics, DeviceClock, sampled_pulse
+from hardware_mocks.signals import simulate
 
-__all__ = ["FORCE", "FrontEndDevice", "FrontEndFaults"]
+__all__ = ["FORCE", "LOOKAHEAD", "FrontEndDevice", "FrontEndFaults"]
 
 logger = logging.getLogger(__name__)
 
@@ -42,6 +50,8 @@ FORCE = -1  #: wiring code: the input carries the hammer force
 FULL = 8388607
 RATES = (256, 512, 1024, 2048, 4096)
 RANGES_MV = (1000, 5000, 10000)
+#: samples of the non-causal lead of the band-limited response that are simulated
+LOOKAHEAD = 64
 
 
 @dataclass
@@ -88,8 +98,11 @@ class FrontEndDevice:
         Sensor noise, m/s^2 RMS and N RMS.
     ppm, offset : float
         Clock error and start delay, see :class:`DeviceClock`.
-    tail : float
-        Length of each hit's computed response, s.
+    tail : float, optional
+        Length of each hit's computed response, s (default: until the model's
+        impulse response has decayed to 1e-7 of its peak).
+    source_block : float
+        Continuous forces (shakers) are simulated this many seconds at a time.
     """
 
     N_INPUTS = 16
@@ -98,7 +111,8 @@ class FrontEndDevice:
                  channel: str = "insitu-bench", wiring: list[int] | None = None,
                  sensitivity: list[float] | None = None, accel_noise: float = 0.0,
                  force_noise: float = 0.0, ppm: float = 0.0, offset: float = 0.0,
-                 tail: float = 4.0, seed: int = 0, serial_number: int = 4242) -> None:
+                 tail: float | None = None, seed: int = 0, serial_number: int = 4242,
+                 source_block: float = 0.1) -> None:
         self.physics = physics if physics is not None else BenchPhysics(get_bench("engine"))
         self.wiring = [*range(12), FORCE] if wiring is None else list(wiring)
         if sensitivity is None:
@@ -110,6 +124,7 @@ class FrontEndDevice:
         self.ppm = ppm
         self.offset = offset
         self.tail = tail
+        self.source_block = source_block
         self.serial_number = serial_number
         self.faults = FrontEndFaults()
         self.rate = 1024
@@ -138,6 +153,7 @@ class FrontEndDevice:
         self._frame_no = 0
         self._pending = np.zeros((self.N_INPUTS, 0))
         self._hit_cursor = len(self.physics.hits())
+        self._forced_until = 0  # continuous forces simulated up to this sample
         self._overload_mask = 0
         self._overflow_flag = False
         self._last_status = time.monotonic()
@@ -173,6 +189,7 @@ class FrontEndDevice:
                 self._command(bytes(msg.data))
             if self.running:
                 self._absorb_hits()
+                self._absorb_sources(self._clock.due())
                 self._emit_due()
                 if time.monotonic() - self._last_status >= 0.1:
                     self._status()
@@ -218,13 +235,43 @@ class FrontEndDevice:
             self.range_mv[ch], self.iepe[ch] = rng, bool(iepe & 1)
             self._ack(op, 0)
         elif op == 3:  # START
+            clock = DeviceClock(self.rate, self.ppm, self.offset)
+            ir = self.physics.impulse_response(clock.true_rate, 0)  # computed once per rate
             self._ack(op, 0)
-            self._clock = DeviceClock(self.rate, self.ppm, self.offset)
+            self._clock = clock
             self._clock.start()
             self._reset_stream()
+            # simulate what the shakers did before the start, so their response is steady
+            self._forced_until = -(ir.h.shape[-1] - ir.lead)
             self.running = True
         else:
             self._ack(op, 3)
+
+    def _add_pending(self, signal: NDArray[np.float64], k_start: int, what: str = "") -> None:
+        """Add ``signal`` (N_INPUTS, n), starting at device sample ``k_start``, to what is
+        still to be sent. Samples already sent are left out; for a ``what`` (a hit) this
+        is reported when more than its :data:`LOOKAHEAD` samples of lead are lost."""
+        start = k_start - self._produced
+        if start < 0:
+            if what and -start > LOOKAHEAD:
+                logger.warning("mock front end: %s registered %d samples late", what,
+                               -start - LOOKAHEAD)
+            signal, start = signal[:, -start:], 0
+        if signal.shape[1] == 0:
+            return
+        end = start + signal.shape[1]
+        if end > self._pending.shape[1]:
+            grow = np.zeros((self.N_INPUTS, end - self._pending.shape[1]))
+            self._pending = np.concatenate([self._pending, grow], axis=1)
+        self._pending[:, start:end] += signal
+
+    def _signal(self, force: NDArray[np.float64], acc: NDArray[np.float64]
+                ) -> NDArray[np.float64]:
+        """Inputs (N_INPUTS, n) from the force on the bench and all response DOFs' accelerations."""
+        signal = np.zeros((self.N_INPUTS, acc.shape[1]))
+        signal[self._resp_rows] = acc[self._resp_dofs]
+        signal[self._force_rows] = force
+        return signal
 
     def _absorb_hits(self) -> None:
         """Add the response to each new hit to the samples still to be sent."""
@@ -232,22 +279,29 @@ class FrontEndDevice:
         self._hit_cursor += len(new)
         rate = self._clock.true_rate
         for hit in new:
-            k0 = int(np.floor((hit.t0 - self._clock.t_first) * rate)) - 2
-            n = int(np.ceil(self.tail * rate))
+            ir = self.physics.impulse_response(rate, hit.exc)
+            k0 = int(np.floor((hit.t0 - self._clock.t_first) * rate)) - LOOKAHEAD
+            n = (int(np.ceil(self.tail * rate)) if self.tail is not None
+                 else int(np.ceil(hit.duration * rate)) + LOOKAHEAD + ir.h.shape[-1] - ir.lead)
             force = sampled_pulse(self._clock.instants(k0, n), 1.0 / rate, [hit])
-            acc = self.physics.response(force, hit.exc, rate, self._resp_dofs)
-            signal = np.zeros((self.N_INPUTS, n))
-            signal[self._resp_rows] = acc
-            signal[self._force_rows] = force
-            start = k0 - self._produced
-            if start < 0:
-                logger.warning("mock front end: hit registered %d samples late", -start)
-                signal, start = signal[:, -start:], 0
-            end = start + signal.shape[1]
-            if end > self._pending.shape[1]:
-                grow = np.zeros((self.N_INPUTS, end - self._pending.shape[1]))
-                self._pending = np.concatenate([self._pending, grow], axis=1)
-            self._pending[:, start:end] += signal
+            self._add_pending(self._signal(force, simulate(ir, force[None, :])), k0, "hit")
+
+    def _absorb_sources(self, due: int) -> None:
+        """Simulate the continuous forces (shakers) one block ahead of sample ``due``."""
+        rate = self._clock.true_rate
+        block = max(1, int(np.ceil(self.source_block * rate)))
+        until = due + LOOKAHEAD + block
+        while self._forced_until < until:
+            a = self._forced_until
+            n = max(block, until - a)
+            self._forced_until = a + n
+            forces = self.physics.continuous_force(self._clock.instants(a, n))
+            for exc, f in forces.items():
+                ir = self.physics.impulse_response(rate, exc)
+                padded = np.zeros(LOOKAHEAD + n + ir.h.shape[-1] - ir.lead)
+                padded[LOOKAHEAD : LOOKAHEAD + n] = f
+                self._add_pending(self._signal(padded, simulate(ir, padded[None, :])),
+                                  a - LOOKAHEAD)
 
     def _physical(self, n: int) -> NDArray[np.float64]:
         out = np.zeros((self.N_INPUTS, n))

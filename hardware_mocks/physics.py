@@ -9,6 +9,13 @@ accelerations the model predicts for it, each on its own sample grid.
 A hit is a half-sine force pulse ``peak * sin(pi (t - t0) / duration)`` for
 ``t0 <= t <= t0 + duration``. Devices sample it as its mean over each sample
 interval (an ideal anti-alias box filter), which is exact to integrate.
+
+Continuous excitation (a shaker) is a :class:`ForceSource` added with
+:meth:`BenchPhysics.add_source`: anything with an ``exc`` attribute (the
+excitation DOF it drives, or None while detached) and a ``force(t)`` method
+giving its force (N) at host instants. Responses are linear convolutions with
+the model's band-limited impulse responses (:func:`hardware_mocks.signals.simulate`,
+which never wraps around), cached per sample rate and excitation DOF.
 """
 
 from __future__ import annotations
@@ -16,13 +23,28 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hardware_mocks.benches import Bench
+from hardware_mocks.signals import ImpulseResponse, impulse_response, simulate
 
-__all__ = ["BenchPhysics", "DeviceClock", "Hit", "sampled_pulse"]
+__all__ = ["BenchPhysics", "DeviceClock", "ForceSource", "Hit", "sampled_pulse"]
+
+
+class ForceSource(Protocol):
+    """A continuous force on the bench, e.g. a shaker: see :meth:`BenchPhysics.add_source`."""
+
+    @property
+    def exc(self) -> int | None:
+        """Excitation DOF index the source drives, or None while it is detached."""
+        ...
+
+    def force(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Force (N) at host instants ``t`` (s, ``time.monotonic()``)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -103,6 +125,8 @@ class BenchPhysics:
         self.resp_xyz = g.coordinates(bench.resp_nodes)
         self.exc_xyz = g.coordinates(bench.exc_nodes)
         self._hits: list[Hit] = []
+        self._sources: list[ForceSource] = []
+        self._irs: dict[tuple[float, int], ImpulseResponse] = {}
         self._lock = threading.Lock()
 
     def hit(self, exc: int = 0, peak: float = 200.0, duration: float = 0.004,
@@ -133,14 +157,59 @@ class BenchPhysics:
         """Hammer force (N) sampled at host instants ``t`` with sample interval ``dt``."""
         return sampled_pulse(t, dt, self.hits())
 
+    def add_source(self, source: ForceSource) -> None:
+        """Add a continuous force source (a shaker); its ``exc`` may change at any time."""
+        with self._lock:
+            if source not in self._sources:
+                self._sources.append(source)
+
+    def remove_source(self, source: ForceSource) -> None:
+        with self._lock:
+            if source in self._sources:
+                self._sources.remove(source)
+
+    def continuous_force(self, t: NDArray[np.float64]) -> dict[int, NDArray[np.float64]]:
+        """Force (N) of the attached sources at host instants ``t``, by excitation DOF."""
+        with self._lock:
+            sources = list(self._sources)
+        out: dict[int, NDArray[np.float64]] = {}
+        for src in sources:
+            exc = src.exc
+            if exc is None:
+                continue
+            if not 0 <= exc < len(self.bench.exc_nodes):
+                raise ValueError(f"force source drives excitation {exc}, "
+                                 f"out of range 0..{len(self.bench.exc_nodes) - 1}")
+            f = np.asarray(src.force(t), dtype=float)
+            out[exc] = out[exc] + f if exc in out else f
+        return out
+
+    def impulse_response(self, fs: float, exc: int) -> ImpulseResponse:
+        """Band-limited impulse responses (n_resp, 1, n_taps) of every response DOF to ``exc``.
+
+        See :func:`hardware_mocks.signals.impulse_response`; cached per ``(fs, exc)``.
+        """
+        key = (float(fs), int(exc))
+        with self._lock:
+            ir = self._irs.get(key)
+        if ir is None:
+            b = self.bench
+            ir = impulse_response(b.model, fs, self.resp_xyz, b.resp_dirs,
+                                  self.exc_xyz[exc : exc + 1], b.exc_dirs[exc : exc + 1])
+            with self._lock:
+                self._irs[key] = ir
+        return ir
+
     def response(self, hit_force: NDArray[np.float64], exc: int, fs: float,
                  resp_index: ArrayLike | None = None) -> NDArray[np.float64]:
         """Accelerations (n_resp, n) for a force history on one excitation DOF, sampled at ``fs``.
 
-        Uses :meth:`BodyOnMounts.time_response`; ``resp_index`` selects response DOFs.
+        A linear convolution (:func:`hardware_mocks.signals.simulate`): the force is
+        zero before and after the given samples, nothing wraps around. The response
+        equals the model's exact FRF below ``fs / 2.56`` and rolls off to Nyquist.
+        ``resp_index`` selects response DOFs.
         """
         idx = np.arange(len(self.bench.resp_nodes)) if resp_index is None else np.asarray(
             resp_index, dtype=np.int64)
-        return self.bench.model.time_response(
-            hit_force[None, :], fs, self.resp_xyz[idx], self.bench.resp_dirs[idx],
-            self.exc_xyz[exc : exc + 1], self.bench.exc_dirs[exc : exc + 1])
+        acc = simulate(self.impulse_response(fs, exc), np.asarray(hit_force, float)[None, :])
+        return acc[idx]

@@ -19,6 +19,17 @@ turned off. It goes off by itself on any command error, when heartbeats stop
 for longer than the watchdog time, when the host closes the port, and on an
 amplifier fault; each of these leaves an error in the queue.
 
+Given a :class:`~hardware_mocks.physics.BenchPhysics`, the shaker is a force
+source on the bench: attached to an excitation DOF (:meth:`ShakerDevice.attach`),
+it pushes with ``force_per_volt`` times its output voltage, which the front end
+mock turns into accelerations and shows on its force input. The output is
+``level_now`` (the ramped level) times a unit waveform of the time since the
+device was made: random and burst random are a random-phase multisine with a flat
+spectrum over ``[f_start, f_stop]`` (at most 4096 lines, period at least 16 s,
+unit RMS; the burst gates it on for ``duty * period`` of every ``period``), chirp a
+linear sweep from ``f_start`` to ``f_stop`` every ``period`` (unit peak), sine unit
+peak at ``frequency``.
+
 Example
 -------
 >>> with ShakerDevice() as dev:  # doctest: +SKIP
@@ -33,6 +44,10 @@ from collections import deque
 from dataclasses import dataclass
 from types import TracebackType
 
+import numpy as np
+from numpy.typing import NDArray
+
+from hardware_mocks.physics import BenchPhysics
 from hardware_mocks.pty_port import PtyPort
 
 __all__ = ["ShakerDevice", "ShakerFaults"]
@@ -48,6 +63,9 @@ ERRORS = {
     103: "Amplifier fault; output off",
 }
 FUNCTIONS = ("RAND", "BRAN", "CHIRP", "SIN")
+#: random multisine: longest period (s) and most lines
+RANDOM_PERIOD = 16.0
+RANDOM_LINES = 4096
 
 
 @dataclass
@@ -62,14 +80,31 @@ class ShakerDevice:
 
     Parameters
     ----------
+    physics : BenchPhysics, optional
+        The bench to drive; without it the shaker drives nothing.
     max_level : float
         Highest level the amplifier accepts, V.
     serial_number : str
+    exc : int, optional
+        Excitation DOF index it is attached to at first (None: detached).
+    force_per_volt : float
+        Force on the structure per volt of output, N/V (amplifier and shaker).
+    seed : int
+        Seed of the random waveform's phases.
     """
 
-    def __init__(self, *, max_level: float = 2.0, serial_number: str = "0007") -> None:
+    def __init__(self, physics: BenchPhysics | None = None, *, max_level: float = 2.0,
+                 serial_number: str = "0007", exc: int | None = None,
+                 force_per_volt: float = 50.0, seed: int = 0) -> None:
         self.max_level = max_level
         self.serial_number = serial_number
+        self.physics = physics
+        self.force_per_volt = force_per_volt
+        self._exc: int | None = None
+        self._seed = seed
+        self._multisine: tuple[tuple[float, float], NDArray[np.float64],
+                               NDArray[np.float64]] | None = None
+        self._t_origin = time.monotonic()
         self.faults = ShakerFaults()
         self.commands: list[str] = []
         self.heartbeats = 0
@@ -83,6 +118,8 @@ class ShakerDevice:
         self._unplug = threading.Event()
         self._thread = threading.Thread(target=self._run, name="mock-shaker", daemon=True)
         self._thread.start()
+        if exc is not None:
+            self.attach(exc)
 
     def _reset(self) -> None:
         self.function = "SIN"
@@ -108,6 +145,74 @@ class ShakerDevice:
         with self._lock:
             return list(self._errors)
 
+    # -- the shaker on the bench ----------------------------------------------------------------
+    @property
+    def exc(self) -> int | None:
+        """Excitation DOF index the shaker pushes on, None while detached."""
+        return self._exc
+
+    def attach(self, exc: int | None) -> None:
+        """Attach the shaker's stinger to excitation DOF ``exc`` of the bench (None detaches)."""
+        if exc is not None:
+            if self.physics is None:
+                raise ValueError("this shaker has no bench to attach to (physics=None)")
+            n = len(self.physics.bench.exc_nodes)
+            if not 0 <= exc < n:
+                raise ValueError(f"excitation index {exc} out of range 0..{n - 1}")
+            self.physics.add_source(self)
+        self._exc = exc
+
+    def force(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Force on the structure (N) at host instants ``t`` (s, ``time.monotonic()``).
+
+        The ramp is extrapolated from the device's present state, so a change of
+        output (on, off, level) shows in forces asked for after it.
+        """
+        t = np.asarray(t, dtype=float)
+        with self._lock:
+            target = self.level if self.output else 0.0
+            now_level, t_upd = self.level_now, self._last_update
+            rate = max(self.level, self.level_now) / self.ramp if self.ramp > 0 else np.inf
+            func, f_sine = self.function, self.frequency
+            f0, f1, period, duty = self.f_start, self.f_stop, self.period, self.duty
+        if np.isfinite(rate):
+            step = np.minimum(rate * np.maximum(t - t_upd, 0.0), abs(target - now_level))
+            env = now_level + np.sign(target - now_level) * step
+        else:  # no ramp: the level changes at once
+            env = np.full_like(t, target)
+        if not np.any(env):
+            return np.zeros_like(t)
+        tau = t - self._t_origin
+        if func == "SIN":
+            wave = np.sin(2 * np.pi * f_sine * tau)
+        elif func == "CHIRP":
+            u = np.mod(tau, period)
+            wave = np.sin(2 * np.pi * (f0 * u + (f1 - f0) * u**2 / (2 * period)))
+        else:
+            wave = self._random(tau, f0, f1)
+            if func == "BRAN":
+                wave = wave * (np.mod(tau, period) < duty * period)
+        return np.asarray(self.force_per_volt * env * wave)
+
+    def _random(self, tau: NDArray[np.float64], f0: float, f1: float) -> NDArray[np.float64]:
+        """Unit-RMS random-phase multisine over ``[f0, f1]`` Hz at times ``tau`` (s)."""
+        if self._multisine is None or self._multisine[0] != (f0, f1):
+            df = max(1.0 / RANDOM_PERIOD, (f1 - f0) / RANDOM_LINES)
+            freqs = np.arange(np.ceil(f0 / df), np.floor(f1 / df) + 1) * df
+            freqs = freqs[freqs > 0]
+            if freqs.size == 0:
+                freqs = np.array([max(f0, df)])
+            phases = np.random.default_rng(self._seed).uniform(0, 2 * np.pi, freqs.size)
+            self._multisine = ((f0, f1), freqs, phases)
+        _, freqs, phases = self._multisine
+        amp = np.sqrt(2.0 / freqs.size)
+        out = np.empty_like(tau)
+        for i in range(0, tau.size, 256):  # bounded memory: 256 x n_lines at a time
+            chunk = tau[i : i + 256]
+            out[i : i + 256] = amp * np.cos(2 * np.pi * np.outer(chunk, freqs) + phases).sum(
+                axis=1)
+        return out
+
     def amplifier_fault(self) -> None:
         """Trip the amplifier: output off, error 103 queued."""
         with self._lock:
@@ -121,6 +226,8 @@ class ShakerDevice:
             time.sleep(0.005)
 
     def shutdown(self) -> None:
+        if self.physics is not None:
+            self.physics.remove_source(self)
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(2.0)

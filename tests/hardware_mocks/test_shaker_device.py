@@ -90,7 +90,7 @@ def test_shutdown_turns_output_off(device: ShakerDevice, shaker: ScpiShaker) -> 
     shaker.shutdown()
     assert not device.output
     # the last command is not answered: give the device thread time to log it
-    deadline = time.monotonic() + 2.0
+    deadline = time.monotonic() + 5.0
     while device.commands[-1:] != ["SYST:HEART:TIM 0"] and time.monotonic() < deadline:
         time.sleep(0.005)
     assert device.commands[-2:] == ["OUTP OFF", "SYST:HEART:TIM 0"]
