@@ -1,0 +1,52 @@
+"""Acquisition: test plans, procedures in a worker thread, and their events.
+
+Public API (stable; the GUI builds on it):
+
+- plans: :class:`TestPlan`, :class:`ExcitationPoint`, :class:`ResponsePoint`,
+  :class:`RecordSettings`, :class:`ShakerSettings`, :func:`load_plan`, :func:`parse_plan`,
+  :class:`PlanError`, :func:`plan_for_bench`;
+- procedures: :class:`HammerProcedure` (``start``, ``pause``, ``resume``, ``stop``,
+  ``accept_hit``, ``reject_hit``, ``clear_override``, ``add_note``, ``wait``);
+- events: :class:`Listener` (``on_next_point``, ``on_hit``, ``on_frf``, ``on_progress``,
+  ``on_paused``, ``on_resumed``, ``on_error``, ``on_finished``), :class:`HitRecord`,
+  :class:`PointFRF`, :class:`Progress`, :class:`RunState`;
+- the in-process mock bench :class:`InProcessBench` (front end, hammer, operator arm);
+- replay: :func:`analyse_run`.
+"""
+
+from app.acquire.analysis import analyse_run
+from app.acquire.events import HitRecord, Listener, PointFRF, Progress, RunState
+from app.acquire.hammer import HammerProcedure
+from app.acquire.mockbench import InProcessBench, plan_for_bench
+from app.acquire.plan import (
+    ExcitationPoint,
+    PlanError,
+    RecordSettings,
+    ResponsePoint,
+    ShakerSettings,
+    TestPlan,
+    load_plan,
+    parse_plan,
+)
+from app.acquire.procedure import Procedure
+
+__all__ = [
+    "ExcitationPoint",
+    "HammerProcedure",
+    "HitRecord",
+    "InProcessBench",
+    "Listener",
+    "PlanError",
+    "PointFRF",
+    "Procedure",
+    "Progress",
+    "RecordSettings",
+    "ResponsePoint",
+    "RunState",
+    "ShakerSettings",
+    "TestPlan",
+    "analyse_run",
+    "load_plan",
+    "parse_plan",
+    "plan_for_bench",
+]

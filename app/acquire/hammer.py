@@ -1,0 +1,335 @@
+"""The hammer procedure: triggered hits, automatic verdicts, overrides, next point when done.
+
+Example
+-------
+>>> proc = HammerProcedure(plan, station, "run.h5", listeners=[my_listener])  # doctest: +SKIP
+>>> proc.start(); proc.wait()  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterable, Mapping
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.acquire.analysis import RunAnalysis, frfset, identify_frfs, margin_samples
+from app.acquire.events import HitRecord, PointFRF, Progress
+from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
+from app.acquire.procedure import Procedure
+from app.acquire.streams import HitStreams, RawHit
+from app.io.runfile import RunWriter, read_run
+from drivers.base import AcquisitionFrontEnd, ChannelConfig
+from drivers.errors import DeviceError
+from drivers.registry import create_device
+from drivers.station import StationConfig
+from processing.data import FRFSet, InputError
+from processing.geometry import GeometryError, GeometryReport
+from processing.identify import IdentificationResult
+
+__all__ = ["HammerProcedure", "station_summary"]
+
+logger = logging.getLogger(__name__)
+
+
+def station_summary(station: StationConfig) -> dict[str, Any]:
+    """The station as JSON-able data for the run file."""
+    out: dict[str, Any] = {"name": station.name, "source": station.source, "devices": {}}
+    for name, dev in station.devices.items():
+        out["devices"][name] = {
+            "backend": dev.backend, "fs": dev.fs, "transport": asdict(dev.transport),
+            "options": dict(dev.options),
+            "channels": [asdict(c) for c in dev.channels],
+        }
+    return out
+
+
+class HammerProcedure(Procedure):
+    """Impact-hammer acquisition of a test plan into one run file.
+
+    Parameters
+    ----------
+    plan : TestPlan or None
+        The plan (None with ``resume=True``: the plan stored in the file).
+    station : StationConfig
+        Devices and channels; the responses must all be on one front end, and the
+        station must have a force channel (the hammer's digitiser, or a front-end input).
+    path : str or Path
+        The run file to write (or to continue with ``resume=True``).
+    listeners : iterable
+        :class:`~app.acquire.events.Listener`-like objects.
+    resume : bool
+        Continue the run in ``path`` from its state.
+    device_options : mapping
+        Per device name, keyword overrides for the driver (e.g. ``stall_timeout``).
+    identify : bool
+        Identify inertia and stiffness when every point is done.
+    partial : bool
+        Accept a plan whose excitations or responses cannot span the 6 rigid-body DOFs
+        (a partial run: FRFs only, no identification).
+    force_channel : str, optional
+        Name of the station's force channel to use. Default: a force input of the
+        responses' front end (same clock, phase exact), else the hammer digitiser's,
+        aligned by :mod:`drivers.sync` (host-timed: about 1 ms, too coarse for the mass line).
+    """
+
+    def __init__(self, plan: TestPlan | None, station: StationConfig, path: str | Path, *,
+                 listeners: Iterable[Any] = (), resume: bool = False,
+                 device_options: Mapping[str, Mapping[str, Any]] | None = None,
+                 identify: bool = True, force_channel: str | None = None,
+                 partial: bool = False) -> None:
+        super().__init__(listeners)
+        self.path = Path(path)
+        self.resume_file = resume
+        if plan is None:
+            if not resume:
+                raise PlanError("give a test plan (or resume a run file)")
+            run = read_run(self.path, with_data=False)
+            plan = parse_plan(run.plan_data, f"{self.path}:/plan")
+        if plan.method != "hammer":
+            raise PlanError(f"{plan.source}: plan.method is {plan.method!r}; "
+                            "this is the hammer procedure")
+        self.plan = plan
+        self.station = station
+        self.device_options = {k: dict(v) for k, v in (device_options or {}).items()}
+        self.do_identify = identify
+        self._force_choice = force_channel
+        self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
+        self._resolve_channels()
+        self.devices: dict[str, AcquisitionFrontEnd] = {}
+        self.writer: RunWriter | None = None
+        self.analysis = RunAnalysis(plan, [c.name for c in self.rows], np.array(
+            [c.range_v * 1000.0 / c.sensitivity for c in self.rows]))
+        self.point_index = 0
+        self.frf: FRFSet | None = None
+        self.result: IdentificationResult | None = None
+        self.hits: list[HitRecord] = []
+        self._streams: HitStreams | None = None
+        self._t0 = time.monotonic()
+        self._t_offset = 0.0
+
+    # -- set-up ---------------------------------------------------------------------------------
+    def _resolve_channels(self) -> None:
+        st, plan = self.station, self.plan
+        resp = plan.response_channels(st)
+        owner = {c.name: d.name for d in st.devices.values() for c in d.channels}
+        ref_names = sorted({owner[c.name] for c in resp})
+        if len(ref_names) != 1:
+            raise PlanError(f"{plan.source}: the responses are on devices {', '.join(ref_names)};"
+                            " put them on one front end")
+        self.ref_name = ref_names[0]
+        forces = [(d.name, c) for d in st.devices.values() for c in d.channels
+                  if c.quantity == "force"]
+        if not forces:
+            raise PlanError(f"{st.source}: no force channel: add the hammer's "
+                            "(quantity = \"force\")")
+        if self._force_choice is not None:
+            forces = [f for f in forces if f[1].name == self._force_choice]
+            if not forces:
+                raise PlanError(f"{st.source}: no force channel {self._force_choice!r}")
+        same = [f for f in forces if f[0] == self.ref_name]  # same clock: phase exact
+        self.force_name, self.force_channel = (same or forces)[0]
+        self.rows: tuple[ChannelConfig, ...] = (self.force_channel, *resp)
+        self.row_devices = (self.force_name, *(self.ref_name for _ in resp))
+
+    def _open_devices(self) -> None:
+        for name in dict.fromkeys((self.ref_name, self.force_name)):
+            dev = create_device(self.station.devices[name], **self.device_options.get(name, {}))
+            if not isinstance(dev, AcquisitionFrontEnd):
+                raise PlanError(f"{self.station.source}: device {name!r} is not an acquisition "
+                                "device")
+            self.devices[name] = dev
+            dev.open()
+        ref, fdev = self.devices[self.ref_name], self.devices[self.force_name]
+        rec = self.plan.record
+        if ref.fs != rec.fs:
+            raise PlanError(f"{self.plan.source}: record.fs is {rec.fs:g} Hz but front end "
+                            f"{self.ref_name!r} runs at {ref.fs:g} Hz: make them equal")
+        names = [c.name for c in ref.channels]
+        self._streams = HitStreams(
+            ref, [names.index(c.name) for c in self.rows[1:]], fdev,
+            [c.name for c in fdev.channels].index(self.force_channel.name),
+            rec.n_pretrigger, rec.n_samples, rec.trigger_level)
+
+    def _open_file(self) -> None:
+        rec = self.plan.record
+        margin = margin_samples(rec.fs)
+        n_store = rec.n_samples + 2 * margin
+        if self.resume_file:
+            run = read_run(self.path)
+            stored = tuple(c.name for c in run.channels)
+            if stored != tuple(c.name for c in self.rows):
+                raise PlanError(f"{self.path}: recorded channels {', '.join(stored)} differ from "
+                                "the station's; resume with the same station")
+            self.writer = RunWriter.resume(self.path)
+            recs = run.records
+            for i in range(len(recs)):
+                res = self.analysis.add(i, int(recs.point[i]), recs.data[i], recs.override[i])
+                self.analysis.set_used(i, bool(recs.accepted[i]) and res is not None)
+            self._t_offset = float(recs.time.max()) + 1.0 if len(recs) else 0.0
+            return
+        fdev = self.devices[self.force_name]
+        separate = self.force_name != self.ref_name
+        fs_raw = fdev.fs if separate else 0.0
+        n_raw = int(np.ceil(n_store * fdev.fs / rec.fs)) + 64 if separate else 0
+        self.writer = RunWriter.create(
+            self.path, plan_data=self.plan.to_dict(), station_data=station_summary(self.station),
+            channels=self.rows, devices=self.row_devices, geometry=self.plan.geometry(),
+            fs=rec.fs, n_samples=n_store, method="hammer", fs_raw=fs_raw, n_raw=n_raw)
+
+    # -- procedure ------------------------------------------------------------------------------
+    def startup(self) -> None:
+        self._open_devices()
+        self._open_file()
+        self._t0 = time.monotonic()
+
+    def execute(self) -> None:
+        assert self._streams is not None
+        self._start_streams()
+        for point in self.plan.excitations:
+            self.point_index = point.index
+            if self.analysis.n_used(point.index) >= self.plan.hits:
+                continue
+            self.emit("on_next_point", point)
+            while self.analysis.n_used(point.index) < self.plan.hits:
+                self.poll()
+                try:
+                    self._streams.read()
+                    trig = self._streams.next_trigger()
+                    if trig is None:
+                        continue
+                    raw = self._streams.record(trig, margin_samples(self.plan.record.fs))
+                except DeviceError as err:
+                    self.pause_for(f"{err}; acquired hits are saved. Check the device, "
+                                   "then resume")
+                    self.emit("on_next_point", point)
+                    continue
+                self._store(point, raw)
+        self._streams.stop()
+        self._complete()
+
+    def _start_streams(self) -> None:
+        assert self._streams is not None
+        self._streams.start()
+        self._streams.settle()
+
+    def on_pause(self) -> None:
+        if self._streams is not None:
+            self._streams.stop()
+
+    def on_resume(self) -> None:
+        # a device that stopped answering may still stream or be half configured:
+        # release every device and open it again (each driver's open() sends STOP first)
+        self._close_devices()
+        self._open_devices()
+        self._start_streams()
+
+    def _close_devices(self) -> None:
+        for dev in self.devices.values():
+            try:
+                dev.shutdown()
+            except DeviceError as err:
+                logger.warning("%s: shutdown failed: %s", dev.name, err)
+        self.devices.clear()
+
+    def shutdown(self) -> None:
+        self._close_devices()
+        if self.writer is not None:
+            state = self.state.value if self.state.value != "running" else "failed"
+            if self.frf is None:
+                self.writer.finish(state, self.message)
+            self.writer = None
+
+    # -- hits -----------------------------------------------------------------------------------
+    def _store(self, point: ExcitationPoint, raw: RawHit) -> None:
+        assert self.writer is not None
+        hit_id = self.writer.n_records
+        res = self.analysis.add(hit_id, point.index, raw.data)
+        v = res.verdicts[0] if res is not None and res.verdicts else None
+        auto = not raw.problem and v is not None and v.accepted
+        if raw.problem:
+            reason = f"{raw.problem}: hit not used"
+        elif v is None:
+            reason = "no trigger in the aligned record"
+        else:
+            reason = v.reason
+        src = raw.force_raw if raw.force_raw is not None else raw.data[0]
+        finite = src[np.isfinite(src)]
+        peak = v.peak_force if v is not None else (float(finite.max()) if finite.size
+                                                    else float("nan"))
+        t = time.monotonic() - self._t0 + self._t_offset
+        self.writer.add_record(point.index, raw.data, time=t, peak_force=peak,
+                               auto_accepted=auto, reason=reason, bad_frames=raw.bad_frames,
+                               missing=raw.missing, force_raw=raw.force_raw)
+        self.analysis.set_used(hit_id, auto)
+        self._report(HitRecord(hit_id, point.index, t, peak, auto, reason, "", raw.bad_frames,
+                               raw.missing, data=raw.data, fs=self.plan.record.fs))
+
+    def _report(self, hit: HitRecord) -> None:
+        n = self.analysis.n_used(hit.point)
+        hit = HitRecord(**{**hit.__dict__, "point_accepted": n, "point_needed": self.plan.hits})
+        if hit.hit_id < len(self.hits):
+            self.hits[hit.hit_id] = hit
+        else:
+            self.hits.append(hit)
+        if not hit.accepted:
+            logger.info("hit %d at %s rejected: %s", hit.hit_id, hit.point, hit.reason)
+        self.emit("on_hit", hit)
+        res = self.analysis.point(hit.point)
+        freq = res.freq if res is not None else np.zeros(0)
+        self.emit("on_frf", PointFRF(
+            hit.point, freq, None if res is None or res.H is None else res.H[:, 0, :],
+            None if res is None or res.coherence is None else res.coherence[:, 0, :],
+            0 if res is None else res.n_accepted))
+        bad = self._streams.bad_frames if self._streams is not None else 0
+        self.emit("on_progress", Progress(
+            self.point_index, len(self.plan.excitations), self.analysis.n_used(self.point_index),
+            self.plan.hits, len(self.hits), sum(h.accepted for h in self.hits), bad,
+            time.monotonic() - self._t0))
+
+    def apply_override(self, hit_id: int, override: str) -> None:
+        if self.writer is None or not 0 <= hit_id < self.writer.n_records:
+            self.emit("on_error", f"no hit {hit_id} to override")
+            return
+        old = self.hits[hit_id] if hit_id < len(self.hits) else None
+        run_point = old.point if old is not None else self.analysis._point_of[hit_id]
+        data = old.data if old is not None and old.data is not None else read_run(
+            self.path).records.data[hit_id]
+        res = self.analysis.add(hit_id, run_point, data, override)
+        if override == "accept" and res is None:
+            self.emit("on_error", f"hit {hit_id} lost samples and cannot be used")
+            return
+        self.writer.set_override(hit_id, override)
+        auto = old.auto_accepted if old is not None else False
+        self.analysis.set_used(hit_id, override == "accept" or (not override and auto))
+        if old is not None:
+            self._report(HitRecord(**{**old.__dict__, "override": override}))
+
+    def apply_note(self, text: str) -> None:
+        if self.writer is not None:
+            self.writer.add_note(text, time.monotonic() - self._t0 + self._t_offset)
+
+    def _complete(self) -> None:
+        """All points done: FRFs, identification, final state in the file."""
+        assert self.writer is not None
+        points = [self.analysis.point(j) for j in range(len(self.plan.excitations))]
+        resp = self.rows[1:]
+        frf = frfset(self.plan, [p for p in points if p is not None], self.plan.geometry(),
+                     *self.plan.response_dofs(self.station))
+        self.frf = frf
+        message = ""
+        result_json = None
+        if self.do_identify and self.geometry_report.ok:
+            try:
+                self.result = identify_frfs(frf)
+                result_json = self.result.to_json()
+            except (InputError, GeometryError) as err:
+                message = f"identification failed: {err}"
+                self.emit("on_error", message)
+        assert len(resp) == frf.H.shape[0]
+        self.writer.finish("finished", message, frf, result_json)
+        self.writer = None

@@ -1,0 +1,139 @@
+"""Built-in plans derived from the simulated benches, and an in-process mock bench.
+
+:func:`plan_for_bench` gives the test plan of a built-in bench (the article's
+engine: 4 triaxial points, 18 forces; the block: 4 points, 9 forces).
+:class:`InProcessBench` starts the simulated front end (python-can ``virtual``
+bus) and hammer digitiser (pseudo-terminal) on one shared physics, and gives the
+station that connects the real drivers to them.
+
+Example
+-------
+>>> with InProcessBench("engine-rigid") as bench:  # doctest: +SKIP
+...     proc = HammerProcedure(plan_for_bench("engine-rigid"), bench.station, "run.h5",
+...                            listeners=[bench.operator])
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from app.acquire.plan import TestPlan, parse_plan
+from drivers.station import StationConfig, parse_station
+from hardware_mocks.benches import Bench, get_bench
+from hardware_mocks.frontend_device import FORCE, FrontEndDevice
+from hardware_mocks.hammer_device import HammerDevice
+from hardware_mocks.operator import MockOperator
+from hardware_mocks.physics import BenchPhysics
+
+__all__ = ["InProcessBench", "plan_for_bench"]
+
+_AXES = "xyz"
+_counter = itertools.count()
+
+
+def _channel_names(bench: Bench) -> list[str]:
+    names: list[str] = []
+    seen: dict[int, int] = {}
+    for node in bench.resp_nodes.tolist():
+        k = seen.get(node, 0)
+        seen[node] = k + 1
+        names.append(f"a{node}{_AXES[k] if k < 3 else k}")
+    return names
+
+
+def plan_for_bench(name: str, *, points: Sequence[int] | None = None, hits: int = 1,
+                   fs: float = 1024.0, length: float = 2.0, pretrigger: float = 0.05,
+                   trigger_level: float = 20.0, exp_tau: float = 0.0) -> TestPlan:
+    """The hammer plan of built-in bench ``name`` (engine, engine-rigid, block, ...).
+
+    ``points`` selects excitation indices (default all); record settings as in
+    :class:`~app.acquire.plan.RecordSettings` (Hz, s, N).
+    """
+    bench = get_bench(name)
+    g = bench.geometry
+    sel = range(len(bench.exc_nodes)) if points is None else points
+    exc_xyz = g.coordinates(bench.exc_nodes)
+    names = _channel_names(bench)
+    responses = []
+    for node in dict.fromkeys(bench.resp_nodes.tolist()):
+        chans = [n for n, r in zip(names, bench.resp_nodes.tolist(), strict=True) if r == node]
+        responses.append({"node": node, "xyz": g.coordinates(np.array([node]))[0].tolist(),
+                          "channels": chans})
+    return parse_plan({
+        "plan": {"name": f"{name} (built in)", "method": "hammer", "hits": hits},
+        "record": {"fs": fs, "length": length, "pretrigger": pretrigger,
+                   "trigger_level": trigger_level, "exp_tau": exp_tau},
+        "excitation": [{"node": int(bench.exc_nodes[j]), "xyz": exc_xyz[j].tolist(),
+                        "direction": bench.exc_dirs[j].tolist()} for j in sel],
+        "response": responses,
+    }, f"built-in plan {name}")
+
+
+class InProcessBench:
+    """Simulated front end + hammer on one bench, in this process, and their station.
+
+    Parameters
+    ----------
+    name : str
+        Built-in bench.
+    fs_frontend, fs_hammer : float
+        Sample rates, Hz.
+    accel_noise, force_noise : float
+        Sensor noise, m/s^2 and N RMS.
+    hammer_ppm, hammer_offset : float
+        The hammer digitiser's clock error (ppm) and start delay (s).
+    operator : dict
+        Keyword arguments of :class:`~hardware_mocks.operator.MockOperator`.
+    """
+
+    def __init__(self, name: str = "engine", *, fs_frontend: float = 1024.0,
+                 fs_hammer: float = 4096.0, accel_noise: float = 0.0, force_noise: float = 0.0,
+                 hammer_ppm: float = 0.0, hammer_offset: float = 0.0,
+                 operator: dict[str, Any] | None = None) -> None:
+        self.bench = get_bench(name)
+        self.physics = BenchPhysics(self.bench)
+        n_resp = len(self.bench.resp_nodes)
+        channel = f"insitu-inproc-{next(_counter)}"
+        self.frontend = FrontEndDevice(self.physics, channel=channel,
+                                       wiring=[*range(n_resp), FORCE], accel_noise=accel_noise,
+                                       force_noise=force_noise,
+                                       tail=4.0)
+        self.hammer = HammerDevice(self.physics, ppm=hammer_ppm, offset=hammer_offset,
+                                   noise=force_noise)
+        dirs = self.bench.resp_dirs
+        chans = [{"name": n, "input": i, "quantity": "acceleration", "sensitivity": 10.2,
+                  "range": 10.0, "node": int(node), "direction": dirs[i].tolist()}
+                 for i, (n, node) in enumerate(zip(_channel_names(self.bench),
+                                                   self.bench.resp_nodes.tolist(), strict=True))]
+        chans.append({"name": "F_fe", "input": n_resp, "quantity": "force",
+                      "sensitivity": 2.25, "range": 5.0})
+        self.station: StationConfig = parse_station({
+            "station": {"name": f"in-process mock bench ({name})"},
+            "devices": {
+                "frontend": {"backend": "frontend-can", "fs": fs_frontend,
+                             "transport": {"interface": "virtual", "channel": channel,
+                                           "fd": True},
+                             "channels": chans},
+                "hammer": {"backend": "hammer-serial", "fs": fs_hammer,
+                           "transport": {"url": self.hammer.path, "baudrate": 921600},
+                           "channels": [{"name": "F", "input": 0, "quantity": "force",
+                                         "sensitivity": 2.25, "range": 5.0}]},
+            }}, "in-process mock station")
+        self.operator = MockOperator(self.hammer, **(operator or {}))
+
+    def shutdown(self) -> None:
+        self.operator.shutdown()
+        self.hammer.shutdown()
+        self.frontend.shutdown()
+
+    def __enter__(self) -> InProcessBench:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.shutdown()

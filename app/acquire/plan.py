@@ -1,0 +1,414 @@
+"""The test plan: where to excite, where the responses are measured, and how to record.
+
+A plan is a TOML file::
+
+    [plan]
+    name = "engine"
+    method = "hammer"            # or "shaker"
+    hits = 3                     # accepted hits (hammer) per excitation point
+
+    [record]
+    fs = 1024                    # Hz, sample rate of the front end
+    length = 2.0                 # s, record length per hit (line spacing 1/length Hz)
+    pretrigger = 0.05            # s kept before the trigger
+    trigger_level = 20.0         # N, force trigger level (rising)
+    exp_tau = 0.0                # s, exponential window (0: none)
+
+    [shaker]                     # method = "shaker" only
+    waveform = "random"          # random, burst-random, chirp
+    level = 0.5                  # V RMS (random) or V peak
+    f_start = 2.0                # Hz
+    f_stop = 200.0               # Hz
+    averages = 20
+    nperseg = 2048               # samples per segment (line spacing fs/nperseg)
+    ramp = 1.0                   # s
+
+    [[excitation]]
+    node = 101
+    xyz = [0.25, 0.10, 0.20]     # m
+    direction = [1, 0, 0]        # force direction, global frame
+
+    [[response]]
+    node = 1
+    xyz = [0.20, 0.00, 0.26]
+    channels = ["a1x", "a1y", "a1z"]   # station channels that measure this point
+
+Response directions come from the station channels (their ``direction``).
+Every error is one line naming the key, as ``plan.toml: record.fs: must be > 0, got -1``.
+
+Example
+-------
+>>> plan = parse_plan({"plan": {"method": "hammer"}, "record": {"fs": 1024, "length": 1.0,
+...     "trigger_level": 10.0}, "excitation": [{"node": 9, "xyz": [0, 0, 0],
+...     "direction": [0, 0, 1]}], "response": [{"node": 1, "xyz": [0, 0, 0],
+...     "channels": ["a1z"]}]})
+>>> plan.record.n_samples
+1024
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.base import ChannelConfig
+from drivers.station import StationConfig
+from processing.data import Geometry
+from processing.geometry import GeometryReport, check_geometry
+
+__all__ = [
+    "ExcitationPoint",
+    "PlanError",
+    "RecordSettings",
+    "ResponsePoint",
+    "ShakerSettings",
+    "TestPlan",
+    "load_plan",
+    "parse_plan",
+]
+
+Method = Literal["hammer", "shaker"]
+
+
+class PlanError(ValueError):
+    """The test plan is invalid or does not fit the station; one line naming the key."""
+
+
+@dataclass(frozen=True)
+class ExcitationPoint:
+    """Where and along which direction the structure is excited.
+
+    Attributes
+    ----------
+    index : int
+        Position in the plan (0-based).
+    node : int
+        Node id of the excitation DOF.
+    xyz : (3,) tuple of float
+        Coordinates in the global frame, m.
+    direction : (3,) tuple of float
+        Unit vector of the force in the global frame.
+    """
+
+    index: int
+    node: int
+    xyz: tuple[float, float, float]
+    direction: tuple[float, float, float]
+
+    @property
+    def label(self) -> str:
+        d = "".join(f"{c:+.2g}" for c in self.direction)
+        return f"point {self.index + 1} (node {self.node}, dir {d})"
+
+
+@dataclass(frozen=True)
+class ResponsePoint:
+    """A measurement point and the station channels that measure it (xyz in m)."""
+
+    node: int
+    xyz: tuple[float, float, float]
+    channels: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class RecordSettings:
+    """Recording settings.
+
+    Attributes
+    ----------
+    fs : float
+        Sample rate of the front end (the reference clock), Hz.
+    length : float
+        Record length per hit, s (line spacing ``1 / length`` Hz).
+    pretrigger : float
+        Time kept before the trigger, s.
+    trigger_level : float
+        Force trigger level, N (rising edge).
+    exp_tau : float or None
+        Exponential window time constant, s; None for no window.
+    estimator : {"H1", "H2", "Hv"}
+    """
+
+    fs: float
+    length: float
+    pretrigger: float = 0.05
+    trigger_level: float = 20.0
+    exp_tau: float | None = None
+    estimator: str = "H1"
+
+    @property
+    def n_samples(self) -> int:
+        """Samples per record."""
+        return round(self.length * self.fs)
+
+    @property
+    def n_pretrigger(self) -> int:
+        return round(self.pretrigger * self.fs)
+
+
+@dataclass(frozen=True)
+class ShakerSettings:
+    """Shaker drive and averaging (levels in V RMS for random, V peak otherwise; Hz; s)."""
+
+    waveform: str = "random"
+    level: float = 0.5
+    f_start: float = 2.0
+    f_stop: float = 200.0
+    averages: int = 20
+    nperseg: int = 2048
+    ramp: float = 1.0
+
+
+@dataclass(frozen=True)
+class TestPlan:
+    """A whole test plan; see the module docstring for the file format."""
+
+    name: str
+    method: Method
+    hits: int
+    record: RecordSettings
+    excitations: tuple[ExcitationPoint, ...]
+    responses: tuple[ResponsePoint, ...]
+    shaker: ShakerSettings = field(default_factory=ShakerSettings)
+    source: str = "plan.toml"
+
+    __test__ = False  # not a pytest test class
+
+    def geometry(self) -> Geometry:
+        """Node ids and coordinates (m) of every response and excitation node."""
+        nodes: dict[int, tuple[float, float, float]] = {}
+        points: list[ResponsePoint | ExcitationPoint] = [*self.responses, *self.excitations]
+        for p in points:
+            if p.node in nodes and not np.allclose(nodes[p.node], p.xyz):
+                raise PlanError(f"{self.source}: node {p.node} is given two different xyz")
+            nodes[p.node] = p.xyz
+        ids = sorted(nodes)
+        return Geometry(np.array(ids, dtype=np.int64), np.array([nodes[i] for i in ids]))
+
+    @property
+    def exc_nodes(self) -> NDArray[np.int64]:
+        return np.array([e.node for e in self.excitations], dtype=np.int64)
+
+    @property
+    def exc_dirs(self) -> NDArray[np.float64]:
+        return np.array([e.direction for e in self.excitations], dtype=float)
+
+    def response_channels(self, station: StationConfig) -> tuple[ChannelConfig, ...]:
+        """The station channels of every response point, in plan order."""
+        by_name = {c.name: c for d in station.devices.values() for c in d.channels}
+        out = []
+        for i, r in enumerate(self.responses):
+            for name in r.channels:
+                ch = by_name.get(name)
+                if ch is None:
+                    raise PlanError(f"{self.source}: response[{i}].channels: station "
+                                    f"{station.source} has no channel {name!r}")
+                if ch.quantity != "acceleration" or ch.direction is None:
+                    raise PlanError(f"{self.source}: response[{i}].channels: {name!r} must be "
+                                    "an acceleration channel with a direction in the station")
+                out.append(ch)
+        return tuple(out)
+
+    def response_dofs(self, station: StationConfig
+                      ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Node id and unit direction of every response DOF, in plan order."""
+        chans = self.response_channels(station)
+        node_of = {n: r.node for r in self.responses for n in r.channels}
+        nodes = np.array([node_of[c.name] for c in chans], dtype=np.int64)
+        dirs = np.array([c.direction for c in chans], dtype=float)
+        return nodes, dirs
+
+    def check(self, station: StationConfig, strict: bool = True) -> GeometryReport:
+        """Rank and condition of E and T; raises PlanError when they cannot span 6 DOFs
+        (``strict=False``: only report it, for partial plans measured in several runs)."""
+        nodes, dirs = self.response_dofs(station)
+        g = self.geometry()
+        rep = check_geometry(g.coordinates(nodes), dirs, g.coordinates(self.exc_nodes),
+                             self.exc_dirs)
+        if strict and not rep.ok:
+            raise PlanError(f"{self.source}: {'; '.join(rep.messages)}")
+        return rep
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plan as TOML-like data; ``parse_plan(plan.to_dict())`` gives it back."""
+        rec: dict[str, Any] = {"fs": self.record.fs, "length": self.record.length,
+                               "pretrigger": self.record.pretrigger,
+                               "trigger_level": self.record.trigger_level,
+                               "exp_tau": self.record.exp_tau or 0.0,
+                               "estimator": self.record.estimator}
+        s = self.shaker
+        return {
+            "plan": {"name": self.name, "method": self.method, "hits": self.hits},
+            "record": rec,
+            "shaker": {"waveform": s.waveform, "level": s.level, "f_start": s.f_start,
+                       "f_stop": s.f_stop, "averages": s.averages, "nperseg": s.nperseg,
+                       "ramp": s.ramp},
+            "excitation": [{"node": e.node, "xyz": list(e.xyz), "direction": list(e.direction)}
+                           for e in self.excitations],
+            "response": [{"node": r.node, "xyz": list(r.xyz), "channels": list(r.channels)}
+                         for r in self.responses],
+        }
+
+
+class _Ctx:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, key: str, msg: str) -> PlanError:
+        return PlanError(f"{self.source}: {key}: {msg}")
+
+    def table(self, data: Mapping[str, Any], name: str, allowed: set[str]) -> dict[str, Any]:
+        t = data.get(name, {})
+        if not isinstance(t, dict):
+            raise self.fail(name, f"must be a table, got {type(t).__name__}")
+        extra = sorted(set(t) - allowed)
+        if extra:
+            raise self.fail(f"{name}.{extra[0]}",
+                            f"unknown key; allowed: {', '.join(sorted(allowed))}")
+        return t
+
+    def number(self, t: Mapping[str, Any], name: str, key: str, default: Any = None, *,
+               integer: bool = False, minimum: float = 0.0, strict: bool = True) -> Any:
+        if name not in t:
+            if default is None:
+                raise self.fail(f"{key}.{name}", "missing")
+            return default
+        v = t[name]
+        types = (int,) if integer else (int, float)
+        if isinstance(v, bool) or not isinstance(v, types) or not np.isfinite(v):
+            raise self.fail(f"{key}.{name}",
+                            f"must be {'an integer' if integer else 'a number'}, got {v!r}")
+        if (v <= minimum) if strict else (v < minimum):
+            raise self.fail(f"{key}.{name}", f"must be {'>' if strict else '>='} {minimum:g}, "
+                            f"got {v!r}")
+        return v
+
+    def vector(self, t: Mapping[str, Any], name: str, key: str, *, nonzero: bool
+               ) -> tuple[float, float, float]:
+        v = t.get(name)
+        if (not isinstance(v, list) or len(v) != 3
+                or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+                or not all(np.isfinite(v))):
+            raise self.fail(f"{key}.{name}", "missing" if v is None else
+                            f"must be [x, y, z] numbers, got {v!r}")
+        a = np.asarray(v, dtype=float)
+        if nonzero:
+            n = float(np.linalg.norm(a))
+            if n == 0:
+                raise self.fail(f"{key}.{name}", "must be a non-zero direction")
+            a = a / n
+        return (float(a[0]), float(a[1]), float(a[2]))
+
+    def node(self, t: Mapping[str, Any], key: str) -> int:
+        v = t.get("node")
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(f"{key}.node", "missing" if v is None else
+                            f"must be an integer node id, got {v!r}")
+        return v
+
+    def points(self, data: Mapping[str, Any], name: str) -> list[dict[str, Any]]:
+        v = data.get(name)
+        if not isinstance(v, list) or not v or not all(isinstance(x, dict) for x in v):
+            raise self.fail(name, f"missing: give at least one [[{name}]] table")
+        return v
+
+
+_TOP = {"plan", "record", "shaker", "excitation", "response"}
+
+
+def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
+    """Validate parsed plan data; raises :class:`PlanError` naming the bad key."""
+    c = _Ctx(source)
+    extra = sorted(set(data) - _TOP)
+    if extra:
+        raise c.fail(extra[0], f"unknown key; allowed: {', '.join(sorted(_TOP))}")
+    p = c.table(data, "plan", {"name", "method", "hits"})
+    name = p.get("name", Path(source).stem)
+    if not isinstance(name, str):
+        raise c.fail("plan.name", f"must be a string, got {name!r}")
+    method = p.get("method", "hammer")
+    if method not in ("hammer", "shaker"):
+        raise c.fail("plan.method", f"must be 'hammer' or 'shaker', got {method!r}")
+    hits = c.number(p, "hits", "plan", 3, integer=True)
+    r = c.table(data, "record", {"fs", "length", "lines", "pretrigger", "trigger_level",
+                                 "exp_tau", "estimator"})
+    fs = float(c.number(r, "fs", "record"))
+    if "length" in r and "lines" in r:
+        raise c.fail("record.lines", "give either length (s) or lines, not both")
+    if "lines" in r:
+        length = 2 * c.number(r, "lines", "record", integer=True) / fs
+    else:
+        length = float(c.number(r, "length", "record"))
+    pre = float(c.number(r, "pretrigger", "record", 0.05, strict=False))
+    if pre >= length:
+        raise c.fail("record.pretrigger", f"must be shorter than the record ({length:g} s)")
+    level = float(c.number(r, "trigger_level", "record", 20.0))
+    tau = float(c.number(r, "exp_tau", "record", 0.0, strict=False)) or None
+    est = r.get("estimator", "H1")
+    if est not in ("H1", "H2", "Hv"):
+        raise c.fail("record.estimator", f"must be H1, H2 or Hv, got {est!r}")
+    if round(length * fs) < 64:
+        raise c.fail("record.length", f"{length:g} s at {fs:g} Hz is under 64 samples")
+    record = RecordSettings(fs, length, pre, level, tau, est)
+    s = c.table(data, "shaker", {"waveform", "level", "f_start", "f_stop", "averages",
+                                 "nperseg", "ramp"})
+    wf = s.get("waveform", "random")
+    if wf not in ("random", "burst-random", "chirp"):
+        raise c.fail("shaker.waveform", f"must be random, burst-random or chirp, got {wf!r}")
+    shaker = ShakerSettings(
+        wf, float(c.number(s, "level", "shaker", 0.5)),
+        float(c.number(s, "f_start", "shaker", 2.0)),
+        float(c.number(s, "f_stop", "shaker", 200.0)),
+        int(c.number(s, "averages", "shaker", 20, integer=True)),
+        int(c.number(s, "nperseg", "shaker", 2048, integer=True, minimum=8)),
+        float(c.number(s, "ramp", "shaker", 1.0, strict=False)))
+    if shaker.f_start >= shaker.f_stop:
+        raise c.fail("shaker.f_stop", f"must be above f_start ({shaker.f_start:g} Hz)")
+    excs = []
+    for i, e in enumerate(c.points(data, "excitation")):
+        key = f"excitation[{i}]"
+        bad = sorted(set(e) - {"node", "xyz", "direction"})
+        if bad:
+            raise c.fail(f"{key}.{bad[0]}", "unknown key; allowed: direction, node, xyz")
+        excs.append(ExcitationPoint(i, c.node(e, key), c.vector(e, "xyz", key, nonzero=False),
+                                    c.vector(e, "direction", key, nonzero=True)))
+    resps = []
+    seen: dict[str, int] = {}
+    for i, rp in enumerate(c.points(data, "response")):
+        key = f"response[{i}]"
+        bad = sorted(set(rp) - {"node", "xyz", "channels"})
+        if bad:
+            raise c.fail(f"{key}.{bad[0]}", "unknown key; allowed: channels, node, xyz")
+        ch = rp.get("channels")
+        if (not isinstance(ch, list) or not ch
+                or not all(isinstance(x, str) and x for x in ch)):
+            raise c.fail(f"{key}.channels", "must be a non-empty list of station channel names")
+        for nm in ch:
+            if nm in seen:
+                raise c.fail(f"{key}.channels", f"channel {nm!r} already used by "
+                             f"response[{seen[nm]}]")
+            seen[nm] = i
+        resps.append(ResponsePoint(c.node(rp, key), c.vector(rp, "xyz", key, nonzero=False),
+                                   tuple(ch)))
+    plan = TestPlan(name, method, int(hits), record, tuple(excs), tuple(resps), shaker, source)
+    plan.geometry()  # nodes with two coordinates
+    return plan
+
+
+def load_plan(path: str | Path) -> TestPlan:
+    """Read and validate a plan file; raises :class:`PlanError` (one line) on any problem."""
+    p = Path(path)
+    try:
+        with p.open("rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as err:
+        raise PlanError(f"{p}: not valid TOML: {err}") from err
+    except OSError as err:
+        raise PlanError(f"{p}: cannot read the plan file: {err.strerror or err}") from err
+    return parse_plan(data, str(p))

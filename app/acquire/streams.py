@@ -1,0 +1,223 @@
+"""Continuous streams from the front end and the hammer, triggered hit records on one time base.
+
+:class:`HitStreams` reads the reference front end (the responses) and the force
+device in chunks of about 0.1 s (ten reads a second, see ``PITFALLS.md``),
+finds hits on the force by its trigger level, and cuts one record per hit on the
+front end's sample grid. When the force comes from another device (the hammer's
+own digitiser), its clock is fitted and the force resampled onto the front end's
+instants with :mod:`drivers.sync`; a hit whose streams cannot be aligned, or that
+lost samples, is returned with the reason and never used.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.base import AcquisitionFrontEnd, TimeBlock
+from drivers.errors import SyncError
+from drivers.sync import ClockFit, align, check_alignment, fit_clock
+
+__all__ = ["HitStreams", "RawHit"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RawHit:
+    """One hit record: ``data`` (n_ch, n) force row first, at ``fs``; ``problem`` if unusable."""
+
+    data: NDArray[np.float64]
+    force_raw: NDArray[np.float64] | None
+    bad_frames: int
+    missing: int
+    problem: str = ""
+
+
+class _Buffer:
+    """The recent samples of one stream: ``data[:, k]`` is device sample ``first + k``."""
+
+    def __init__(self, n_ch: int, keep: int) -> None:
+        self.data = np.zeros((n_ch, 0))
+        self.first = 0
+        self.keep = keep
+
+    @property
+    def end(self) -> int:
+        return self.first + self.data.shape[1]
+
+    def add(self, block: TimeBlock) -> None:
+        if self.data.shape[1] == 0:
+            self.first = block.first_sample
+        self.data = np.concatenate([self.data, block.data], axis=1)
+        drop = self.data.shape[1] - self.keep
+        if drop > 0:
+            self.data = self.data[:, drop:]
+            self.first += drop
+
+    def slice(self, start: int, stop: int) -> NDArray[np.float64]:
+        if start < self.first or stop > self.end:
+            raise SyncError(f"samples {start}..{stop} are not buffered ({self.first}..{self.end})")
+        return self.data[:, start - self.first:stop - self.first]
+
+
+class HitStreams:
+    """Streams of one hammer test, read by the procedure's worker thread.
+
+    Parameters
+    ----------
+    ref : AcquisitionFrontEnd
+        The front end with the response channels (the reference clock).
+    resp_rows : sequence of int
+        Rows of ``ref``'s blocks that are the plan's responses, in order.
+    force_dev : AcquisitionFrontEnd
+        The device with the force channel (``ref`` itself, or the hammer digitiser).
+    force_row : int
+        Row of the force in ``force_dev``'s blocks.
+    n_before, n_record : int
+        Samples kept before the trigger and the record length, at ``ref.fs``.
+    level : float
+        Trigger level, N (rising).
+    """
+
+    CHUNK = 0.1  # s per read
+
+    def __init__(self, ref: AcquisitionFrontEnd, resp_rows: list[int],
+                 force_dev: AcquisitionFrontEnd, force_row: int, n_before: int, n_record: int,
+                 level: float) -> None:
+        self.ref, self.force_dev = ref, force_dev
+        self.separate = force_dev is not ref
+        self.resp_rows = resp_rows
+        self.force_row = force_row
+        self.n_before, self.n_record = n_before, n_record
+        self.level = level
+        keep = n_record * 2 + int(4 * ref.fs)
+        self._ref = _Buffer(len(ref.channels), keep)
+        ratio = force_dev.fs / ref.fs
+        self._force = _Buffer(len(force_dev.channels), int(keep * ratio) + 64)
+        self._searched = 0
+        self._armed_from = 0
+
+    @property
+    def bad_frames(self) -> int:
+        n = self.ref.health.bad_frames
+        return n + (self.force_dev.health.bad_frames if self.separate else 0)
+
+    def start(self) -> None:
+        """Start streaming (both devices, one after the other: clocks are fitted later)."""
+        self.ref.start()
+        if self.separate:
+            self.force_dev.start()
+        self._ref = _Buffer(self._ref.data.shape[0], self._ref.keep)
+        self._force = _Buffer(self._force.data.shape[0], self._force.keep)
+        self._searched = self._armed_from = 0
+
+    def stop(self) -> None:
+        for dev in (self.ref, self.force_dev) if self.separate else (self.ref,):
+            dev.stop()
+
+    def read(self) -> None:
+        """Read about 0.1 s from every stream (blocks until it is in; device errors raise)."""
+        self._ref.add(self.ref.read_block(max(1, int(self.ref.fs * self.CHUNK)), timeout=2.0))
+        if self.separate:
+            self._force.add(self.force_dev.read_block(
+                max(1, int(self.force_dev.fs * self.CHUNK)), timeout=2.0))
+
+    def settle(self, seconds: float = 0.7) -> None:
+        """Stream ``seconds`` so the clocks can be measured before the first hit."""
+        for _ in range(max(1, round(seconds / self.CHUNK))):
+            self.read()
+        self._searched = (self._force if self.separate else self._ref).end
+
+    def _fits(self) -> tuple[ClockFit, ClockFit]:
+        fits = {self.ref.name: fit_clock(self.ref.clock_pairs(), self.ref.fs),  # type: ignore[attr-defined]
+                self.force_dev.name: fit_clock(self.force_dev.clock_pairs(),  # type: ignore[attr-defined]
+                                               self.force_dev.fs)}
+        check_alignment(fits)
+        return fits[self.ref.name], fits[self.force_dev.name]
+
+    def next_trigger(self) -> int | None:
+        """Device sample index (of the force stream) of the next trigger, or None yet."""
+        buf = self._force if self.separate else self._ref
+        row = self.force_row
+        lo = max(self._searched, buf.first + 1, self._armed_from)
+        if buf.end - lo < 1:
+            return None
+        f = buf.data[row, lo - 1 - buf.first:]
+        with np.errstate(invalid="ignore"):
+            cross = np.flatnonzero((f[:-1] < self.level) & (f[1:] >= self.level))
+        if cross.size == 0:
+            self._searched = buf.end
+            return None
+        k = lo + int(cross[0])
+        self._searched = k + 1
+        return k
+
+    def record(self, trigger: int, margin: int) -> RawHit:
+        """Wait for and cut the record of the hit that triggered at ``trigger``.
+
+        The record spans ``n_before + margin`` samples before the trigger to
+        ``n_record - n_before + margin`` after it, on the front end's grid.
+        """
+        bad0 = self.bad_frames
+        length = self.n_record + 2 * margin
+        if not self.separate:
+            start = trigger - self.n_before - margin
+            while self._ref.end < start + length:
+                self.read()
+            self._arm_after(trigger)
+            block = self._ref.slice(start, start + length)
+            data = np.vstack([block[self.force_row][None], block[self.resp_rows]])
+            return self._finish(data, None, bad0)
+        ref_fit, f_fit = self._fits()
+        t_trig = float(f_fit.host_time(trigger))
+        k_ref = round((t_trig - ref_fit.t0) * ref_fit.rate)
+        start = k_ref - self.n_before - margin
+        ratio = self.force_dev.fs / self.ref.fs
+        while True:
+            t_end = float(ref_fit.host_time(start + length))
+            f_stop = int(np.ceil((t_end - f_fit.t0) * f_fit.rate)) + 16
+            if self._ref.end >= start + length and self._force.end >= f_stop:
+                break
+            self.read()
+        self._arm_after(trigger)
+        ref_fit, f_fit = self._fits()  # refit with the latest frames
+        t0 = float(ref_fit.host_time(start))
+        f_start = max(int(np.floor((t0 - f_fit.t0) * f_fit.rate)) - 16, self._force.first)
+        f_stop = min(f_stop + 16, self._force.end)
+        ref_block = TimeBlock(self._ref.slice(start, start + length), self.ref.fs,
+                              self.ref.channels, start)
+        raw = self._force.slice(f_start, f_stop)
+        force_raw = raw[self.force_row].copy()
+        n_lost = int(np.count_nonzero(np.isnan(raw).any(axis=0)))
+        resp = ref_block.data[self.resp_rows]
+        if n_lost:
+            data = np.vstack([np.full((1, length), np.nan), resp])
+            return self._finish(data, force_raw, bad0, f"{n_lost} force samples lost")
+        other = TimeBlock(raw, self.force_dev.fs, self.force_dev.channels, f_start)
+        try:
+            aligned = align(ref_block, ref_fit, other, f_fit, self.force_dev.name)
+        except SyncError as err:
+            data = np.vstack([np.full((1, length), np.nan), resp])
+            return self._finish(data, force_raw, bad0, f"streams not aligned: {err}")
+        logger.debug("hit aligned: force %d..%d (x%.3g) onto front end %d..%d", f_start, f_stop,
+                     ratio, start, start + length)
+        return self._finish(np.vstack([aligned.data[self.force_row][None], resp]), force_raw, bad0)
+
+    def _arm_after(self, trigger: int) -> None:
+        ratio = self.force_dev.fs / self.ref.fs if self.separate else 1.0
+        self._armed_from = trigger + int((self.n_record - self.n_before) * ratio)
+
+    def _finish(self, data: NDArray[np.float64], force_raw: NDArray[np.float64] | None,
+                bad0: int, problem: str = "") -> RawHit:
+        missing = int(np.count_nonzero(np.isnan(data).any(axis=0)))
+        bad = self.bad_frames - bad0
+        if missing and not problem:
+            problem = f"{missing} samples lost"
+        if problem and bad:
+            problem += f" ({bad} corrupted frames)"
+        return RawHit(data, force_raw, bad, missing, problem)
+

@@ -1,0 +1,49 @@
+"""``insitu replay RUN.h5``: recompute FRFs and the identification from a run's raw records.
+
+Uses the same code as the live run, on the records as stored, with the operator's
+overrides: the FRFs and the result are identical to the live run's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+
+from app.acquire.analysis import analyse_run
+from app.cli.common import UserError
+from app.cli.summary import print_result
+from app.io.runfile import read_run
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser("replay", help="recompute FRFs and identification from a run file",
+                       description=__doc__)
+    p.add_argument("file", type=Path, help="run file (HDF5) written by insitu acquire")
+    p.add_argument("--out", type=Path, help="write the result JSON here")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    data = read_run(args.file)
+    if len(data.records) == 0:
+        raise UserError(f"{args.file}: the run holds no hit yet")
+    frf, result, _ = analyse_run(data)
+    console = Console()
+    acc = int(np.count_nonzero(data.records.accepted))
+    console.print(f"[bold]{args.file}[/bold] ({data.state}): {len(data.records)} hits, "
+                  f"{acc} used, {frf.H.shape[0]} x {frf.H.shape[1]} FRFs")
+    if data.frf is not None:
+        same = np.array_equal(data.frf.H, frf.H) and data.result == json.loads(
+            json.dumps(result.to_json()))
+        console.print("identical to the live run" if same else
+                      "[yellow]differs from the FRFs stored by the live run[/yellow]")
+    print_result(result, console)
+    if args.out:
+        args.out.write_text(json.dumps(result.to_json(), indent=2))
+        console.print(f"result written to {args.out}")
+    return 0

@@ -1,0 +1,401 @@
+"""One HDF5 file per acquisition run: raw records, verdicts, settings, FRFs and results.
+
+The layout is documented in ``docs/run-file.md`` (schema version :data:`SCHEMA_VERSION`).
+During acquisition the file is in HDF5 single-writer/multiple-reader (SWMR) mode:
+every object is created up front and records are *appended* to resizable
+datasets, flushed after each one, so a power cut or ``kill -9`` leaves a file
+that reads back with every record flushed so far. :meth:`RunWriter.finish`
+ends the SWMR session and writes the state, FRFs and identification result.
+
+Example
+-------
+>>> run = read_run("run.h5")  # doctest: +SKIP
+>>> run.state, len(run.records.point)  # doctest: +SKIP
+('finished', 54)
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.base import ChannelConfig
+from processing.data import FRFSet, Geometry
+
+__all__ = ["SCHEMA_VERSION", "ChannelInfo", "RecordTable", "RunData", "RunFileError",
+           "RunWriter", "read_run"]
+
+SCHEMA_VERSION = 1
+FORMAT = "insitu-run"
+TEXT = 256  # bytes of a reason / note in the fixed-width string columns
+OVERRIDES = {"": 0, "accept": 1, "reject": -1}
+_OVERRIDE_NAMES = {v: k for k, v in OVERRIDES.items()}
+
+#: per-record columns: name -> (dtype, unit)
+_COLUMNS: dict[str, tuple[str, str]] = {
+    "point": ("i4", "1"), "time": ("f8", "s"), "peak_force": ("f8", "N"),
+    "auto_accepted": ("u1", "1"), "reason": (f"S{TEXT}", "n/a"), "override": ("i1", "1"),
+    "bad_frames": ("i4", "1"), "missing": ("i4", "1"),
+}
+
+
+class RunFileError(ValueError):
+    """The run file is missing, foreign, of another schema version or damaged (one line)."""
+
+
+@dataclass(frozen=True)
+class ChannelInfo:
+    """One row of the records: channel name, device, quantity, SI unit, sensitivity (mV/unit),
+    range (V), IEPE, node and unit direction."""
+
+    name: str
+    device: str
+    quantity: str
+    unit: str
+    sensitivity: float
+    range_v: float
+    iepe: bool
+    node: int
+    direction: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class RecordTable:
+    """Every record of a run, columns as arrays (row ``i`` is record ``i``)."""
+
+    data: NDArray[np.float64]  # (n, n_ch, n_samples): force N, responses m/s^2
+    fs: float
+    point: NDArray[np.int32]
+    time: NDArray[np.float64]
+    peak_force: NDArray[np.float64]
+    auto_accepted: NDArray[np.bool_]
+    reason: tuple[str, ...]
+    override: tuple[str, ...]
+    bad_frames: NDArray[np.int32]
+    missing: NDArray[np.int32]
+    force_raw: NDArray[np.float64] | None = None  # (n, n_raw) hammer force at fs_raw
+    fs_raw: float = 0.0
+
+    def __len__(self) -> int:
+        return int(self.point.size)
+
+    @property
+    def accepted(self) -> NDArray[np.bool_]:
+        """The verdict in force: override where given, else the automatic one."""
+        ov = np.array([OVERRIDES[o] for o in self.override], dtype=int)
+        return np.where(ov == 0, self.auto_accepted, ov > 0)
+
+
+@dataclass(frozen=True)
+class RunData:
+    """What :func:`read_run` returns. ``state`` is ``"interrupted"`` when the writer died."""
+
+    path: str
+    schema_version: int
+    state: str
+    message: str
+    created: str
+    method: str
+    plan_data: dict[str, Any]
+    station_data: dict[str, Any]
+    channels: tuple[ChannelInfo, ...]
+    geometry: Geometry
+    records: RecordTable
+    notes: tuple[tuple[float, str], ...]
+    frf: FRFSet | None
+    result: dict[str, Any] | None
+
+
+def _text(group: h5py.Group, name: str, obj: Any, units: str = "n/a") -> None:
+    ds = group.create_dataset(name, data=json.dumps(obj))
+    ds.attrs["units"] = units
+
+
+def _array(group: h5py.Group, name: str, data: Any, units: str) -> h5py.Dataset:
+    ds = group.create_dataset(name, data=data)
+    ds.attrs["units"] = units
+    return ds
+
+
+def _column(group: h5py.Group, name: str, dtype: str, units: str,
+            shape: tuple[int, ...] = ()) -> None:
+    ds = group.create_dataset(name, shape=(0, *shape), maxshape=(None, *shape), dtype=dtype,
+                              chunks=(1, *shape) if shape else (256,))
+    ds.attrs["units"] = units
+
+
+class RunWriter:
+    """Appends records to a run file; use :meth:`create` or :meth:`resume`, then
+    :meth:`add_record` per hit, :meth:`finish` at the end.
+
+    Not thread-safe: one thread (the procedure's worker) writes.
+    """
+
+    def __init__(self, path: Path, f: h5py.File) -> None:
+        self.path = path
+        self._f = f
+        self._f.swmr_mode = True
+
+    # -- opening --------------------------------------------------------------------------------
+    @classmethod
+    def create(cls, path: str | Path, *, plan_data: Mapping[str, Any],
+               station_data: Mapping[str, Any], channels: Sequence[ChannelConfig],
+               devices: Sequence[str], geometry: Geometry, fs: float, n_samples: int,
+               method: str, fs_raw: float = 0.0, n_raw: int = 0) -> RunWriter:
+        """A new run file (overwrites ``path``).
+
+        ``channels`` are the rows of every record (force first), ``devices`` the device each
+        comes from; records are ``n_samples`` long at ``fs`` Hz; ``n_raw`` > 0 stores the
+        hammer's own force samples (``fs_raw`` Hz) of every hit as well.
+        """
+        p = Path(path)
+        try:
+            f = h5py.File(p, "w", libver="latest")
+        except OSError as err:
+            raise RunFileError(f"{p}: cannot create the run file: {err}") from err
+        f.attrs.update({"format": FORMAT, "schema_version": SCHEMA_VERSION, "state": "running",
+                        "message": "", "method": method,
+                        "created": datetime.datetime.now().astimezone().isoformat(
+                            timespec="seconds")})
+        _text(f, "plan", dict(plan_data))
+        _text(f, "station", dict(station_data))
+        ch = f.create_group("channels")
+        _array(ch, "name", np.array([c.name for c in channels], dtype="S64"), "n/a")
+        _array(ch, "device", np.array(list(devices), dtype="S64"), "n/a")
+        _array(ch, "quantity", np.array([c.quantity for c in channels], dtype="S16"), "n/a")
+        _array(ch, "unit", np.array([c.unit for c in channels], dtype="S16"), "n/a")
+        _array(ch, "sensitivity", [c.sensitivity for c in channels], "mV/unit")
+        _array(ch, "range", [c.range_v for c in channels], "V")
+        _array(ch, "iepe", np.array([c.iepe for c in channels], dtype="u1"), "1")
+        _array(ch, "node", [-1 if c.node is None else c.node for c in channels], "1")
+        _array(ch, "direction", [c.direction or (0.0, 0.0, 0.0) for c in channels], "1")
+        g = f.create_group("geometry")
+        _array(g, "node_ids", geometry.node_ids, "1")
+        _array(g, "xyz", geometry.xyz, "m")
+        rec = f.create_group("records")
+        rec.attrs["fs"] = float(fs)
+        rec.attrs["fs_raw"] = float(fs_raw)
+        _column(rec, "data", "f8", "see /channels/unit", (len(channels), int(n_samples)))
+        rec["data"].attrs["units"] = np.array([c.unit for c in channels], dtype="S16")
+        if n_raw:
+            _column(rec, "force_raw", "f8", "N", (int(n_raw),))
+        for name, (dtype, unit) in _COLUMNS.items():
+            _column(rec, name, dtype, unit)
+        notes = f.create_group("notes")
+        _column(notes, "time", "f8", "s")
+        _column(notes, "text", f"S{TEXT * 2}", "n/a")
+        f.flush()
+        return cls(p, f)
+
+    @classmethod
+    def resume(cls, path: str | Path) -> RunWriter:
+        """Reopen an interrupted or paused run to append to it.
+
+        A file whose writer was killed carries HDF5's "open for writing" mark; it is
+        copied object by object into a fresh file that then replaces it (the original
+        stays in place until the copy is complete).
+        """
+        p = Path(path)
+        read_run(p, with_data=False)  # one-line error if foreign or damaged
+        try:
+            f = h5py.File(p, "a", libver="latest")
+        except OSError:
+            tmp = p.with_name(p.name + ".resume-tmp")
+            with h5py.File(p, "r", swmr=True) as src, h5py.File(tmp, "w", libver="latest") as dst:
+                dst.attrs.update(dict(src.attrs))
+                for key in src:
+                    src.copy(src[key], dst, name=key)
+            os.replace(tmp, p)
+            f = h5py.File(p, "a", libver="latest")
+        f.attrs["state"] = "running"
+        f.attrs["message"] = ""
+        for key in ("frf", "result"):
+            if key in f:
+                del f[key]
+        f.flush()
+        return cls(p, f)
+
+    # -- appending ------------------------------------------------------------------------------
+    @property
+    def n_records(self) -> int:
+        return int(self._f["records/point"].shape[0])
+
+    def add_record(self, point: int, data: NDArray[np.float64], *, time: float,
+                   peak_force: float, auto_accepted: bool, reason: str, bad_frames: int = 0,
+                   missing: int = 0, force_raw: NDArray[np.float64] | None = None) -> int:
+        """Append one record with its verdict and flush; returns its index."""
+        rec = self._f["records"]
+        i = self.n_records
+        values = {"point": point, "time": time, "peak_force": peak_force,
+                  "auto_accepted": bool(auto_accepted),
+                  "reason": reason.encode("utf-8")[:TEXT], "override": 0,
+                  "bad_frames": bad_frames, "missing": missing}
+        rec["data"].resize(i + 1, axis=0)
+        rec["data"][i] = data
+        if "force_raw" in rec:
+            raw = np.full(rec["force_raw"].shape[1], np.nan)
+            if force_raw is not None:
+                k = min(raw.size, force_raw.size)
+                raw[:k] = force_raw[:k]
+            rec["force_raw"].resize(i + 1, axis=0)
+            rec["force_raw"][i] = raw
+        for name, v in values.items():  # columns last: a record counts once its point is in
+            ds = rec[name]
+            ds.resize(i + 1, axis=0)
+            ds[i] = v
+        self._f.flush()
+        return i
+
+    def set_override(self, index: int, override: str) -> None:
+        """Set (``"accept"``, ``"reject"``) or clear (``""``) the operator's override."""
+        if override not in OVERRIDES:
+            raise ValueError(f"override must be one of accept, reject or '', got {override!r}")
+        if not 0 <= index < self.n_records:
+            raise ValueError(f"no record {index}: the run has {self.n_records}")
+        self._f["records/override"][index] = OVERRIDES[override]
+        self._f.flush()
+
+    def add_note(self, text: str, time: float) -> None:
+        """Append an operator note (``time`` s since the run started)."""
+        notes = self._f["notes"]
+        i = notes["time"].shape[0]
+        for name, v in (("time", time), ("text", text.encode("utf-8")[: 2 * TEXT])):
+            notes[name].resize(i + 1, axis=0)
+            notes[name][i] = v
+        self._f.flush()
+
+    # -- ending ---------------------------------------------------------------------------------
+    def finish(self, state: str, message: str = "", frf: FRFSet | None = None,
+               result: Mapping[str, Any] | None = None) -> None:
+        """End the SWMR session and record the final state, FRFs and result."""
+        self.close()
+        with h5py.File(self.path, "a", libver="latest") as f:
+            f.attrs["state"] = state
+            f.attrs["message"] = message
+            for key in ("frf", "result"):
+                if key in f:
+                    del f[key]
+            if frf is not None:
+                g = f.create_group("frf")
+                g.attrs["estimator"] = str(frf.meta.get("estimator", "H1"))
+                _array(g, "freq", frf.freq, "Hz")
+                _array(g, "H", frf.H, "m/s^2/N")
+                if frf.coherence is not None:
+                    _array(g, "coherence", frf.coherence, "1")
+                _array(g, "resp_nodes", frf.resp_nodes, "1")
+                _array(g, "resp_dirs", frf.resp_dirs, "1")
+                _array(g, "exc_nodes", frf.exc_nodes, "1")
+                _array(g, "exc_dirs", frf.exc_dirs, "1")
+                _array(g, "n_averages", np.asarray(frf.meta.get("n_averages", []), int), "1")
+            if result is not None:
+                _text(f, "result", dict(result), "SI, see METHOD.md")
+
+    def close(self) -> None:
+        """Close the file (idempotent); records already added stay."""
+        if self._f.id.valid:
+            self._f.flush()
+            self._f.close()
+
+
+# -- reading ------------------------------------------------------------------------------------
+def _open(p: Path) -> h5py.File:
+    if not p.is_file():
+        raise RunFileError(f"{p}: no such run file")
+    try:
+        return h5py.File(p, "r")
+    except OSError as err:
+        first = err
+    if "already open for write" in str(first):
+        # a writer is active or was killed mid-run: the SWMR reader sees every flushed record
+        try:
+            return h5py.File(p, "r", swmr=True)
+        except OSError as err:
+            first = err
+    raise RunFileError(f"{p}: not a readable HDF5 run file (truncated or damaged?): "
+                       f"{str(first).splitlines()[0]}") from first
+
+
+def _str(v: Any) -> str:
+    return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+
+
+def read_run(path: str | Path, with_data: bool = True) -> RunData:
+    """Read a run file written by :class:`RunWriter`; raises :class:`RunFileError` (one line).
+
+    ``with_data=False`` skips the record samples (``records.data`` is then empty).
+    """
+    p = Path(path)
+    f = _open(p)
+    try:
+        if _str(f.attrs.get("format", "")) != FORMAT:
+            raise RunFileError(f"{p}: not an insitu run file (no format={FORMAT!r} attribute)")
+        version = int(f.attrs.get("schema_version", -1))
+        if version != SCHEMA_VERSION:
+            raise RunFileError(f"{p}: run-file schema version {version}; this insitu reads "
+                               f"version {SCHEMA_VERSION}")
+        return _read(p, f, version, with_data)
+    except (KeyError, OSError, ValueError, TypeError) as err:
+        if isinstance(err, RunFileError):
+            raise
+        raise RunFileError(f"{p}: damaged run file: {str(err).splitlines()[0]}") from err
+    finally:
+        f.close()
+
+
+def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
+    ch = f["channels"]
+    names = [_str(x) for x in ch["name"][()]]
+    channels = tuple(
+        ChannelInfo(n, _str(d), _str(q), _str(u), float(s), float(r), bool(i), int(nd),
+                    (float(v[0]), float(v[1]), float(v[2])))
+        for n, d, q, u, s, r, i, nd, v in zip(
+            names, ch["device"][()], ch["quantity"][()], ch["unit"][()], ch["sensitivity"][()],
+            ch["range"][()], ch["iepe"][()], ch["node"][()], ch["direction"][()], strict=True))
+    rec = f["records"]
+    n = min(rec[c].shape[0] for c in _COLUMNS)  # rows complete in every column
+    n = min(n, rec["data"].shape[0])
+    data = rec["data"][:n] if with_data else np.zeros((0, *rec["data"].shape[1:]))
+    raw = None
+    if "force_raw" in rec and with_data:
+        raw = rec["force_raw"][:n]
+    records = RecordTable(
+        data=np.asarray(data, dtype=float), fs=float(rec.attrs["fs"]),
+        point=rec["point"][:n], time=rec["time"][:n], peak_force=rec["peak_force"][:n],
+        auto_accepted=rec["auto_accepted"][:n].astype(bool),
+        reason=tuple(_str(x) for x in rec["reason"][:n]),
+        override=tuple(_OVERRIDE_NAMES.get(int(x), "") for x in rec["override"][:n]),
+        bad_frames=rec["bad_frames"][:n], missing=rec["missing"][:n],
+        force_raw=raw, fs_raw=float(rec.attrs.get("fs_raw", 0.0)))
+    nt = f["notes"]
+    k = min(nt["time"].shape[0], nt["text"].shape[0])
+    notes = tuple((float(t), _str(x)) for t, x in zip(nt["time"][:k], nt["text"][:k],
+                                                     strict=True))
+    geometry = Geometry(f["geometry/node_ids"][()], f["geometry/xyz"][()])
+    frf = None
+    if "frf" in f:
+        g = f["frf"]
+        frf = FRFSet(g["freq"][()], g["H"][()], g["resp_nodes"][()], g["resp_dirs"][()],
+                     g["exc_nodes"][()], g["exc_dirs"][()], geometry,
+                     g["coherence"][()] if "coherence" in g else None,
+                     {"estimator": _str(g.attrs.get("estimator", "H1")),
+                      "n_averages": g["n_averages"][()].tolist()})
+    result = json.loads(_str(f["result"][()])) if "result" in f else None
+    state = _str(f.attrs.get("state", ""))
+    return RunData(
+        path=str(p), schema_version=version,
+        state="interrupted" if state == "running" else state,
+        message=_str(f.attrs.get("message", "")), created=_str(f.attrs.get("created", "")),
+        method=_str(f.attrs.get("method", "")),
+        plan_data=json.loads(_str(f["plan"][()])),
+        station_data=json.loads(_str(f["station"][()])),
+        channels=channels, geometry=geometry, records=records, notes=notes, frf=frf,
+        result=result)
