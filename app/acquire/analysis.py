@@ -73,13 +73,14 @@ def frfset(plan: TestPlan, points: Sequence[ImpactResult], geometry: Geometry,
     return impact_frfset(points, geometry, resp_nodes, resp_dirs, plan.exc_nodes, plan.exc_dirs)
 
 
-def identify_frfs(frf: FRFSet) -> IdentificationResult:
-    """The identification of a run's FRFs (0 Hz line dropped), default options."""
-    keep = frf.freq > 0
+def identify_frfs(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
+    """The identification of a run's FRFs, on the lines above 0 Hz and up to fs / 2.56
+    (above it the front ends' anti-alias filters shape the data)."""
+    keep = (frf.freq > 0) & (frf.freq <= frf.freq[-1] / 1.28)
     coh = None if frf.coherence is None else np.nan_to_num(frf.coherence[..., keep])
     cut = FRFSet(frf.freq[keep], frf.H[..., keep], frf.resp_nodes, frf.resp_dirs,
                  frf.exc_nodes, frf.exc_dirs, frf.geometry, coh, dict(frf.meta))
-    return identify(cut, IdentifyOptions())
+    return identify(cut, options or IdentifyOptions())
 
 
 class RunAnalysis:
@@ -125,7 +126,9 @@ class RunAnalysis:
         return sum(1 for h, p in self._point_of.items() if p == point and self._accepted.get(h))
 
 
-def analyse_run(run: RunData) -> tuple[FRFSet, IdentificationResult, RunAnalysis]:
+def analyse_run(run: RunData, options: IdentifyOptions | None = None) -> (
+    tuple[FRFSet, IdentificationResult, RunAnalysis]
+):
     """Recompute every verdict, the FRFs and the identification from a run file's raw records."""
     from app.acquire.plan import parse_plan
 
@@ -147,4 +150,4 @@ def analyse_run(run: RunData) -> tuple[FRFSet, IdentificationResult, RunAnalysis
     resp = rows[1:]
     frf = frfset(plan, points, run.geometry, np.array([c.node for c in resp]),
                  np.array([c.direction for c in resp]))
-    return frf, identify_frfs(frf), ana
+    return frf, identify_frfs(frf, options), ana

@@ -1,6 +1,8 @@
 """``insitu identify FILE.uff``: inertia parameters and mount-system stiffness from FRFs.
 
-The file holds FRFs (dataset 58, function type 4) with geometry, or time records
+The file is a run file (``.h5``, written by ``insitu acquire``: its raw hits are
+processed as ``insitu replay`` does), or a UFF file holding FRFs (dataset 58,
+function type 4) with geometry, or time records
 (function type 1, one run per excitation, see ``insitu frf``): then the FRFs and
 their coherence are computed first with the time-data options below, the coherence
 gate keeps low-coherence lines out of the fit, and an exponential window's damping
@@ -16,18 +18,23 @@ from typing import Any
 
 from rich.console import Console
 
+from app.acquire.analysis import analyse_run
 from app.cli.common import UserError
 from app.cli.frf import add_processing_arguments, frfset_from_time_uff
 from app.cli.summary import print_result
+from app.io.runfile import read_run
 from app.io.uff import read_frf_uff
 from app.io.uff_time import uff_holds_time_data
-from processing.identify import IdentifyOptions, identify
+from processing.data import FRFSet
+from processing.identify import IdentificationResult, IdentifyOptions, identify
 
 
 def add_parser(sub: Any) -> None:
     p = sub.add_parser("identify", help="identify inertia parameters and K, C from a UFF file",
                        description=__doc__)
-    p.add_argument("file", type=Path, help="UFF file with geometry (15/2411) and FRFs (58)")
+    p.add_argument("file", type=Path,
+                   help="UFF file with geometry (15/2411) and FRFs or time records (58), "
+                        "or a run file (.h5) written by insitu acquire")
     p.add_argument("--out", type=Path, help="write the result JSON here")
     p.add_argument("--mass-band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="mass-line band in Hz (default: chosen from the data)")
@@ -58,12 +65,21 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
 def run(args: argparse.Namespace) -> int:
     if args.refine_points < 0:
         raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
+    if args.file.suffix.lower() in (".h5", ".hdf5"):  # a run file: raw hits -> FRFs -> result
+        data = read_run(args.file)
+        if len(data.records) == 0:
+            raise UserError(f"{args.file}: the run holds no hit yet")
+        frf, result, _ = analyse_run(data, options_from(args))
+        return _report(args, frf, result)
     if uff_holds_time_data(args.file):
         print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")
         frf = frfset_from_time_uff(args.file, args)
     else:
         frf = read_frf_uff(args.file)
-    result = identify(frf, options_from(args))
+    return _report(args, frf, identify(frf, options_from(args)))
+
+
+def _report(args: argparse.Namespace, frf: FRFSet, result: IdentificationResult) -> int:
     console = Console()
     console.print(f"[bold]{args.file}[/bold]: {frf.H.shape[0]} response DOFs x "
                   f"{frf.H.shape[1]} excitations, {frf.freq.size} lines "
