@@ -313,42 +313,9 @@ def identify_arrays(
     (s) is the time constant of an exponential window applied to the records.
     """
     opt = options or IdentifyOptions()
-    extra = {"rigid_band_top": rigid_band_top, "exponential_tau": exponential_tau}
-    result = _identify_once(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs,
-                            coherence=coherence, options=opt, **extra)
-    if opt.refine_points <= 0:
-        return result
-    # alternate identification and response-point refinement on the mass-line lines
-    xyz = np.array(resp_xyz, dtype=float)
-    T = excitation_matrix(exc_xyz, exc_dirs)
-    freq = np.asarray(freq, dtype=float)
-    for _ in range(opt.refine_points):
-        lines = np.isin(freq, result.mass_lines)
-        w = 2 * np.pi * freq[lines]
-        shapes = [mode_shape_basis(w, p) for p in result.elastic_modes]
-        shapes.append(np.asarray(w**2, dtype=np.complex128))  # quasi-static, modes above
-        xyz = xyz - point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
-                                  result.M, result.K, result.C, shapes=np.array(shapes))
-        result = _identify_once(freq, H, xyz, resp_dirs, exc_xyz, exc_dirs,
-                                coherence=coherence, options=opt, **extra)
-    return dataclasses.replace(result, point_corrections=np.asarray(resp_xyz, float) - xyz)
-
-
-def _identify_once(
-    freq: NDArray[np.float64],
-    H: NDArray[np.complex128],
-    resp_xyz: NDArray[np.float64],
-    resp_dirs: NDArray[np.float64],
-    exc_xyz: NDArray[np.float64],
-    exc_dirs: NDArray[np.float64],
-    *,
-    coherence: NDArray[np.float64] | None = None,
-    options: IdentifyOptions | None = None,
-    rigid_band_top: float | None = None,
-    exponential_tau: float | None = None,
-) -> IdentificationResult:
-    """One identification with the given geometry."""
-    opt = options or IdentifyOptions()
+    if opt.refine_points > 0:
+        return _refined(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs, coherence, opt,
+                        rigid_band_top, exponential_tau)
     freq = np.asarray(freq, dtype=float)
     H = np.asarray(H)
     if H.ndim != 3 or H.shape[-1] != freq.size:
@@ -566,3 +533,34 @@ def _identify_once(
         warnings=tuple(warnings),
         stiffness_per_line=Ks_line,
     )
+
+
+def _refined(
+    freq: NDArray[np.float64], H: NDArray[np.complex128], resp_xyz: NDArray[np.float64],
+    resp_dirs: NDArray[np.float64], exc_xyz: NDArray[np.float64], exc_dirs: NDArray[np.float64],
+    coherence: NDArray[np.float64] | None, opt: IdentifyOptions,
+    rigid_band_top: float | None, exponential_tau: float | None,
+) -> IdentificationResult:
+    """Identification alternated ``opt.refine_points`` times with response-point refinement
+    on the mass-line lines (:mod:`processing.refine`)."""
+    once = dataclasses.replace(opt, refine_points=0)
+
+    def identify_at(xyz: NDArray[np.float64]) -> IdentificationResult:
+        return identify_arrays(freq, H, xyz, resp_dirs, exc_xyz, exc_dirs, coherence=coherence,
+                               options=once, rigid_band_top=rigid_band_top,
+                               exponential_tau=exponential_tau)
+
+    result = identify_at(np.asarray(resp_xyz, dtype=float))
+    xyz = np.array(resp_xyz, dtype=float)
+    T = excitation_matrix(exc_xyz, exc_dirs)
+    freq = np.asarray(freq, dtype=float)
+    for _ in range(opt.refine_points):
+        lines = np.isin(freq, result.mass_lines)
+        w = 2 * np.pi * freq[lines]
+        shapes = [mode_shape_basis(w, p) for p in result.elastic_modes]
+        shapes.append(np.asarray(w**2, dtype=np.complex128))  # quasi-static, modes above
+        xyz = xyz - point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
+                                  result.M, result.K, result.C, shapes=np.array(shapes))
+        result = identify_at(xyz)
+    return dataclasses.replace(result, point_corrections=np.asarray(resp_xyz, float) - xyz)
+
