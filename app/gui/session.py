@@ -1,0 +1,103 @@
+"""The state every view shares: the FRF set being analysed, its analysis and the options.
+
+:class:`Session` is the one place that starts background work on the data: loading a file
+and (re-)identifying. Views call its methods and redraw on its signals; none of them runs
+numerics on the GUI thread.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from PySide6 import QtCore
+
+from app.gui.worker import TaskRunner
+from app.report.analysis import Analysis, analyse
+from app.report.sources import load_frfs
+from processing.data import FRFSet
+from processing.identify import IdentifyOptions
+
+__all__ = ["Session"]
+
+
+class Session(QtCore.QObject):
+    """Shared data of the window.
+
+    Signals
+    -------
+    data_changed(FRFSet)
+        New FRFs (a file opened, or an acquisition finished); an analysis follows.
+    analysis_changed(Analysis)
+        A newer analysis of the current data is ready.
+    message(str, str)
+        (level, text) for the window's message bar; level is "info", "warning" or "error".
+    """
+
+    data_changed = QtCore.Signal(object)
+    analysis_changed = QtCore.Signal(object)
+    message = QtCore.Signal(str, str)
+
+    def __init__(self, runner: TaskRunner, parent: QtCore.QObject | None = None) -> None:
+        super().__init__(parent)
+        self.runner = runner
+        self.frf: FRFSet | None = None
+        self.source = ""
+        self.path: Path | None = None
+        self.analysis: Analysis | None = None
+        self.options = IdentifyOptions()
+        self._generation = 0  # bumped with each new data set: older analyses are dropped
+        runner.done.connect(self._on_done)
+        runner.failed.connect(self._on_failed)
+
+    def open_file(self, path: str | Path) -> None:
+        """Load a UFF FRF file or a run file in the background; data_changed follows."""
+        p = Path(path)
+        self.message.emit("info", f"opening {p.name} …")
+        self.runner.submit("session.load", lambda: (p, load_frfs(p)))
+
+    def set_frf(self, frf: FRFSet, source: str, path: Path | None = None) -> None:
+        """Make ``frf`` the current data and analyse it with automatic bands."""
+        self.frf, self.source, self.path = frf, source, path
+        self._generation += 1
+        self.analysis = None
+        self.options = replace(self.options, mass_band=None, stiffness_band=None)
+        self.data_changed.emit(frf)
+        self.reanalyse()
+
+    def set_options(self, options: IdentifyOptions) -> None:
+        """New identification options; re-identifies the current data in the background."""
+        self.options = options
+        self.reanalyse()
+
+    def reanalyse(self) -> None:
+        """Identify and check the current data again (no-op without data)."""
+        frf, opt, src, gen = self.frf, self.options, self.source, self._generation
+        if frf is None:
+            return
+        self.runner.submit("session.analysis", lambda: (gen, analyse(frf, opt, src)))
+
+    @QtCore.Slot(str, object)
+    def _on_done(self, key: str, result: object) -> None:
+        if key == "session.load":
+            assert isinstance(result, tuple)
+            path, frf = result
+            self.message.emit("info", f"opened {path.name}")
+            self.set_frf(frf, path.name, path)
+        elif key == "session.analysis":
+            assert isinstance(result, tuple)
+            gen, result = result
+            assert isinstance(result, Analysis)
+            if gen != self._generation:
+                return  # analysis of data replaced meanwhile
+            self.analysis = result
+            self.analysis_changed.emit(result)
+            if result.result is None:
+                self.message.emit("error", f"identification failed: {result.error}")
+
+    @QtCore.Slot(str, str)
+    def _on_failed(self, key: str, message: str) -> None:
+        if key == "session.load":
+            self.message.emit("error", f"cannot open the file: {message}")
+        elif key == "session.analysis":
+            self.message.emit("error", f"analysis failed: {message}")

@@ -1,0 +1,104 @@
+"""The plan's points and directions in three orthographic projections (top, front, side).
+
+pyqtgraph's 3-D view needs PyOpenGL and an OpenGL context, neither available on an
+off-screen or remote test-cell PC; three linked 2-D projections show the same and work
+everywhere.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6 import QtWidgets
+
+from app.gui.plan_rows import PlanRow
+from app.report.figures import COLORS
+
+__all__ = ["ProjectionsWidget"]
+
+_VIEWS = (("top view (X-Y)", 0, 1), ("front view (X-Z)", 0, 2), ("side view (Y-Z)", 1, 2))
+_AXES = "XYZ"
+
+
+class ProjectionsWidget(QtWidgets.QWidget):
+    """Response points (blue circles), excitation points (red triangles), their directions
+    (short lines from each point), node labels, and the next point highlighted (yellow star)."""
+
+    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        lay = QtWidgets.QGridLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        self.plots: list[pg.PlotWidget] = []
+        self._resp: list[pg.ScatterPlotItem] = []
+        self._exc: list[pg.ScatterPlotItem] = []
+        self._arrows: list[pg.PlotDataItem] = []
+        self._next: list[pg.ScatterPlotItem] = []
+        self._labels: list[list[pg.TextItem]] = []
+        for k, (title, i, j) in enumerate(_VIEWS):
+            w = pg.PlotWidget()
+            p = w.getPlotItem()
+            p.setTitle(title, size="9pt")
+            p.setLabel("bottom", _AXES[i], units="m")
+            p.setLabel("left", _AXES[j], units="m")
+            p.showGrid(x=True, y=True, alpha=0.2)
+            p.setAspectLocked(True)
+            arrows = p.plot([], [], pen=pg.mkPen("#555555", width=1.5), connect="pairs")
+            resp = pg.ScatterPlotItem(symbol="o", size=9, brush=COLORS[0], pen=None)
+            exc = pg.ScatterPlotItem(symbol="t", size=10, brush=COLORS[1], pen=None)
+            nxt = pg.ScatterPlotItem(symbol="star", size=22, brush="#F0E442", pen=pg.mkPen("k"))
+            for item in (resp, exc, nxt):
+                p.addItem(item)
+            self.plots.append(w)
+            self._resp.append(resp)
+            self._exc.append(exc)
+            self._arrows.append(arrows)
+            self._next.append(nxt)
+            self._labels.append([])
+            lay.addWidget(w, k // 2, k % 2)
+        self.help = QtWidgets.QLabel(
+            f"<b>Legend</b><br><span style='color:{COLORS[0]}; font-size:14pt'>●</span> "
+            f"response DOF (accelerometer)<br><span style='color:{COLORS[1]}; "
+            "font-size:14pt'>▼</span> excitation DOF (hit or shaker)<br>"
+            "<span style='color:#555555; font-size:14pt'>—</span> measured or excited "
+            "direction, from the point<br><span style='color:#C8B400; font-size:14pt'>★</span>"
+            " next point to excite<br>numbers: node ids. Drag to pan, wheel to zoom.")
+        self.help.setWordWrap(True)
+        lay.addWidget(self.help, 1, 1)
+
+    def set_rows(self, rows: Sequence[PlanRow]) -> None:
+        """Draw the plan's rows."""
+        resp = np.array([r.xyz for r in rows if r.role == "response"]).reshape(-1, 3)
+        exc = np.array([r.xyz for r in rows if r.role == "excitation"]).reshape(-1, 3)
+        pts = np.array([r.xyz for r in rows]).reshape(-1, 3)
+        dirs = np.array([r.direction for r in rows]).reshape(-1, 3)
+        span = float(np.ptp(pts, axis=0).max()) if len(pts) else 1.0
+        tips = pts + 0.08 * max(span, 1e-3) * dirs
+        seg = np.empty((2 * len(pts), 3))
+        seg[0::2], seg[1::2] = pts, tips
+        nodes: dict[int, tuple[float, float, float]] = {}
+        for r in rows:
+            nodes.setdefault(r.node, r.xyz)
+        for k, (_, i, j) in enumerate(_VIEWS):
+            self._resp[k].setData(resp[:, i], resp[:, j])
+            self._exc[k].setData(exc[:, i], exc[:, j])
+            self._arrows[k].setData(seg[:, i], seg[:, j])
+            plot = self.plots[k].getPlotItem()
+            for t in self._labels[k]:
+                plot.removeItem(t)
+            self._labels[k] = []
+            for node, xyz in nodes.items():
+                t = pg.TextItem(str(node), color="#333333", anchor=(0, 1))
+                t.setPos(xyz[i], xyz[j])
+                plot.addItem(t)
+                self._labels[k].append(t)
+            plot.vb.enableAutoRange(x=True, y=True)
+
+    def highlight(self, xyz: Sequence[float] | None) -> None:
+        """Mark the next point to excite (None clears the mark)."""
+        for k, (_, i, j) in enumerate(_VIEWS):
+            if xyz is None:
+                self._next[k].setData([], [])
+            else:
+                self._next[k].setData([xyz[i]], [xyz[j]])

@@ -1,0 +1,222 @@
+"""Results view: the ten inertia parameters (about the CoG and O), principal moments and
+axes, K and C, dynamic stiffness against frequency (article Fig. 12), measured against
+synthesised FRFs (Figs. 9, 13), the physical-consistency verdict, and the bands, adjustable
+with live re-identification in the background."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from PySide6 import QtCore, QtWidgets
+
+from app.gui.session import Session
+from app.gui.widgets import fill_table, make_plot, set_verdict
+from app.report import figures
+from app.report.analysis import Analysis
+from app.report.tables import format_matrix, inertia_rows, principal_rows
+
+__all__ = ["ResultsView"]
+
+
+def _spin(suffix: str = " Hz") -> QtWidgets.QDoubleSpinBox:
+    s = QtWidgets.QDoubleSpinBox()
+    s.setDecimals(2)
+    s.setRange(0.0, 1e6)
+    s.setSingleStep(1.0)
+    s.setSuffix(suffix)
+    s.setKeyboardTracking(False)
+    return s
+
+
+class ResultsView(QtWidgets.QWidget):
+    """Identified parameters and their figures; band and method controls."""
+
+    def __init__(self, session: Session, parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self._filling = False
+        # --- controls
+        self.auto_bands = QtWidgets.QCheckBox("automatic bands")
+        self.auto_bands.setChecked(True)
+        self.mass_lo, self.mass_hi = _spin(), _spin()
+        self.stiff_lo, self.stiff_hi = _spin(), _spin()
+        self.method = QtWidgets.QComboBox()
+        self.method.addItems(["improved", "plain"])
+        self.method.setToolTip("improved (default) or the article's plain method")
+        self.physical = QtWidgets.QCheckBox("enforce physical consistency")
+        self.status = QtWidgets.QLabel("")
+        ctl = QtWidgets.QHBoxLayout()
+        ctl.addWidget(QtWidgets.QLabel("Mass line:"))
+        ctl.addWidget(self.mass_lo)
+        ctl.addWidget(QtWidgets.QLabel("to"))
+        ctl.addWidget(self.mass_hi)
+        ctl.addSpacing(12)
+        ctl.addWidget(QtWidgets.QLabel("Stiffness band:"))
+        ctl.addWidget(self.stiff_lo)
+        ctl.addWidget(QtWidgets.QLabel("to"))
+        ctl.addWidget(self.stiff_hi)
+        ctl.addWidget(self.auto_bands)
+        ctl.addSpacing(12)
+        ctl.addWidget(QtWidgets.QLabel("Method:"))
+        ctl.addWidget(self.method)
+        ctl.addWidget(self.physical)
+        ctl.addStretch(1)
+        ctl.addWidget(self.status)
+        self._debounce = QtCore.QTimer(self)
+        self._debounce.setSingleShot(True)
+        self._debounce.setInterval(250)
+        self._debounce.timeout.connect(self._reidentify)
+        for s in (self.mass_lo, self.mass_hi, self.stiff_lo, self.stiff_hi):
+            s.valueChanged.connect(self._band_edited)
+        self.auto_bands.toggled.connect(self._changed)
+        self.method.currentIndexChanged.connect(self._changed)
+        self.physical.toggled.connect(self._changed)
+        # --- tables
+        self.verdict = QtWidgets.QLabel()
+        self.summary = QtWidgets.QLabel()
+        self.summary.setWordWrap(True)
+        self.inertia = QtWidgets.QTableWidget()
+        self.principal = QtWidgets.QTableWidget()
+        self.K = QtWidgets.QTableWidget()
+        self.C = QtWidgets.QTableWidget()
+        for t in (self.inertia, self.principal, self.K, self.C):
+            t.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        tabs = QtWidgets.QTabWidget()
+        tabs.addTab(self.K, "Stiffness K at O")
+        tabs.addTab(self.C, "Damping C at O")
+        self.table_tabs = tabs
+        left = QtWidgets.QWidget()
+        ll = QtWidgets.QVBoxLayout(left)
+        ll.setContentsMargins(0, 0, 0, 0)
+        ll.addWidget(self.verdict)
+        ll.addWidget(self.summary)
+        ll.addWidget(QtWidgets.QLabel("<b>Ten inertia parameters</b> (products J_xy = ∫xy dm)"))
+        ll.addWidget(self.inertia, 4)
+        ll.addWidget(QtWidgets.QLabel("<b>Principal moments and axes</b> about the CoG"))
+        ll.addWidget(self.principal, 2)
+        ll.addWidget(tabs, 3)
+        units = QtWidgets.QLabel("DOF order x, y, z, rx, ry, rz at the origin O. K: N/m, N/rad, "
+                                 "N m/m, N m/rad; C: N s/m, N s/rad, N m s/m, N m s/rad.")
+        units.setWordWrap(True)
+        ll.addWidget(units)
+        # --- plots
+        self.stiffness_plot = make_plot()
+        self.stiffness_rot_plot = make_plot()
+        self.synthesis_plot = make_plot()
+        plots = QtWidgets.QWidget()
+        pl = QtWidgets.QVBoxLayout(plots)
+        pl.setContentsMargins(0, 0, 0, 0)
+        pl.addWidget(self.synthesis_plot)
+        pl.addWidget(self.stiffness_plot)
+        pl.addWidget(self.stiffness_rot_plot)
+        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        split.addWidget(left)
+        split.addWidget(plots)
+        split.setSizes([520, 760])
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.addLayout(ctl)
+        lay.addWidget(split, 1)
+        set_verdict(self.verdict, None, "No results yet: open FRFs or run a test")
+        session.runner.busy.connect(self._busy)
+        session.data_changed.connect(self._new_data)
+
+    # --- controls --------------------------------------------------------------------------------
+    @QtCore.Slot(bool)
+    def _busy(self, busy: bool) -> None:
+        self.status.setText("identifying…" if busy else "")
+
+    @QtCore.Slot(object)
+    def _new_data(self, _frf: object) -> None:
+        self._filling = True
+        try:
+            self.auto_bands.setChecked(True)
+        finally:
+            self._filling = False
+
+    def _band_edited(self) -> None:
+        if self._filling:
+            return
+        self._filling = True
+        try:
+            self.auto_bands.setChecked(False)
+        finally:
+            self._filling = False
+        self._debounce.start()
+
+    def _changed(self) -> None:
+        if not self._filling:
+            self._debounce.start()
+
+    def set_bands(self, mass: tuple[float, float], stiffness: tuple[float, float]) -> None:
+        """Set both bands (Hz) as the operator would; re-identifies after a short pause."""
+        self.mass_lo.setValue(mass[0])
+        self.mass_hi.setValue(mass[1])
+        self.stiff_lo.setValue(stiffness[0])
+        self.stiff_hi.setValue(stiffness[1])
+
+    def _reidentify(self) -> None:
+        auto = self.auto_bands.isChecked()
+        opt = replace(
+            self.session.options,
+            method=self.method.currentText(),  # type: ignore[arg-type]
+            physical=self.physical.isChecked(),
+            mass_band=None if auto else (self.mass_lo.value(), self.mass_hi.value()),
+            stiffness_band=None if auto else (self.stiff_lo.value(), self.stiff_hi.value()),
+        )
+        self.session.set_options(opt)
+
+    # --- display ---------------------------------------------------------------------------------
+    @QtCore.Slot(object)
+    def show_analysis(self, a: Analysis) -> None:
+        """Redraw for a new analysis."""
+        r = a.result
+        figures.draw_synthesis(self.synthesis_plot.getPlotItem(), a)
+        figures.draw_dynamic_stiffness(self.stiffness_plot.getPlotItem(), a)
+        figures.draw_dynamic_stiffness(self.stiffness_rot_plot.getPlotItem(), a, rotational=True)
+        if r is None:
+            set_verdict(self.verdict, False, f"Identification failed: {a.error}")
+            self.summary.setText("Adjust the bands or check the data (see Checks).")
+            for t in (self.inertia, self.principal, self.K, self.C):
+                t.clear()
+                t.setRowCount(0)
+            return
+        self._filling = True
+        try:
+            self.mass_lo.setValue(r.mass_band[0])
+            self.mass_hi.setValue(r.mass_band[1])
+            self.stiff_lo.setValue(r.stiffness_band[0])
+            self.stiff_hi.setValue(r.stiffness_band[1])
+        finally:
+            self._filling = False
+        p = r.properties
+        if p.physically_consistent:
+            set_verdict(self.verdict, True,
+                        f"Physically consistent inertia (J1 + J2 ≥ J3, margin "
+                        f"{p.triangle_margin:+.3f})" + (" — enforced" if r.physical_enforced
+                                                         else ""))
+        else:
+            set_verdict(self.verdict, False,
+                        "NOT physically consistent: "
+                        + ("not positive definite; " if not p.positive_definite else "")
+                        + f"triangle margin {p.triangle_margin:+.3f}. Tick 'enforce physical "
+                          "consistency' or check the data")
+        modes = ", ".join(f"{f:.2f}" for f in r.rigid_modes_hz)
+        text = (f"{r.method} method, {r.iterations} iterations"
+                f"{'' if r.converged else ' (NOT converged)'}; mass line "
+                f"{r.mass_band[0]:.2f}-{r.mass_band[1]:.2f} Hz ({len(r.mass_lines)} lines), "
+                f"stiffness {r.stiffness_band[0]:.2f}-{r.stiffness_band[1]:.2f} Hz "
+                f"({len(r.stiffness_lines)} lines). Rigid-body modes: {modes} Hz.")
+        if r.warnings:
+            text += " Warnings: " + "; ".join(r.warnings)
+        self.summary.setText(text)
+        fill_table(self.inertia, ("parameter", "unit", "about CoG", "about origin O"),
+                   inertia_rows(p))
+        fill_table(self.principal, ("", "moment (kg m²)", "axis x", "axis y", "axis z"),
+                   principal_rows(p))
+        dofs = figures.DOF_LABELS
+        fill_table(self.K, ("K at O", *dofs),
+                   [(d, *row) for d, row in zip(dofs, format_matrix(r.K), strict=True)])
+        fill_table(self.C, ("C at O", *dofs),
+                   [(d, *row) for d, row in zip(dofs, format_matrix(r.C), strict=True)])
+        self.K.setToolTip("N/m (translation rows/columns), N/rad, N m/m, N m/rad")
+        self.C.setToolTip("N s/m, N s/rad, N m s/m, N m s/rad")

@@ -1,0 +1,133 @@
+"""Everything the views and the report show about one FRF set, computed in one call.
+
+:func:`analyse` is pure computation (no Qt) so the GUI can run it in a worker thread and
+``insitu report`` without a GUI. Failures of one part (an impossible geometry, a band outside
+the data) are kept as one-line messages, never raised, so the other parts still show.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.coherence import CoherenceGate, coherence_gate
+from processing.data import FRFSet
+from processing.geometry import GeometryReport, check_geometry
+from processing.identify import IdentificationResult, IdentifyOptions, identify
+from processing.rigidity import RigidityCheck, rigidity_check
+
+__all__ = ["Analysis", "analyse", "message_of", "positive_lines"]
+
+
+def message_of(err: BaseException) -> str:
+    """One line for the operator: the exception's message, or its type when it has none."""
+    text = " ".join(str(err).split())
+    return text or type(err).__name__
+
+
+def positive_lines(frf: FRFSet) -> FRFSet:
+    """``frf`` without its 0 Hz (and negative) lines, where accelerance and coherence are
+    undefined; NaN coherence elsewhere counts as 0 (fails the gate)."""
+    keep = frf.freq > 0
+    coh = frf.coherence
+    if np.all(keep) and (coh is None or np.all(np.isfinite(coh))):
+        return frf
+    if coh is not None:
+        coh = np.nan_to_num(coh[..., keep])
+    return FRFSet(frf.freq[keep], frf.H[..., keep], frf.resp_nodes, frf.resp_dirs,
+                  frf.exc_nodes, frf.exc_dirs, frf.geometry, coh, dict(frf.meta))
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """Identification and checks of one FRF set.
+
+    Attributes
+    ----------
+    frf : the measured FRFs (accelerance, (m/s^2)/N)
+    source : where they came from (file name or "acquisition")
+    options : identification options used
+    geometry : rank/condition of E and T, or None when the geometry itself is unusable
+    result : identification result, or None when it failed (``error`` says why)
+    rigidity : rigidity check, or None when it could not run (``rigidity_error`` says why)
+    gate : coherence gate at the options' threshold, or None without coherence
+    """
+
+    frf: FRFSet
+    source: str
+    options: IdentifyOptions
+    geometry: GeometryReport | None
+    result: IdentificationResult | None
+    error: str | None
+    rigidity: RigidityCheck | None
+    rigidity_error: str | None
+    gate: CoherenceGate | None
+
+    @property
+    def positive_freq(self) -> NDArray[np.float64]:
+        """The frequency lines the identification uses (all of ``frf``: f > 0), Hz."""
+        return self.frf.freq
+
+    def stiffness_freq(self) -> NDArray[np.float64]:
+        """Lines of ``result.stiffness_per_line`` (the stiffness band), Hz."""
+        if self.result is None:
+            return np.zeros(0)
+        f = self.positive_freq
+        lo, hi = self.result.stiffness_band
+        return f[(f >= lo) & (f <= hi)]
+
+    def summary(self) -> str:
+        """One line naming the data and the outcome."""
+        n_r, n_e, n_f = self.frf.H.shape
+        head = f"{self.source}: {n_r} response DOFs x {n_e} excitations, {n_f} lines"
+        if self.result is None:
+            return f"{head}; identification failed: {self.error}"
+        return f"{head}; identified mass {self.result.properties.mass:.2f} kg"
+
+
+def analyse(frf: FRFSet, options: IdentifyOptions | None = None, source: str = "") -> Analysis:
+    """Identify and check ``frf``; never raises for bad data (messages instead).
+
+    Parameters
+    ----------
+    frf : FRFSet
+    options : identification options (bands, method, physical constraint)
+    source : label shown in views and reports
+
+    Examples
+    --------
+    >>> from hardware_mocks.benches import get_bench  # doctest: +SKIP
+    >>> analyse(get_bench("engine-rigid").frfset()).result.properties.mass  # doctest: +SKIP
+    110.0...
+    """
+    opt = options or IdentifyOptions()
+    frf = positive_lines(frf)
+    geometry: GeometryReport | None
+    try:
+        geometry = check_geometry(frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
+                                  max_cond_T=opt.max_cond_T)
+    except ValueError as err:
+        geometry = None
+        geo_error: str | None = message_of(err)
+    else:
+        geo_error = None
+    result: IdentificationResult | None = None
+    error: str | None = geo_error
+    if geometry is not None:
+        try:
+            result = identify(frf, opt)
+        except (ValueError, ArithmeticError) as err:  # InputError, GeometryError, LinAlgError
+            error = message_of(err)
+    rigidity: RigidityCheck | None = None
+    rigidity_error: str | None = None
+    try:
+        rigidity = rigidity_check(frf)
+    except (ValueError, IndexError, ArithmeticError) as err:
+        rigidity_error = message_of(err)
+    gate = None
+    if frf.coherence is not None:
+        gate = coherence_gate(frf.coherence, frf.freq, opt.coherence_threshold)
+    return Analysis(frf, source or str(frf.meta.get("file", "FRFs")), opt, geometry, result,
+                    error, rigidity, rigidity_error, gate)

@@ -1,0 +1,224 @@
+"""The whole test on the mock bench through the GUI's own controls: station, plan, start,
+hits with accept/reject overrides, next points, identification, exports, settings; and a
+screenshot of every main view for docs/screenshots."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from PySide6 import QtWidgets
+
+from app.acquire.events import RunState
+from app.acquire.mockbench import plan_for_bench
+from app.cli.main import main
+from app.gui.main_window import MainWindow
+from app.io.runfile import read_run
+from hardware_mocks.benches import get_bench
+
+SCREENSHOTS = Path(__file__).resolve().parents[3] / "docs" / "screenshots"
+#: six excitations at six points that span the six rigid-body DOFs (cond T about 11)
+POINTS = [0, 4, 8, 9, 13, 17]
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(v)
+
+
+def _write_plan(path: Path) -> None:
+    """The bench's plan, reduced to POINTS, as the TOML file an engineer would write."""
+    data = plan_for_bench("engine-rigid", points=POINTS, length=2.0).to_dict()
+    out = []
+    for table in ("plan", "record"):
+        out.append(f"[{table}]")
+        out += [f"{k} = {_toml_value(v)}" for k, v in data[table].items()]
+    for name in ("excitation", "response"):
+        for item in data[name]:
+            out.append(f"[[{name}]]")
+            out += [f"{k} = {_toml_value(v)}" for k, v in item.items()]
+    path.write_text("\n".join(out) + "\n")
+
+
+def _screenshot(window: MainWindow, view: QtWidgets.QWidget, name: str) -> None:
+    window.tabs.setCurrentWidget(view)
+    QtWidgets.QApplication.processEvents()
+    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+    assert window.grab().save(str(SCREENSHOTS / f"{name}.png"))
+
+
+def _text(table: QtWidgets.QTableWidget, row: int, col: int) -> str:
+    item = table.item(row, col)
+    return item.text() if item is not None else ""
+
+
+def _verdict_cells(window: MainWindow, row: int) -> tuple[str, str, str]:
+    t = window.acquisition_view.hits_table
+    return _text(t, row, 4), _text(t, row, 5), _text(t, row, 6)
+
+
+def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWindow],
+                                      choose_file: Callable[..., None],
+                                      tmp_path: Path) -> None:
+    model = get_bench("engine-rigid").model
+    window = make_window()
+    station = window.station_view
+    # Station: the built-in mock bench, its devices answer, live levels move on a hit
+    station.bench_combo.setCurrentText("engine-rigid")
+    station.mock_button.click()
+    assert station.station is not None
+    n_channels = sum(len(d.channels) for d in station.station.devices.values())
+    assert n_channels >= 13 and station.channels.rowCount() == n_channels
+    with qtbot.waitSignal(window.runner.done, timeout=20000):
+        station.check_button.click()
+    qtbot.waitUntil(lambda: _text(station.devices, 0, 4) == "OK", timeout=5000)
+    station.monitor_button.click()
+    assert station.stream is not None
+    qtbot.waitUntil(lambda: station.levels.frames > 3, timeout=10000)
+    station.tap_button.click()
+    force = list(station.stream.source.names).index("F")  # the hammer
+    qtbot.waitUntil(lambda: station.levels.peak_percent()[force] > 1.0, timeout=10000)
+    qtbot.wait(500)  # let the response ring in the traces
+    _screenshot(window, station, "station")
+
+    # Test plan: imported from TOML; the geometry check passes before any hit
+    plan_file = tmp_path / "engine-6.toml"
+    _write_plan(plan_file)
+    choose_file(plan_file)
+    window.plan_view.import_plan_button.click()
+    assert window.plan_view.plan is not None and len(window.plan_view.plan.excitations) == 6
+    assert window.plan_view.geometry_text().startswith("Geometry OK")
+    _screenshot(window, window.plan_view, "plan")
+
+    # Acquisition: the simulated operator double-hits on the second hit
+    assert station.mock is not None
+    station.mock.operator.faults[1] = "double"
+    acq = window.acquisition_view
+    run = tmp_path / "run.h5"
+    acq.run_path.setText(str(run))
+    acq.start_button.click()
+    assert station.stream is None  # live levels released the devices
+    assert not acq.start_button.isEnabled() and acq.stop_button.isEnabled()
+    table = acq.hits_table
+    qtbot.waitUntil(lambda: table.rowCount() >= 3, timeout=30000)
+    assert _verdict_cells(window, 1)[0].startswith("double hit")
+    assert _verdict_cells(window, 2) == ("accepted", "-", "yes")
+    # the operator tries the overrides: keep the double hit and reject the repeat ...
+    table.selectRow(1)
+    acq.accept_button.click()
+    table.selectRow(2)
+    acq.reject_button.click()
+    qtbot.waitUntil(lambda: _verdict_cells(window, 2)[1] == "reject", timeout=10000)
+    assert _verdict_cells(window, 1)[1:] == ("accept", "yes")
+    assert _verdict_cells(window, 2)[2] == "no"
+    # ... then thinks better of it: the double hit is rejected after all (its force window
+    # cuts the rebound, so its FRF is wrong) and the repeat is accepted
+    table.selectRow(1)
+    acq.reject_button.click()
+    table.selectRow(2)
+    acq.accept_button.click()
+    qtbot.waitUntil(lambda: _verdict_cells(window, 2)[1] == "accept", timeout=10000)
+    assert _verdict_cells(window, 1)[1:] == ("reject", "no")
+    assert _verdict_cells(window, 2)[2] == "yes"
+    qtbot.waitUntil(lambda: acq.state is not RunState.RUNNING, timeout=60000)
+    assert acq.state is RunState.FINISHED, (acq.next_label.text(), window.messages.text)
+    qtbot.waitUntil(lambda: window.session.analysis is not None
+                    and window.session.path == run, timeout=30000)
+    assert acq.progress_bar.value() == 6
+    n_hits = table.rowCount()  # 7, or more if the loaded machine made a hit arrive late
+    assert n_hits >= 7
+    assert acq.next_label.text().startswith("Finished")
+    _screenshot(window, acq, "acquisition")
+
+    # the run file holds every hit and the overrides
+    stored = read_run(run, with_data=False)
+    assert stored.state == "finished" and len(stored.records) == n_hits
+    assert stored.records.override[1:3] == ("reject", "accept")
+    assert list(stored.records.accepted[:3]) == [True, False, True]
+    assert int(np.sum(stored.records.accepted)) == 6  # one per point
+
+    # identification against the model's truth
+    r = window.session.analysis.result
+    assert r is not None
+    p = r.properties
+    assert p.mass == pytest.approx(model.mass, rel=0.01)
+    np.testing.assert_allclose(p.cog, model.cog, atol=2e-3)
+    np.testing.assert_allclose(np.diag(r.K), np.diag(model.K), rtol=0.02)
+    assert abs(float(_text(window.results_view.inertia, 0, 2)) - model.mass) < 1.1
+    _screenshot(window, window.checks_view, "checks")
+    _screenshot(window, window.results_view, "results")
+
+    # exports: the run file, the result JSON, the report
+    export = window.export_view
+    assert export.run_button.isEnabled()
+    for button, name in ((export.run_button, "copy.h5"), (export.json_button, "r.json"),
+                         (export.html_button, "r.html")):
+        choose_file(tmp_path / name, save=True)
+        button.click()
+    assert read_run(tmp_path / "copy.h5", with_data=False).state == "finished"
+    assert json.loads((tmp_path / "r.json").read_text())["mass"] == pytest.approx(p.mass)
+    assert "data:image/png;base64," in (tmp_path / "r.html").read_text()
+    _screenshot(window, export, "export")
+
+    # settings: the next session comes back with this station, plan and tab
+    window.tabs.setCurrentWidget(window.results_view)
+    window.close()
+    again = make_window()
+    assert again.station_view.mock is not None
+    assert again.station_view.bench_combo.currentText() == "engine-rigid"
+    assert again.plan_view.plan_path == plan_file
+    assert again.plan_view.plan is not None and len(again.plan_view.plan.excitations) == 6
+    assert again.tabs.currentWidget() is again.results_view
+
+    # replay: the recorded run opens through File > Open into the same views
+    choose_file(tmp_path / "copy.h5")
+    with qtbot.waitSignal(again.session.analysis_changed, timeout=30000) as blocker:
+        again.open_action.trigger()
+    replayed = blocker.args[0]
+    assert replayed.result is not None and replayed.frf.H.shape == (12, 6, 800)
+    assert replayed.result.properties.mass == pytest.approx(p.mass, rel=1e-9)
+    assert again.export_view.run_button.isEnabled()
+    assert again.checks_view.overall.text() == "All checks pass"
+
+    # and the same report without a GUI
+    assert main(["report", str(tmp_path / "copy.h5"), "--out", str(tmp_path / "cli.html")]) == 0
+    text = (tmp_path / "cli.html").read_text()
+    assert text.count("data:image/png;base64,") == 6 and f"{p.mass:.3f}" in text
+
+
+def test_pause_resume_stop_keeps_the_hits(qtbot, make_window, tmp_path: Path) -> None:
+    window = make_window()
+    window.station_view.use_mock("engine-rigid")
+    acq = window.acquisition_view
+    acq.run_path.setText(str(tmp_path / "stopped.h5"))
+    acq.start_button.click()
+    qtbot.waitUntil(lambda: acq.hits_table.rowCount() >= 1, timeout=30000)
+    # an override and its undo ("Automatic verdict") while the run goes on
+    acq.hits_table.selectRow(0)
+    acq.reject_button.click()
+    qtbot.waitUntil(lambda: _verdict_cells(window, 0)[1:] == ("reject", "no"), timeout=10000)
+    acq.hits_table.selectRow(0)
+    acq.clear_button.click()
+    qtbot.waitUntil(lambda: _verdict_cells(window, 0)[1:] == ("-", "yes"), timeout=10000)
+    acq.pause_button.click()
+    qtbot.waitUntil(lambda: acq.state is RunState.PAUSED, timeout=20000)
+    assert acq.resume_button.isEnabled() and not acq.pause_button.isEnabled()
+    assert acq.next_label.text().startswith("Paused: paused by the operator")
+    acq.resume_button.click()
+    qtbot.waitUntil(lambda: acq.state is RunState.RUNNING, timeout=20000)
+    with qtbot.waitSignal(acq.bridge.finished, timeout=20000):
+        acq.stop_button.click()
+    assert acq.state is RunState.STOPPED
+    assert window.messages.level == "warning" and "saved in" in window.messages.text
+    stored = read_run(tmp_path / "stopped.h5", with_data=False)
+    assert stored.state == "stopped" and len(stored.records) == acq.hits_table.rowCount()
+    assert acq.start_button.isEnabled() and not acq.stop_button.isEnabled()
