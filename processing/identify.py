@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from processing._kernels import real_times_complex
+from processing.coherence import coherence_gate
 from processing.data import FRFSet, InputError
 from processing.geometry import (
     DEFAULT_MAX_COND_T,
@@ -127,6 +128,10 @@ class IdentificationResult:
     stiffness_per_line: NDArray[np.complex128] | None = field(default=None, repr=False)
     #: estimated response-point location errors (n_resp, 3), m, when refined
     point_corrections: NDArray[np.float64] | None = None
+    #: frequency ranges (f_low, f_high), Hz, of the lines of the mass and stiffness bands
+    #: left out because some FRF's coherence is below ``coherence_threshold``
+    coherence_ranges_hz: tuple[tuple[float, float], ...] = ()
+    coherence_threshold: float = 0.8
 
     def checks(self) -> dict[str, dict[str, Any]]:
         """Named pass/fail checks with their figures (result JSON ``checks``)."""
@@ -143,9 +148,10 @@ class IdentificationResult:
             "coherence": {
                 "pass": (not self.coherence_checked) or self.coherence_dropped == 0,
                 "checked": self.coherence_checked,
-                "threshold": 0.8,
+                "threshold": self.coherence_threshold,
                 "min_in_mass_band": self.coherence_min,
                 "dropped_lines": self.coherence_dropped,
+                "dropped_ranges_hz": [list(r) for r in self.coherence_ranges_hz],
             },
             "rigidity": {
                 "pass": bool(np.max(rel) < 0.1) if rel.size else True,
@@ -400,6 +406,8 @@ def identify_arrays(
         )
     coh_dropped = int(np.count_nonzero(colw[:, in_mass | in_stiff] == 0))
     coh_min = float(np.min(coherence[..., in_mass])) if coherence is not None else 1.0
+    coh_ranges = () if coherence is None else coherence_gate(  # lines outside the bands pass
+        np.where(in_mass | in_stiff, coherence, 1.0), freq, opt.coherence_threshold).ranges
 
     Xm, wm, Wm = X[..., mass_sel], w_all[mass_sel], colw[:, mass_sel]
     Xs, ws, Ws = X[..., stiff_sel], w_all[stiff_sel], colw[:, stiff_sel]
@@ -529,6 +537,8 @@ def identify_arrays(
         coherence_dropped=coh_dropped,
         coherence_checked=coherence is not None,
         coherence_min=coh_min,
+        coherence_ranges_hz=coh_ranges,
+        coherence_threshold=opt.coherence_threshold,
         physical_enforced=physical_enforced,
         warnings=tuple(warnings),
         stiffness_per_line=Ks_line,

@@ -216,6 +216,7 @@ def process_impacts(
     channel_names: Sequence[str] | None = None,
     ranges: ArrayLike | None = None,
     estimator: str = "H1",
+    force_accept: bool = False,
 ) -> ImpactResult:
     """Find, check, window and average the hits of one impact recording.
 
@@ -233,11 +234,31 @@ def process_impacts(
     ranges : (n_ch,) array, optional
         Full-scale input range of each channel, in its unit, for overload detection.
     estimator : {'H1', 'H2', 'Hv'}
+    force_accept : bool
+        Accept every complete hit whatever its checks say (an operator's override).
+        The checks still run: an overridden verdict is accepted and its ``reason``
+        reads ``"accepted by override: <what the checks found>"``. A double hit's
+        force window then spans every impact (up to the last rise above
+        ``double_hit_ratio`` of the peak, plus one pulse width and the taper), so the
+        rebound's force is not cut off while its response is kept. Incomplete
+        records stay rejected.
 
     Returns
     -------
     ImpactResult
         ``H`` and ``coherence`` are None when no hit was accepted; the verdicts say why.
+
+    Examples
+    --------
+    >>> fs, n = 1024.0, 2048
+    >>> t = np.arange(n) / fs
+    >>> f = 100 * np.exp(-(((t - 0.1) / 0.002) ** 2)) + 40 * np.exp(-(((t - 0.115) / 0.002) ** 2))
+    >>> x = np.vstack([f, np.convolve(f, np.exp(-t * 20), "full")[:n] / fs])
+    >>> s = ImpactSettings(20.0, 1024, 32)
+    >>> process_impacts(x, fs, s).verdicts[0].accepted
+    False
+    >>> process_impacts(x, fs, s, force_accept=True).verdicts[0].reason[:20]
+    'accepted by override'
     """
     x = np.asarray(data)
     if x.ndim != 2 or x.shape[0] < 2:
@@ -295,13 +316,17 @@ def process_impacts(
         if double[k]:
             dt = (rerise[k] - first_above[k]) / fs * 1e3
             reasons.append(f"double hit (second impact {dt:.1f} ms after the first)")
-        accepted[k] = not reasons
+        accepted[k] = force_accept or not reasons
+        reason = "; ".join(reasons)
+        if force_accept and reasons:
+            reason = f"accepted by override: {reason}"
         verdicts.append(HitVerdict(i, int(trig), int(start), float(peak_force[k]),
-                                   not reasons, "; ".join(reasons)))
+                                   bool(accepted[k]), reason))
         k += 1
     for v in verdicts:
-        if not v.accepted:
-            log.info("hit %d at sample %d rejected: %s", v.index, v.trigger, v.reason)
+        if v.reason:
+            log.info("hit %d at sample %d %s", v.index, v.trigger,
+                     v.reason if v.accepted else f"rejected: {v.reason}")
 
     freq = np.asarray(np.fft.rfftfreq(L, 1.0 / fs), dtype=np.float64)
     meta: dict[str, object] = {"fs": float(fs), "record_length": L, "pretrigger": pre}
@@ -319,6 +344,11 @@ def process_impacts(
         width = np.maximum(fall[accepted] - first_above[accepted], 1)
         stop = fall[accepted] + width
         taper = width
+        if force_accept:  # an accepted double hit: the window spans the last impact too
+            g_a = g[accepted]
+            above = g_a > settings.double_hit_ratio * g_a.max(axis=-1, keepdims=True)
+            last = L - 1 - np.argmax(above[:, ::-1], axis=-1)
+            stop = np.where(double[accepted], np.maximum(stop, last + 2 * width), stop)
     windows[:, force_channel] *= force_window(L, np.minimum(stop, L), taper)
     sp = record_spectra(rec_a, fs, windows, references=(force_channel,))
     H, coh = frf(sp, estimator)

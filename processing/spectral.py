@@ -59,6 +59,9 @@ _T = TypeVar("_T")
 _Scratch = tuple[
     NDArray[np.floating], NDArray[np.complexfloating] | None, NDArray[np.complexfloating] | None
 ]
+#: output arrays of one group's sums: cross (n_ref, n_ch, n_f) complex128, squares
+#: (n_ch, 2 n_f) in the spectra's real precision, auto-spectra (n_ch, n_f) float64
+_Outputs = tuple[NDArray[np.complex128], NDArray[np.floating], NDArray[np.float64]]
 
 
 class SpectralError(ValueError):
@@ -291,30 +294,43 @@ def _cross_sums(
     refs: tuple[int, ...],
     resps: tuple[int, ...],
     prod: NDArray[np.complexfloating] | None = None,
+    out: _Outputs | None = None,
 ) -> _Sums:
     """Sums over the leading axis of ``conj(F) F``, ``conj(F) X`` and ``|X|^2``.
 
     ``Z`` (n_seg, n_ch, n_f) holds the spectra of all channels of n_seg segments.
     In single precision the cross products are formed in ``prod`` (scratch of shape
-    (n_seg, n_ref, n_ch, n_f), allocated if not given) and summed, einsum being slow
-    there; in double precision einsum does it in one pass over ``Z``.
+    (n_seg, n_ref, n_ch, n_f), allocated if not given) and summed in double precision,
+    einsum being slow there; in double precision einsum does it in one pass over ``Z``.
+    The sums go to ``out`` (see ``_Outputs``; allocated if not given) and the results
+    are views of it: fresh megabyte-sized outputs for every group cost page faults
+    that took as long as the products themselves (measured).
     """
+    n_seg, n_ch, n_f = Z.shape
+    if out is None:
+        out = _outputs(len(refs), n_ch, n_f, Z.real.dtype)
+    cross, auto2, Sxx = out
     Zr = np.conj(Z[:, list(refs)])  # (n_seg, n_ref, n_f), small copy
     if Z.dtype == np.complex64:
-        shape = (Z.shape[0], len(refs), *Z.shape[1:])
+        shape = (n_seg, len(refs), n_ch, n_f)
         if prod is None or prod.shape != shape:
             prod = np.empty(shape, dtype=Z.dtype)
         np.multiply(Zr[:, :, None, :], Z[:, None, :, :], out=prod)
-        cross = np.add.reduce(prod, axis=0).astype(np.complex128)
+        np.add.reduce(prod, axis=0, dtype=np.complex128, out=cross)
     else:
-        cross = np.einsum("saf,sbf->abf", Zr, Z).astype(np.complex128, copy=False)
+        np.einsum("saf,sbf->abf", Zr, Z, out=cross)
     v = np.ascontiguousarray(Z).view(Z.real.dtype)  # interleaved re, im
-    auto2 = np.einsum("sbf,sbf->bf", v, v)
-    Sxx = auto2[:, 0::2].astype(np.float64) + auto2[:, 1::2]
+    np.einsum("sbf,sbf->bf", v, v, out=auto2)
+    np.add(auto2[:, 0::2], auto2[:, 1::2], out=Sxx, dtype=np.float64)
     r0 = resps[0] if resps else 0
     if resps == tuple(range(r0, r0 + len(resps))):  # the usual layout: a view, no copy
         return cross[:, list(refs)], cross[:, r0 : r0 + len(resps)], Sxx[r0 : r0 + len(resps)]
     return cross[:, list(refs)], cross[:, list(resps)], Sxx[list(resps)]
+
+
+def _outputs(n_ref: int, n_ch: int, n_f: int, real: np.dtype[np.floating]) -> _Outputs:
+    return (np.empty((n_ref, n_ch, n_f), np.complex128), np.empty((n_ch, 2 * n_f), real),
+            np.empty((n_ch, n_f), np.float64))
 
 
 def _shifted(fn: Callable[[int, int], _T], first: int, i: int, worker: int) -> _T:
@@ -391,9 +407,11 @@ class SpectralAccumulator:
 
     Memory: the unconsumed tail (less than ``(workers + 1) * group * step + nperseg``
     samples per channel), a copy of at most that much joined to the next block, the
-    accumulators (``n_ref * n_ch * (n_f + 1)`` complex values) and, per worker, two
-    arrays of ``group * n_ch * nperseg`` values. Measured with 25 channels, nperseg
-    8192, 1 s blocks at 51.2 kHz, two workers: under 80 MB (``benchmarks/frf.py``).
+    accumulators (``n_ref * n_ch * (n_f + 1)`` complex values), per worker two arrays
+    of ``group * n_ch * nperseg`` values, and ``2 * workers`` sets of one group's sums
+    (``(n_ref + 2) * n_ch * n_f`` complex values each) reused from group to group.
+    Measured with 25 channels, nperseg 8192, 1 s blocks at 51.2 kHz, two workers:
+    under 100 MB (``benchmarks/frf.py``).
 
     Examples
     --------
@@ -471,6 +489,7 @@ class SpectralAccumulator:
         self._n_seg = 0
         self._n_samples = 0
         self._scratch: list[_Scratch] = []
+        self._outs: list[_Outputs] = []
 
     @property
     def n_averages(self) -> int:
@@ -497,15 +516,25 @@ class SpectralAccumulator:
         self._win = self.window.astype(self._dtype)
         self._tail = np.empty((self._n_ch, 0), dtype=self._dtype)
 
-    def _group_sums(self, seg: NDArray[np.floating], worker: int | None = None) -> _Sums:
+    def _group_sums(self, seg: NDArray[np.floating], worker: int | None = None,
+                    slot: int | None = None) -> _Sums:
         """Sums of one group: ``seg`` (n_ch, n_seg, nperseg) strided view of the samples.
 
-        A full group reuses the scratch arrays of ``worker``: allocating them anew for
-        every group costs page faults that serialise the threads.
+        A full group reuses the scratch arrays of ``worker`` and writes its sums to the
+        output arrays of ``slot`` (its place in the groups awaiting commit; the result is
+        a view of them): allocating them anew for every group costs page faults that
+        serialise the threads.
         """
         n_seg = seg.shape[1]
+        sums_out = None
         if worker is not None and n_seg == self.group:
             buf, spec, prod = self._workspace(worker)
+            if slot is not None:
+                assert self._dtype is not None
+                while len(self._outs) <= slot:
+                    self._outs.append(_outputs(len(self._refs), self._n_ch, self.freq.size,
+                                               self._dtype))
+                sums_out = self._outs[slot]
         else:
             buf, spec, prod = np.empty((n_seg, self._n_ch, self.nperseg), self._dtype), None, None
         np.multiply(seg.transpose(1, 0, 2), self._win, out=buf)
@@ -520,7 +549,7 @@ class SpectralAccumulator:
         if self.detrend == "constant":
             mean = seg.mean(axis=-1).T  # (n_seg, n_ch), in the samples' precision like scipy
             Z[..., self._dc_bins] -= (mean[..., None] * self._dc_values).astype(Z.dtype)
-        return _cross_sums(Z, self._refs, self._resps, prod)
+        return _cross_sums(Z, self._refs, self._resps, prod, sums_out)
 
     def _workspace(self, worker: int) -> _Scratch:
         while len(self._scratch) <= worker:
@@ -575,6 +604,8 @@ class SpectralAccumulator:
             need = (n_head - 1) * hop + span - n_tail
             head = np.concatenate([tail[:, off:], arr[:, :need]], axis=-1)
 
+        chunk = 2 * self.workers  # groups whose sums wait for their turn to be committed
+
         def job(g: int, worker: int) -> _Sums:
             if g < n_inside:
                 seg = self._segments(tail, g * hop, self.group)
@@ -582,9 +613,8 @@ class SpectralAccumulator:
                 seg = self._segments(head, g * hop - off, self.group)
             else:
                 seg = self._segments(arr, g * hop - n_tail, self.group)
-            return self._group_sums(seg, worker)
+            return self._group_sums(seg, worker, g % chunk)  # a slot per group of a chunk
 
-        chunk = 2 * self.workers  # groups whose sums wait for their turn to be committed
         for first in range(0, n_groups, chunk):
             n_run = min(chunk, n_groups - first)
             self._commit(_map_ordered(functools.partial(_shifted, job, first), n_run,

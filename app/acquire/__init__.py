@@ -5,19 +5,22 @@ Public API (stable; the GUI builds on it):
 - plans: :class:`TestPlan`, :class:`ExcitationPoint`, :class:`ResponsePoint`,
   :class:`RecordSettings`, :class:`ShakerSettings`, :func:`load_plan`, :func:`parse_plan`,
   :class:`PlanError`, :func:`plan_for_bench`;
-- procedures: :class:`HammerProcedure` (``start``, ``pause``, ``resume``, ``stop``,
-  ``accept_hit``, ``reject_hit``, ``clear_override``, ``add_note``, ``wait``);
+- procedures: :class:`HammerProcedure` and :class:`ShakerProcedure` (``start``, ``pause``,
+  ``resume``, ``stop``, ``accept_hit``, ``reject_hit``, ``clear_override``, ``add_note``,
+  ``wait``; both report through the same events and write the same run file; a shaker
+  run's "hits" are its blocks);
 - events: :class:`Listener` (``on_next_point``, ``on_hit``, ``on_frf``, ``on_progress``,
   ``on_paused``, ``on_resumed``, ``on_error``, ``on_finished``), :class:`HitRecord`,
   :class:`PointFRF`, :class:`Progress`, :class:`RunState`;
-- the in-process mock bench :class:`InProcessBench` (front end, hammer, operator arm);
-- replay: :func:`analyse_run`.
+- the in-process mock bench :class:`InProcessBench` (front end, hammer, shaker, operators);
+- replay: :func:`analyse_run`; overrides of a stored run: :func:`override_run`.
 """
 
 from app.acquire.analysis import analyse_run
 from app.acquire.events import HitRecord, Listener, PointFRF, Progress, RunState
 from app.acquire.hammer import HammerProcedure
 from app.acquire.mockbench import InProcessBench, plan_for_bench
+from app.acquire.overrides import OverrideOutcome, override_run
 from app.acquire.plan import (
     ExcitationPoint,
     PlanError,
@@ -29,6 +32,7 @@ from app.acquire.plan import (
     parse_plan,
 )
 from app.acquire.procedure import Procedure
+from app.acquire.shaker import ShakerProcedure
 
 __all__ = [
     "ExcitationPoint",
@@ -36,6 +40,7 @@ __all__ = [
     "HitRecord",
     "InProcessBench",
     "Listener",
+    "OverrideOutcome",
     "PlanError",
     "PointFRF",
     "Procedure",
@@ -43,10 +48,12 @@ __all__ = [
     "RecordSettings",
     "ResponsePoint",
     "RunState",
+    "ShakerProcedure",
     "ShakerSettings",
     "TestPlan",
     "analyse_run",
     "load_plan",
+    "override_run",
     "parse_plan",
     "plan_for_bench",
 ]

@@ -9,12 +9,12 @@ same FRFs and the same identification, bit for bit.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from app.acquire.blocks import BlockAnalysis, shaker_frfset
 from app.acquire.plan import RecordSettings, TestPlan
 from app.io.runfile import RunData
 from processing.data import FRFSet, Geometry, InputError
@@ -27,8 +27,9 @@ from processing.impact import (
     process_impacts,
 )
 
-__all__ = ["RunAnalysis", "analyse_run", "frfset", "hit_result", "impact_settings",
-           "margin_samples", "point_result"]
+__all__ = ["RunAnalysis", "analyse_blocks", "analyse_records", "analyse_run",
+           "check_identifiable", "frfset", "hit_result", "host_timed", "impact_settings",
+           "margin_samples", "point_result", "run_frfs"]
 
 
 def margin_samples(fs: float) -> int:
@@ -46,19 +47,16 @@ def hit_result(data: NDArray[np.float64], record: RecordSettings, names: Sequenc
                ranges: NDArray[np.float64] | None, override: str = "") -> ImpactResult:
     """Verdict, windows and spectra of one stored hit record (force row 0, N; responses m/s^2).
 
-    ``override="accept"`` processes a hit the automatic checks rejected as if it had
-    passed them (double-hit and overload checks relaxed; same trigger and record).
+    ``override="accept"`` uses a hit the automatic checks rejected (the checks still
+    run and their finding stays in the verdict's reason; a double hit's force window
+    spans the rebound: :func:`processing.impact.process_impacts` ``force_accept``).
     Records with lost samples cannot be accepted, whatever the override.
     """
     if not np.all(np.isfinite(data)):
         raise InputError("the record has lost samples (corrupted or dropped frames)")
-    settings = impact_settings(record)
-    if override == "accept":
-        settings = replace(settings, double_hit_ratio=0.999999,
-                           clip_samples=settings.record_length)
-        ranges = None
-    return process_impacts(data, record.fs, settings, channel_names=list(names),
-                           ranges=ranges, estimator=record.estimator)
+    return process_impacts(data, record.fs, impact_settings(record), channel_names=list(names),
+                           ranges=ranges, estimator=record.estimator,
+                           force_accept=override == "accept")
 
 
 def point_result(results: Sequence[ImpactResult]) -> ImpactResult | None:
@@ -126,10 +124,9 @@ class RunAnalysis:
         return sum(1 for h, p in self._point_of.items() if p == point and self._accepted.get(h))
 
 
-def analyse_run(run: RunData, options: IdentifyOptions | None = None) -> (
-    tuple[FRFSet, IdentificationResult, RunAnalysis]
-):
-    """Recompute every verdict, the FRFs and the identification from a run file's raw records."""
+def analyse_records(run: RunData) -> tuple[TestPlan, RunAnalysis]:
+    """Recompute every stored record's verdict and spectra (no FRF set, no identification);
+    ``RunAnalysis.point(j)`` is then point ``j``'s FRF column or None."""
     from app.acquire.plan import parse_plan
 
     plan = parse_plan(run.plan_data, f"{run.path}:/plan")
@@ -142,12 +139,73 @@ def analyse_run(run: RunData, options: IdentifyOptions | None = None) -> (
         auto = res is not None and bool(res.verdicts) and res.verdicts[0].accepted
         used = auto if not rec.override[i] else rec.override[i] == "accept" and res is not None
         ana.set_used(i, bool(used))
+    return plan, ana
+
+
+def analyse_blocks(run: RunData) -> tuple[TestPlan, BlockAnalysis]:
+    """A shaker run's :func:`analyse_records`: every stored block judged again and averaged.
+
+    A block rejected live for what its samples cannot show (the shaker's output went
+    off) keeps that verdict: the stored automatic verdict can be confirmed, never upgraded.
+    """
+    from app.acquire.plan import parse_plan
+
+    plan = parse_plan(run.plan_data, f"{run.path}:/plan")
+    rows = run.channels
+    ranges = np.array([c.range_v * 1000.0 / c.sensitivity for c in rows])
+    blocks = BlockAnalysis(plan, [c.name for c in rows], ranges)
+    rec = run.records
+    for i in range(len(rec)):
+        v = blocks.add(i, int(rec.point[i]), rec.data[i], rec.override[i])
+        auto = bool(rec.auto_accepted[i]) and v is not None and v[0]
+        used = (rec.override[i] == "accept") if rec.override[i] else auto
+        blocks.set_used(i, v is not None and used)
+    return plan, blocks
+
+
+def analyse_run(run: RunData, options: IdentifyOptions | None = None) -> (
+    tuple[FRFSet, IdentificationResult, Any]
+):
+    """Recompute every verdict, the FRFs and the identification from a run file's raw records.
+
+    Returns the FRFs, the identification and the analysis (:class:`RunAnalysis` for a
+    hammer run, :class:`~app.acquire.blocks.BlockAnalysis` for a shaker run). A run whose
+    force was aligned by host timing only is refused (InputError, one line).
+    """
+    check_identifiable(run)
+    frf, ana = run_frfs(run)
+    return frf, identify_frfs(frf, options), ana
+
+
+def check_identifiable(run: RunData) -> None:
+    """Refuse (InputError, one line) a run whose force was aligned by host timing only."""
+    if run.records.force_alignment == "host-timed":
+        dev = run.channels[0].device if run.channels else "?"
+        ref = run.channels[1].device if len(run.channels) > 1 else "?"
+        raise InputError(f"{run.path}: not identified: {host_timed(dev, ref)}")
+
+
+def run_frfs(run: RunData) -> tuple[FRFSet, Any]:
+    """The FRFs of a run's stored records (every point needs an accepted record) and the
+    analysis they come from; :func:`analyse_run` without the identification."""
+    resp = run.channels[1:]
+    resp_nodes, resp_dirs = np.array([c.node for c in resp]), np.array([c.direction for c in resp])
+    if run.method == "shaker":
+        splan, blocks = analyse_blocks(run)
+        cols = [blocks.point(j) for j in range(len(splan.excitations))]
+        return shaker_frfset(splan, cols, run.geometry, resp_nodes, resp_dirs), blocks
+    plan, ana = analyse_records(run)
     points: list[Any] = [ana.point(j) for j in range(len(plan.excitations))]
     for j, r in enumerate(points):
         if r is None:
             raise InputError(f"{run.path}: excitation {plan.excitations[j].label} has no "
                              "accepted hit: resume the run (insitu acquire --resume)")
-    resp = rows[1:]
-    frf = frfset(plan, points, run.geometry, np.array([c.node for c in resp]),
-                 np.array([c.direction for c in resp]))
-    return frf, identify_frfs(frf, options), ana
+    return frfset(plan, points, run.geometry, resp_nodes, resp_dirs), ana
+
+
+def host_timed(force_device: str, frontend: str) -> str:
+    """Why a run whose force is aligned by host timing only is not identified (one line)."""
+    return (f"the force comes from {force_device!r}, aligned to front end {frontend!r} by host "
+            "timing only (about 1 ms: 20 degrees of phase at 55 Hz, the mass line comes out "
+            "tens of percent off): record the same force on a front-end input too (a common "
+            "channel) so every hit is aligned on it, or acquire FRFs only (no identification)")

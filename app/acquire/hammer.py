@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from app.acquire.analysis import RunAnalysis, frfset, identify_frfs, margin_samples
+from app.acquire.analysis import RunAnalysis, frfset, host_timed, identify_frfs, margin_samples
 from app.acquire.events import HitRecord, PointFRF, Progress
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
 from app.acquire.procedure import Procedure
@@ -74,14 +74,21 @@ class HammerProcedure(Procedure):
     force_channel : str, optional
         Name of the station's force channel to use. Default: a force input of the
         responses' front end (same clock, phase exact), else the hammer digitiser's,
-        aligned by :mod:`drivers.sync` (host-timed: about 1 ms, too coarse for the mass line).
+        aligned by :mod:`drivers.sync`.
+    sync_channel : str, optional
+        With the force from a separate device (the hammer's digitiser): the front end's
+        channel that records the same force (a common channel), on which every hit is
+        aligned to a fraction of a sample. Default: the front end's force input, if any.
+        Without one the alignment is host-timed (about 1 ms: the mass line's phase is
+        ruined), and a run that should identify is refused (:class:`PlanError`);
+        ``identify=False`` records such FRFs anyway.
     """
 
     def __init__(self, plan: TestPlan | None, station: StationConfig, path: str | Path, *,
                  listeners: Iterable[Any] = (), resume: bool = False,
                  device_options: Mapping[str, Mapping[str, Any]] | None = None,
                  identify: bool = True, force_channel: str | None = None,
-                 partial: bool = False) -> None:
+                 partial: bool = False, sync_channel: str | None = None) -> None:
         super().__init__(listeners)
         self.path = Path(path)
         self.resume_file = resume
@@ -98,8 +105,11 @@ class HammerProcedure(Procedure):
         self.device_options = {k: dict(v) for k, v in (device_options or {}).items()}
         self.do_identify = identify
         self._force_choice = force_channel
+        self._sync_choice = sync_channel
         self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
         self._resolve_channels()
+        if self.force_alignment == "host-timed" and identify and self.geometry_report.ok:
+            raise PlanError(f"{station.source}: {host_timed(self.force_name, self.ref_name)}")
         self.devices: dict[str, AcquisitionFrontEnd] = {}
         self.writer: RunWriter | None = None
         self.analysis = RunAnalysis(plan, [c.name for c in self.rows], np.array(
@@ -135,6 +145,19 @@ class HammerProcedure(Procedure):
         self.force_name, self.force_channel = (same or forces)[0]
         self.rows: tuple[ChannelConfig, ...] = (self.force_channel, *resp)
         self.row_devices = (self.force_name, *(self.ref_name for _ in resp))
+        self.sync_channel: ChannelConfig | None = None
+        if self.force_name == self.ref_name:
+            self.force_alignment = "same-device"
+            return
+        common = [c for c in st.devices[self.ref_name].channels if c.quantity == "force"]
+        if self._sync_choice is not None:
+            common = [c for c in common if c.name == self._sync_choice]
+            if not common:
+                raise PlanError(f"{st.source}: sync channel {self._sync_choice!r} must be a "
+                                f"force input of front end {self.ref_name!r} (the hammer's "
+                                "force signal, split to both devices)")
+        self.sync_channel = common[0] if common else None
+        self.force_alignment = "common-channel" if common else "host-timed"
 
     def _open_devices(self) -> None:
         for name in dict.fromkeys((self.ref_name, self.force_name)):
@@ -150,10 +173,11 @@ class HammerProcedure(Procedure):
             raise PlanError(f"{self.plan.source}: record.fs is {rec.fs:g} Hz but front end "
                             f"{self.ref_name!r} runs at {ref.fs:g} Hz: make them equal")
         names = [c.name for c in ref.channels]
+        sync = None if self.sync_channel is None else names.index(self.sync_channel.name)
         self._streams = HitStreams(
             ref, [names.index(c.name) for c in self.rows[1:]], fdev,
             [c.name for c in fdev.channels].index(self.force_channel.name),
-            rec.n_pretrigger, rec.n_samples, rec.trigger_level)
+            rec.n_pretrigger, rec.n_samples, rec.trigger_level, sync_row=sync)
 
     def _open_file(self) -> None:
         rec = self.plan.record
@@ -172,14 +196,17 @@ class HammerProcedure(Procedure):
                 self.analysis.set_used(i, bool(recs.accepted[i]) and res is not None)
             self._t_offset = float(recs.time.max()) + 1.0 if len(recs) else 0.0
             return
+        assert self._streams is not None
         fdev = self.devices[self.force_name]
         separate = self.force_name != self.ref_name
         fs_raw = fdev.fs if separate else 0.0
-        n_raw = int(np.ceil(n_store * fdev.fs / rec.fs)) + 64 if separate else 0
+        n_raw = self._streams.raw_length(n_store) if separate else 0
         self.writer = RunWriter.create(
             self.path, plan_data=self.plan.to_dict(), station_data=station_summary(self.station),
             channels=self.rows, devices=self.row_devices, geometry=self.plan.geometry(),
-            fs=rec.fs, n_samples=n_store, method="hammer", fs_raw=fs_raw, n_raw=n_raw)
+            fs=rec.fs, n_samples=n_store, method="hammer", fs_raw=fs_raw, n_raw=n_raw,
+            force_alignment=self.force_alignment,
+            sync_channel="" if self.sync_channel is None else self.sync_channel.name)
 
     # -- procedure ------------------------------------------------------------------------------
     def startup(self) -> None:
@@ -190,27 +217,31 @@ class HammerProcedure(Procedure):
     def execute(self) -> None:
         assert self._streams is not None
         self._start_streams()
-        for point in self.plan.excitations:
-            self.point_index = point.index
-            if self.analysis.n_used(point.index) >= self.plan.hits:
-                continue
-            self.emit("on_next_point", point)
-            while self.analysis.n_used(point.index) < self.plan.hits:
-                self.poll()
-                try:
-                    self._streams.read()
-                    trig = self._streams.next_trigger()
-                    if trig is None:
-                        continue
-                    raw = self._streams.record(trig, margin_samples(self.plan.record.fs))
-                except DeviceError as err:
-                    self.pause_for(f"{err}; acquired hits are saved. Check the device, "
-                                   "then resume")
-                    self.emit("on_next_point", point)
-                    continue
-                self._store(point, raw)
+        # points left incomplete by a later override (a hit rejected there) are visited again
+        while todo := [p for p in self.plan.excitations
+                       if self.analysis.n_used(p.index) < self.plan.hits]:
+            self._acquire_point(todo[0])
         self._streams.stop()
         self._complete()
+
+    def _acquire_point(self, point: ExcitationPoint) -> None:
+        assert self._streams is not None
+        self.point_index = point.index
+        self.emit("on_next_point", point)
+        while self.analysis.n_used(point.index) < self.plan.hits:
+            self.poll()
+            try:
+                self._streams.read()
+                trig = self._streams.next_trigger()
+                if trig is None:
+                    continue
+                raw = self._streams.record(trig, margin_samples(self.plan.record.fs))
+            except DeviceError as err:
+                self.pause_for(f"{err}; acquired hits are saved. Check the device, "
+                               "then resume")
+                self.emit("on_next_point", point)
+                continue
+            self._store(point, raw)
 
     def _start_streams(self) -> None:
         assert self._streams is not None
@@ -264,7 +295,8 @@ class HammerProcedure(Procedure):
         t = time.monotonic() - self._t0 + self._t_offset
         self.writer.add_record(point.index, raw.data, time=t, peak_force=peak,
                                auto_accepted=auto, reason=reason, bad_frames=raw.bad_frames,
-                               missing=raw.missing, force_raw=raw.force_raw)
+                               missing=raw.missing, force_raw=raw.force_raw, sync=raw.sync,
+                               sync_offset=raw.sync_offset)
         self.analysis.set_used(hit_id, auto)
         self._report(HitRecord(hit_id, point.index, t, peak, auto, reason, "", raw.bad_frames,
                                raw.missing, data=raw.data, fs=self.plan.record.fs))

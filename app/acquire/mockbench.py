@@ -3,8 +3,9 @@
 :func:`plan_for_bench` gives the test plan of a built-in bench (the article's
 engine: 4 triaxial points, 18 forces; the block: 4 points, 9 forces).
 :class:`InProcessBench` starts the simulated front end (python-can ``virtual``
-bus) and hammer digitiser (pseudo-terminal) on one shared physics, and gives the
-station that connects the real drivers to them.
+bus), hammer digitiser and shaker (pseudo-terminals) on one shared physics, and
+gives the station that connects the real drivers to them, with a simulated
+operator for each procedure (``operator`` hits, ``shaker_operator`` moves the shaker).
 
 Example
 -------
@@ -16,7 +17,7 @@ Example
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import Any
 
@@ -27,8 +28,9 @@ from drivers.station import StationConfig, parse_station
 from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.frontend_device import FORCE, FrontEndDevice
 from hardware_mocks.hammer_device import HammerDevice
-from hardware_mocks.operator import MockOperator
+from hardware_mocks.operator import MockOperator, MockShakerOperator
 from hardware_mocks.physics import BenchPhysics
+from hardware_mocks.shaker_device import ShakerDevice
 
 __all__ = ["InProcessBench", "plan_for_bench"]
 
@@ -48,11 +50,14 @@ def _channel_names(bench: Bench) -> list[str]:
 
 def plan_for_bench(name: str, *, points: Sequence[int] | None = None, hits: int = 1,
                    fs: float = 1024.0, length: float = 2.0, pretrigger: float = 0.05,
-                   trigger_level: float = 20.0, exp_tau: float = 0.0) -> TestPlan:
-    """The hammer plan of built-in bench ``name`` (engine, engine-rigid, block, ...).
+                   trigger_level: float = 20.0, exp_tau: float = 0.0, method: str = "hammer",
+                   shaker: Mapping[str, Any] | None = None) -> TestPlan:
+    """The hammer (or shaker) plan of built-in bench ``name`` (engine, engine-rigid, block, ...).
 
     ``points`` selects excitation indices (default all); record settings as in
-    :class:`~app.acquire.plan.RecordSettings` (Hz, s, N).
+    :class:`~app.acquire.plan.RecordSettings` (Hz, s, N). ``method="shaker"`` makes a
+    shaker plan with the ``[shaker]`` keys given in ``shaker``
+    (:class:`~app.acquire.plan.ShakerSettings`; its blocks set the record length).
     """
     bench = get_bench(name)
     g = bench.geometry
@@ -64,10 +69,14 @@ def plan_for_bench(name: str, *, points: Sequence[int] | None = None, hits: int 
         chans = [n for n, r in zip(names, bench.resp_nodes.tolist(), strict=True) if r == node]
         responses.append({"node": node, "xyz": g.coordinates(np.array([node]))[0].tolist(),
                           "channels": chans})
+    record: dict[str, Any] = {"fs": fs, "pretrigger": pretrigger,
+                              "trigger_level": trigger_level, "exp_tau": exp_tau}
+    if method != "shaker":
+        record["length"] = length
     return parse_plan({
-        "plan": {"name": f"{name} (built in)", "method": "hammer", "hits": hits},
-        "record": {"fs": fs, "length": length, "pretrigger": pretrigger,
-                   "trigger_level": trigger_level, "exp_tau": exp_tau},
+        "plan": {"name": f"{name} (built in)", "method": method, "hits": hits},
+        "record": record,
+        "shaker": dict(shaker or {}),
         "excitation": [{"node": int(bench.exc_nodes[j]), "xyz": exc_xyz[j].tolist(),
                         "direction": bench.exc_dirs[j].tolist()} for j in sel],
         "response": responses,
@@ -89,29 +98,38 @@ class InProcessBench:
         The hammer digitiser's clock error (ppm) and start delay (s).
     operator : dict
         Keyword arguments of :class:`~hardware_mocks.operator.MockOperator`.
+    fe_force : bool
+        Wire the force to front-end input ``n_resp`` (channel ``F_fe``): the hammer's
+        and the shaker's force sensor. False leaves the hammer's digitiser as the only
+        force channel.
+    force_per_volt : float
+        The shaker's force per volt of output, N/V.
     """
 
     def __init__(self, name: str = "engine", *, fs_frontend: float = 1024.0,
                  fs_hammer: float = 4096.0, accel_noise: float = 0.0, force_noise: float = 0.0,
                  hammer_ppm: float = 0.0, hammer_offset: float = 0.0,
-                 operator: dict[str, Any] | None = None) -> None:
+                 operator: dict[str, Any] | None = None, fe_force: bool = True,
+                 force_per_volt: float = 50.0) -> None:
         self.bench = get_bench(name)
         self.physics = BenchPhysics(self.bench)
         n_resp = len(self.bench.resp_nodes)
         channel = f"insitu-inproc-{next(_counter)}"
         self.frontend = FrontEndDevice(self.physics, channel=channel,
-                                       wiring=[*range(n_resp), FORCE], accel_noise=accel_noise,
-                                       force_noise=force_noise,
+                                       wiring=[*range(n_resp), *([FORCE] if fe_force else [])],
+                                       accel_noise=accel_noise, force_noise=force_noise,
                                        tail=4.0)
         self.hammer = HammerDevice(self.physics, ppm=hammer_ppm, offset=hammer_offset,
                                    noise=force_noise)
+        self.shaker = ShakerDevice(self.physics, force_per_volt=force_per_volt)
         dirs = self.bench.resp_dirs
         chans = [{"name": n, "input": i, "quantity": "acceleration", "sensitivity": 10.2,
                   "range": 10.0, "node": int(node), "direction": dirs[i].tolist()}
                  for i, (n, node) in enumerate(zip(_channel_names(self.bench),
                                                    self.bench.resp_nodes.tolist(), strict=True))]
-        chans.append({"name": "F_fe", "input": n_resp, "quantity": "force",
-                      "sensitivity": 2.25, "range": 5.0})
+        if fe_force:
+            chans.append({"name": "F_fe", "input": n_resp, "quantity": "force",
+                          "sensitivity": 2.25, "range": 5.0})
         self.station: StationConfig = parse_station({
             "station": {"name": f"in-process mock bench ({name})"},
             "devices": {
@@ -123,11 +141,15 @@ class InProcessBench:
                            "transport": {"url": self.hammer.path, "baudrate": 921600},
                            "channels": [{"name": "F", "input": 0, "quantity": "force",
                                          "sensitivity": 2.25, "range": 5.0}]},
+                "shaker": {"backend": "shaker-scpi",
+                           "transport": {"url": self.shaker.path, "baudrate": 115200}},
             }}, "in-process mock station")
         self.operator = MockOperator(self.hammer, **(operator or {}))
+        self.shaker_operator = MockShakerOperator(self.shaker)
 
     def shutdown(self) -> None:
         self.operator.shutdown()
+        self.shaker.shutdown()
         self.hammer.shutdown()
         self.frontend.shutdown()
 

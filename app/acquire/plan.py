@@ -20,8 +20,10 @@ A plan is a TOML file::
     f_start = 2.0                # Hz
     f_stop = 200.0               # Hz
     averages = 20
-    nperseg = 2048               # samples per segment (line spacing fs/nperseg)
-    ramp = 1.0                   # s
+    nperseg = 2048               # samples per block (line spacing fs/nperseg; chirp period)
+    ramp = 1.0                   # s, output ramp up and down
+    settle = 1.0                 # s streamed after the ramp before the first block
+    duty = 0.5                   # burst random: fraction of each block the burst is on
 
     [[excitation]]
     node = 101
@@ -154,7 +156,28 @@ class RecordSettings:
 
 @dataclass(frozen=True)
 class ShakerSettings:
-    """Shaker drive and averaging (levels in V RMS for random, V peak otherwise; Hz; s)."""
+    """Shaker drive and averaging.
+
+    Attributes
+    ----------
+    waveform : {"random", "burst-random", "chirp"}
+    level : float
+        V RMS (random, burst random) or V peak (chirp).
+    f_start, f_stop : float
+        Band of the random signal, sweep of the chirp, Hz.
+    averages : int
+        Accepted blocks per excitation point.
+    nperseg : int
+        Samples per block (line spacing ``fs / nperseg`` Hz); the chirp's and the
+        burst's period is one block.
+    ramp : float
+        Output ramp time up and down, s.
+    settle : float
+        Time streamed after the ramp before the first block (transients die out), s.
+    duty : float
+        Burst random: fraction of each block the burst is on (the rest lets the
+        response decay).
+    """
 
     waveform: str = "random"
     level: float = 0.5
@@ -163,6 +186,8 @@ class ShakerSettings:
     averages: int = 20
     nperseg: int = 2048
     ramp: float = 1.0
+    settle: float = 1.0
+    duty: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -248,7 +273,7 @@ class TestPlan:
             "record": rec,
             "shaker": {"waveform": s.waveform, "level": s.level, "f_start": s.f_start,
                        "f_stop": s.f_stop, "averages": s.averages, "nperseg": s.nperseg,
-                       "ramp": s.ramp},
+                       "ramp": s.ramp, "settle": s.settle, "duty": s.duty},
             "excitation": [{"node": e.node, "xyz": list(e.xyz), "direction": list(e.direction)}
                            for e in self.excitations],
             "response": [{"node": r.node, "xyz": list(r.xyz), "channels": list(r.channels)}
@@ -343,6 +368,11 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
         raise c.fail("record.lines", "give either length (s) or lines, not both")
     if "lines" in r:
         length = 2 * c.number(r, "lines", "record", integer=True) / fs
+    elif method == "shaker" and "length" not in r:  # one block
+        nps = data.get("shaker", {}).get("nperseg") if isinstance(data.get("shaker"), dict) \
+            else None
+        length = (nps if isinstance(nps, int) and not isinstance(nps, bool) and nps > 0
+                  else 2048) / fs
     else:
         length = float(c.number(r, "length", "record"))
     pre = float(c.number(r, "pretrigger", "record", 0.05, strict=False))
@@ -357,7 +387,7 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
         raise c.fail("record.length", f"{length:g} s at {fs:g} Hz is under 64 samples")
     record = RecordSettings(fs, length, pre, level, tau, est)
     s = c.table(data, "shaker", {"waveform", "level", "f_start", "f_stop", "averages",
-                                 "nperseg", "ramp"})
+                                 "nperseg", "ramp", "settle", "duty"})
     wf = s.get("waveform", "random")
     if wf not in ("random", "burst-random", "chirp"):
         raise c.fail("shaker.waveform", f"must be random, burst-random or chirp, got {wf!r}")
@@ -367,7 +397,11 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
         float(c.number(s, "f_stop", "shaker", 200.0)),
         int(c.number(s, "averages", "shaker", 20, integer=True)),
         int(c.number(s, "nperseg", "shaker", 2048, integer=True, minimum=8)),
-        float(c.number(s, "ramp", "shaker", 1.0, strict=False)))
+        float(c.number(s, "ramp", "shaker", 1.0, strict=False)),
+        float(c.number(s, "settle", "shaker", 1.0, strict=False)),
+        float(c.number(s, "duty", "shaker", 0.5)))
+    if shaker.duty > 1:
+        raise c.fail("shaker.duty", f"must be <= 1, got {shaker.duty:g}")
     if shaker.f_start >= shaker.f_stop:
         raise c.fail("shaker.f_stop", f"must be above f_start ({shaker.f_start:g} Hz)")
     excs = []

@@ -7,19 +7,25 @@ front end's sample grid. When the force comes from another device (the hammer's
 own digitiser), its clock is fitted and the force resampled onto the front end's
 instants with :mod:`drivers.sync`; a hit whose streams cannot be aligned, or that
 lost samples, is returned with the reason and never used.
+
+Host timing aligns the two clocks to about a millisecond only. When the front end
+also records the hammer's force (``sync_row``, a common channel), each hit is
+aligned on it: :func:`drivers.sync.signal_delay` measures the remaining delay
+between the resampled hammer force and the front end's copy to a small fraction
+of a sample, and the hammer's clock fit is shifted by it before resampling again.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from drivers.base import AcquisitionFrontEnd, TimeBlock
 from drivers.errors import SyncError
-from drivers.sync import ClockFit, align, check_alignment, fit_clock
+from drivers.sync import ClockFit, align, check_alignment, fit_clock, signal_delay
 
 __all__ = ["HitStreams", "RawHit"]
 
@@ -28,13 +34,25 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class RawHit:
-    """One hit record: ``data`` (n_ch, n) force row first, at ``fs``; ``problem`` if unusable."""
+    """One hit record: ``data`` (n_ch, n) force row first, at ``fs``; ``problem`` if unusable.
+
+    ``sync`` is the common channel's record (front end, N) and ``sync_offset`` the
+    correction it gave to the host-timed alignment, s (NaN when not aligned on one).
+    """
 
     data: NDArray[np.float64]
     force_raw: NDArray[np.float64] | None
     bad_frames: int
     missing: int
     problem: str = ""
+    sync: NDArray[np.float64] | None = None
+    sync_offset: float = float("nan")
+
+
+#: a common channel whose copy of the force correlates less than this is not the same signal
+MIN_SYNC_CORRELATION = 0.9
+#: largest correction of the host-timed alignment believed, s
+MAX_SYNC_OFFSET = 0.02
 
 
 class _Buffer:
@@ -81,15 +99,19 @@ class HitStreams:
         Samples kept before the trigger and the record length, at ``ref.fs``.
     level : float
         Trigger level, N (rising).
+    sync_row : int, optional
+        Row of ``ref``'s blocks that records the same force (a common channel): each hit
+        of a separate force device is aligned on it to a fraction of a sample.
     """
 
     CHUNK = 0.1  # s per read
 
     def __init__(self, ref: AcquisitionFrontEnd, resp_rows: list[int],
                  force_dev: AcquisitionFrontEnd, force_row: int, n_before: int, n_record: int,
-                 level: float) -> None:
+                 level: float, sync_row: int | None = None) -> None:
         self.ref, self.force_dev = ref, force_dev
         self.separate = force_dev is not ref
+        self.sync_row = sync_row if self.separate else None
         self.resp_rows = resp_rows
         self.force_row = force_row
         self.n_before, self.n_record = n_before, n_record
@@ -100,6 +122,18 @@ class HitStreams:
         self._force = _Buffer(len(force_dev.channels), int(keep * ratio) + 64)
         self._searched = 0
         self._armed_from = 0
+
+    @property
+    def raw_pad(self) -> int:
+        """Samples of the force device kept on each side of a hit beyond its record (room
+        for the common-channel correction)."""
+        if self.sync_row is None:
+            return 16
+        return 16 + int(np.ceil(MAX_SYNC_OFFSET * self.force_dev.fs))
+
+    def raw_length(self, n_store: int) -> int:
+        """Most force-device samples of one hit record of ``n_store`` front-end samples."""
+        return int(np.ceil(n_store * self.force_dev.fs / self.ref.fs)) + 4 * self.raw_pad + 64
 
     @property
     def bad_frames(self) -> int:
@@ -177,47 +211,78 @@ class HitStreams:
         k_ref = round((t_trig - ref_fit.t0) * ref_fit.rate)
         start = k_ref - self.n_before - margin
         ratio = self.force_dev.fs / self.ref.fs
+        pad = self.raw_pad
         while True:
             t_end = float(ref_fit.host_time(start + length))
-            f_stop = int(np.ceil((t_end - f_fit.t0) * f_fit.rate)) + 16
+            f_stop = int(np.ceil((t_end - f_fit.t0) * f_fit.rate)) + pad
             if self._ref.end >= start + length and self._force.end >= f_stop:
                 break
             self.read()
         self._arm_after(trigger)
         ref_fit, f_fit = self._fits()  # refit with the latest frames
         t0 = float(ref_fit.host_time(start))
-        f_start = max(int(np.floor((t0 - f_fit.t0) * f_fit.rate)) - 16, self._force.first)
-        f_stop = min(f_stop + 16, self._force.end)
+        f_start = max(int(np.floor((t0 - f_fit.t0) * f_fit.rate)) - pad, self._force.first)
+        f_stop = min(f_stop + pad, self._force.end)
         ref_block = TimeBlock(self._ref.slice(start, start + length), self.ref.fs,
                               self.ref.channels, start)
         raw = self._force.slice(f_start, f_stop)
         force_raw = raw[self.force_row].copy()
+        sync = None if self.sync_row is None else ref_block.data[self.sync_row].copy()
         n_lost = int(np.count_nonzero(np.isnan(raw).any(axis=0)))
         resp = ref_block.data[self.resp_rows]
         if n_lost:
             data = np.vstack([np.full((1, length), np.nan), resp])
-            return self._finish(data, force_raw, bad0, f"{n_lost} force samples lost")
+            return self._finish(data, force_raw, bad0, f"{n_lost} force samples lost", sync)
         other = TimeBlock(raw, self.force_dev.fs, self.force_dev.channels, f_start)
+        offset = float("nan")
         try:
             aligned = align(ref_block, ref_fit, other, f_fit, self.force_dev.name)
+            if sync is not None:
+                aligned, offset = self._align_on(sync, ref_block, ref_fit, other, f_fit)
         except SyncError as err:
             data = np.vstack([np.full((1, length), np.nan), resp])
-            return self._finish(data, force_raw, bad0, f"streams not aligned: {err}")
-        logger.debug("hit aligned: force %d..%d (x%.3g) onto front end %d..%d", f_start, f_stop,
-                     ratio, start, start + length)
-        return self._finish(np.vstack([aligned.data[self.force_row][None], resp]), force_raw, bad0)
+            return self._finish(data, force_raw, bad0, f"streams not aligned: {err}", sync)
+        logger.debug("hit aligned: force %d..%d (x%.3g) onto front end %d..%d, common-channel "
+                     "correction %.1f us", f_start, f_stop, ratio, start, start + length,
+                     offset * 1e6)
+        return self._finish(np.vstack([aligned.data[self.force_row][None], resp]), force_raw,
+                            bad0, "", sync, offset)
+
+    def _align_on(self, sync: NDArray[np.float64], ref_block: TimeBlock, ref_fit: ClockFit,
+                  other: TimeBlock, f_fit: ClockFit) -> tuple[TimeBlock, float]:
+        """Re-align ``other`` so its force matches the common channel ``sync`` (s offset)."""
+        if np.any(np.isnan(sync)):
+            raise SyncError("the common channel lost samples during the hit")
+        total = 0.0
+        fit = f_fit
+        aligned = align(ref_block, ref_fit, other, fit, self.force_dev.name)
+        for _ in range(3):  # converges in one step; the others check it
+            delay, corr = signal_delay(sync, aligned.data[self.force_row], self.ref.fs)
+            if corr < MIN_SYNC_CORRELATION:
+                raise SyncError(f"the front end's common channel does not match "
+                                f"{self.force_dev.name}'s force (correlation {corr:.2f})")
+            total += delay
+            if abs(total) > MAX_SYNC_OFFSET:
+                raise SyncError(f"common channel {total * 1e3:.1f} ms off the host-timed "
+                                f"alignment (limit {MAX_SYNC_OFFSET * 1e3:g} ms)")
+            fit = replace(fit, t0=fit.t0 - delay)
+            aligned = align(ref_block, ref_fit, other, fit, self.force_dev.name)
+            if abs(delay) * self.ref.fs < 1e-4:
+                break
+        return aligned, total
 
     def _arm_after(self, trigger: int) -> None:
         ratio = self.force_dev.fs / self.ref.fs if self.separate else 1.0
         self._armed_from = trigger + int((self.n_record - self.n_before) * ratio)
 
     def _finish(self, data: NDArray[np.float64], force_raw: NDArray[np.float64] | None,
-                bad0: int, problem: str = "") -> RawHit:
+                bad0: int, problem: str = "", sync: NDArray[np.float64] | None = None,
+                sync_offset: float = float("nan")) -> RawHit:
         missing = int(np.count_nonzero(np.isnan(data).any(axis=0)))
         bad = self.bad_frames - bad0
         if missing and not problem:
             problem = f"{missing} samples lost"
         if problem and bad:
             problem += f" ({bad} corrupted frames)"
-        return RawHit(data, force_raw, bad, missing, problem)
+        return RawHit(data, force_raw, bad, missing, problem, sync, sync_offset)
 

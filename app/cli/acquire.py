@@ -1,7 +1,16 @@
 """``insitu acquire``: run a test plan headless, with progress bars, into one HDF5 run file.
 
-``--mock`` (or no ``--station``) acquires on the built-in in-process mock bench with a
-simulated operator arm. ``--resume`` continues an interrupted run from its file.
+The plan's ``method`` picks the procedure: hammer (triggered hits) or shaker (a
+level ramp, then blocks averaged per point). ``--mock`` (or no ``--station``)
+acquires on the built-in in-process mock bench with a simulated operator (who
+hits, or moves the shaker). ``--resume`` continues an interrupted run from its
+file. ``--resume --override HIT=accept|reject|clear`` (repeatable; HIT the record
+number printed by the run, from 1) changes the operator's verdict of stored hits
+or blocks: the FRFs and the identification are recomputed from the raw records
+and stored when every point is complete (no device is opened then), otherwise
+the acquisition resumes to complete the points that now lack hits. With a real
+station and a shaker plan, the run waits at each point until the shaker is
+attached there (press Enter).
 """
 
 from __future__ import annotations
@@ -17,9 +26,16 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from app.acquire import HammerProcedure, InProcessBench, Listener, load_plan, plan_for_bench
 from app.acquire.events import HitRecord, RunState
 from app.acquire.events import Progress as RunProgress
+from app.acquire.overrides import override_run, parse_override
+from app.acquire.plan import TestPlan, parse_plan
+from app.acquire.procedure import Procedure
+from app.acquire.shaker import ShakerProcedure
 from app.cli.common import UserError
-from drivers.station import load_station
+from app.io.runfile import read_run
+from drivers.station import StationConfig, load_station
 
+#: what a pause that waits for the operator to attach the shaker says first
+ATTACH = "attach the shaker"
 
 class _Bars(Listener):
     def __init__(self, progress: Progress, n_points: int, console: Console) -> None:
@@ -27,6 +43,7 @@ class _Bars(Listener):
         self.console = console
         self.points = progress.add_task("points", total=n_points)
         self.hits = progress.add_task("hits at point", total=1)
+        self.paused = ""
 
     def on_next_point(self, point: Any) -> None:
         self.progress.update(self.hits, description=f"hits at {point.label}", completed=0)
@@ -41,7 +58,9 @@ class _Bars(Listener):
         self.progress.update(self.points, completed=p.points_done)
 
     def on_paused(self, reason: str) -> None:
-        self.console.print(f"[yellow]paused: {reason}[/yellow]")
+        self.paused = reason
+        if not reason.startswith(ATTACH):
+            self.console.print(f"[yellow]paused: {reason}[/yellow]")
 
 
 def add_parser(sub: Any) -> None:
@@ -51,51 +70,118 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--plan", type=Path, help="test plan TOML (default with --mock: the bench's)")
     p.add_argument("--out", type=Path, required=True, help="run file to write (RUN.h5)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument("--override", action="append", default=[], metavar="HIT=VERDICT",
+                   help="with --resume: accept, reject or clear the verdict of stored record "
+                        "HIT (from 1); repeatable")
     p.add_argument("--mock", action="store_true", help="use the in-process mock bench")
     p.add_argument("--bench", default="engine", help="mock bench (default engine)")
-    p.add_argument("--hits", type=int, default=1, help="mock plan: accepted hits per point")
-    p.add_argument("--length", type=float, default=2.0, help="mock plan: record length, s")
+    p.add_argument("--method", choices=("hammer", "shaker"), default="hammer",
+                   help="mock plan: hammer or shaker (chirp, one block per --hits)")
+    p.add_argument("--hits", type=int, default=1,
+                   help="mock plan: accepted hits (or shaker blocks) per point")
+    p.add_argument("--length", type=float, default=2.0,
+                   help="mock plan: record (or shaker block) length, s")
     p.add_argument("--points", help="mock plan: excitation indices, comma separated")
     p.set_defaults(run=run)
 
 
+def _mock_plan(args: argparse.Namespace) -> TestPlan:
+    pts = [int(x) for x in args.points.split(",")] if args.points else None
+    if args.method == "shaker":
+        fs = 1024.0
+        return plan_for_bench(args.bench, points=pts, fs=fs, method="shaker", shaker={
+            "waveform": "chirp", "nperseg": round(args.length * fs), "averages": args.hits,
+            "f_start": 2.0, "f_stop": fs / 2.56, "ramp": 0.2, "settle": 1.5})
+    return plan_for_bench(args.bench, points=pts, hits=args.hits, length=args.length)
+
+
+def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Namespace,
+               bench: InProcessBench | None) -> Procedure:
+    method = plan.method if plan is not None else read_run(args.out, with_data=False).method
+    if method == "shaker":
+        return ShakerProcedure(plan, station, args.out, resume=args.resume,
+                               listeners=[bench.shaker_operator] if bench else [],
+                               confirm_attach=bench is None)
+    return HammerProcedure(plan, station, args.out, resume=args.resume,
+                           listeners=[bench.operator] if bench else [])
+
+
+def _apply_overrides(args: argparse.Namespace, console: Console) -> bool:
+    """Apply ``--override``s to the stored run; True when the run is complete after them."""
+    wanted: dict[int, str] = {}
+    for text in args.override:
+        i, what = parse_override(text)
+        wanted[i] = what
+    out = override_run(args.out, wanted)
+    for i, (old, new) in out.changed.items():
+        reason = out.run.records.reason[i]
+        console.print(f"record {i + 1}: override {old or 'none'} -> {new or 'none'}"
+                      + (f" (automatic verdict: {reason})" if reason else ""))
+    if not out.complete:
+        for j, n, need in out.missing:
+            console.print(f"point {j + 1}: {n} of {need} accepted: acquiring the rest")
+        return False
+    if out.message:
+        raise UserError(f"{args.out}: FRFs stored; {out.message}")
+    what = "FRFs and identification" if out.result is not None else "FRFs (partial plan)"
+    console.print(f"{what} recomputed and stored in {args.out}")
+    if out.result is not None:
+        from app.acquire.analysis import analyse_run
+        from app.cli.summary import print_result
+
+        print_result(analyse_run(out.run)[1], console)
+    return True
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.override and not args.resume:
+        raise UserError("--override changes a stored run: give --resume --out RUN.h5")
     if args.resume and not args.out.is_file():
         raise UserError(f"{args.out}: no run file to resume")
     if not args.resume and args.out.exists():
         raise UserError(f"{args.out} exists: choose another --out or use --resume")
-    plan = load_plan(args.plan) if args.plan else None
     console = Console()
+    if args.override and _apply_overrides(args, console):
+        return 0
+    plan = load_plan(args.plan) if args.plan else None
     with contextlib.ExitStack() as stack:
+        bench = None
         if args.mock or args.station is None:
-            bench = stack.enter_context(InProcessBench(args.bench))
-            station, listeners = bench.station, [bench.operator]
+            known = plan if plan is not None or not args.resume else parse_plan(
+                read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan")
+            fs = known.record.fs if known is not None else 1024.0
+            bench = stack.enter_context(InProcessBench(args.bench, fs_frontend=fs))
+            station = bench.station
             if plan is None and not args.resume:
-                pts = [int(x) for x in args.points.split(",")] if args.points else None
-                plan = plan_for_bench(args.bench, points=pts, hits=args.hits,
-                                      length=args.length)
+                plan = _mock_plan(args)
         else:
-            station, listeners = load_station(args.station), []
+            station = load_station(args.station)
             if plan is None and not args.resume:
                 raise UserError("give --plan FILE (or --mock for the built-in bench's plan)")
-        proc = HammerProcedure(plan, station, args.out, listeners=listeners, resume=args.resume)
-        n = len(proc.plan.excitations)
+        proc = _procedure(plan, station, args, bench)
+        n = len(proc.plan.excitations)  # type: ignore[attr-defined]
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
-            proc.add_listener(_Bars(progress, n, console))
+            bars = _Bars(progress, n, console)
+            proc.add_listener(bars)
             proc.start()
             try:
-                while proc.wait(0.2) is RunState.RUNNING or proc.running:
-                    pass
+                while proc.wait(0.2) is not RunState.FINISHED and proc.running:
+                    if proc.state is RunState.PAUSED and bars.paused.startswith(ATTACH):
+                        bars.paused = ""
+                        console.input(f"{proc.message}: press Enter ")
+                        proc.resume()
             except KeyboardInterrupt:
                 proc.stop()
                 proc.wait()
+    hits: list[HitRecord] = proc.hits  # type: ignore[attr-defined]
     if proc.state is not RunState.FINISHED:
-        raise UserError(f"run {proc.state.value}: {proc.message}; acquired hits are in "
+        raise UserError(f"run {proc.state.value}: {proc.message}; acquired records are in "
                         f"{args.out} (continue with --resume)")
-    console.print(f"{len(proc.hits)} hits, run written to {args.out}")
-    if proc.result is not None:
+    console.print(f"{len(hits)} records, run written to {args.out}")
+    result = proc.result  # type: ignore[attr-defined]
+    if result is not None:
         from app.cli.summary import print_result
 
-        print_result(proc.result, console)
+        print_result(result, console)
     return 0

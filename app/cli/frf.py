@@ -1,41 +1,67 @@
-"""``insitu frf FILE.uff --out FRF.uff``: FRFs and coherence from UFF time records.
+"""``insitu frf INPUT [--out FRF.uff|FRF.h5]``: FRFs and coherence from time data.
 
-Each run of the file (its records sharing a load case: one force, the accelerations)
-gives the FRF column of its excitation DOF; runs at the same DOF are averaged
-together. ``--method random`` (shaker: continuous random, Welch with Hann window and
-overlap; also burst random and periodic chirp with ``--window boxcar --overlap 0``)
-or ``--method impact`` (hammer: trigger, per-hit checks, force and exponential
-windows). Writes the FRFs with their coherence and geometry as UFF, and prints the
-hits rejected, the coherence gate and the rigidity check.
+INPUT is a UFF file of time records or a run file (``.h5``) written by ``insitu acquire``.
+
+UFF: each run (its records sharing a load case: one force, the accelerations) gives
+the FRF column of its excitation DOF; runs at the same DOF are averaged together.
+``--method random`` (shaker: continuous random, Welch with Hann window and overlap;
+also burst random and periodic chirp with ``--window boxcar --overlap 0``) or
+``--method impact`` (hammer: trigger, per-hit checks, force and exponential windows).
+
+Run file: every stored hit is processed again with the plan's settings and the
+operator's overrides, as ``insitu replay`` does (the time-data options do not apply).
+
+The FRFs, their coherence and geometry are written as UFF (``.uff``, ``.unv``) or as
+an HDF5 FRF file (``.h5``, ``.hdf5``), chosen by the suffix of ``--out``. A bad run
+(no force channel, records of different rates or lengths, NaN samples, no hit found,
+every hit rejected, ...) is reported on one line and skipped: the FRFs of the good
+runs are still written, and the exit status is then 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.cli.common import UserError
+from app.io.frf_h5 import write_frf_h5
 from app.io.uff import read_time_uff, write_frf_uff
 from app.io.uff_geometry import read_geometry_uff
+from app.io.uff_time import TimeRun
 from processing.coherence import coherence_gate
-from processing.data import FRFSet
+from processing.data import FRFSet, Geometry, InputError
 from processing.geometry import GeometryError
-from processing.impact import ImpactResult, ImpactSettings, merge_results, process_impacts
+from processing.impact import (
+    ImpactResult,
+    ImpactSettings,
+    impact_frfset,
+    merge_results,
+    process_impacts,
+)
 from processing.rigidity import rigidity_check
 from processing.spectral import ESTIMATORS, CrossSpectra, SpectralAccumulator, combine, frf
 
+H5_SUFFIXES = (".h5", ".hdf5")
+UFF_SUFFIXES = (".uff", ".unv")
+
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("frf", help="FRFs and coherence from UFF time records",
+    p = sub.add_parser("frf", help="FRFs and coherence from UFF time records or a run file",
                        description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("file", type=Path, help="UFF file with geometry and time records (58, type 1)")
-    p.add_argument("--out", type=Path, required=True, help="UFF file to write the FRFs to")
+    p.add_argument("file", type=Path,
+                   help="UFF file with geometry and time records (58, type 1), or a run "
+                        "file (.h5) written by insitu acquire")
+    p.add_argument("--out", type=Path,
+                   help="FRF file to write: .uff/.unv (UFF 58) or .h5/.hdf5 (HDF5 FRF file); "
+                        "default INPUT's name with _frf.uff")
     add_processing_arguments(p, method_alias=True)
-    p.add_argument("--binary", action="store_true", help="write binary 58b records")
+    p.add_argument("--binary", action="store_true", help="UFF output: write binary 58b records")
     p.set_defaults(run=run)
 
 
@@ -61,116 +87,250 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
                         "usable band)")
 
 
-def _random_spectra(force: np.ndarray, responses: np.ndarray, fs: float,
-                    args: argparse.Namespace) -> CrossSpectra:
-    nperseg = args.nperseg
-    if force.size < nperseg:
-        raise UserError(f"a run has {force.size} samples, fewer than --nperseg {nperseg}")
-    acc = SpectralAccumulator(fs, nperseg, round(args.overlap * nperseg),
-                              window=args.window)
-    acc.update(np.vstack([force[None], responses]))
-    return acc.spectra()
-
-
-def _impact(force: np.ndarray, responses: np.ndarray, fs: float,
-            args: argparse.Namespace) -> ImpactResult:
-    level = args.level if args.level is not None else 0.1 * float(np.max(np.abs(force)))
-    settings = ImpactSettings(
-        level=level, record_length=round(args.record * fs),
-        pretrigger=round(args.pretrigger * fs),
-        slope="rising" if level > 0 else "falling", exp_tau=args.exp_tau,
-    )
-    names = ["force", *(f"response {i + 1}" for i in range(responses.shape[0]))]
-    return process_impacts(np.vstack([force[None], responses]), fs, settings,
-                           channel_names=names, estimator=args.estimator)
+def skipped(args: argparse.Namespace, message: str) -> None:
+    """One stderr line for a run that is reported and skipped."""
+    print(f"insitu {getattr(args, 'verb', 'frf')}: {message} (skipped)", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:
-    out = frfset_from_time_uff(args.file, args)
-    write_frf_uff(args.out, out, binary=args.binary, coherence=True)
-    print(f"{out.H.shape[0]} x {out.H.shape[1]} FRFs ({args.estimator}), {out.freq.size} lines, "
-          f"written to {args.out}")
-    return 0
+    out = args.out or args.file.with_name(args.file.stem + "_frf.uff")
+    suffix = out.suffix.lower()
+    if suffix not in H5_SUFFIXES + UFF_SUFFIXES:
+        raise UserError(f"--out {out}: unknown suffix {out.suffix!r}: use .uff or .unv (UFF 58) "
+                        "or .h5 or .hdf5 (HDF5 FRF file)")
+    if args.file.suffix.lower() in H5_SUFFIXES:
+        frfs, n_bad = frfset_from_run_file(args.file, args)
+    else:
+        frfs, n_bad = frfset_from_time_uff(args.file, args)
+    if suffix in H5_SUFFIXES:
+        write_frf_h5(out, frfs, source=str(args.file))
+    else:
+        write_frf_uff(out, frfs, binary=args.binary, coherence=True)
+    print(f"{frfs.H.shape[0]} x {frfs.H.shape[1]} FRFs ({frfs.meta.get('estimator', 'H1')}), "
+          f"{frfs.freq.size} lines, written to {out}"
+          + (f"; {n_bad} bad run(s) skipped, exit status 2" if n_bad else ""))
+    return 2 if n_bad else 0
 
 
-def frfset_from_time_uff(path: Path, args: argparse.Namespace) -> FRFSet:
-    """FRFs with coherence and geometry from the time runs of a UFF file; prints per-run
-    verdicts, the coherence gate and the rigidity check."""
+# ----------------------------------------------------------------------------------------------
+# UFF time records
+# ----------------------------------------------------------------------------------------------
+def _random_spectra(r: TimeRun, args: argparse.Namespace) -> CrossSpectra:
+    nperseg = args.nperseg
+    if r.n_samples < nperseg:
+        raise InputError(f"load case {r.load_case}: {r.n_samples} samples, fewer than "
+                         f"--nperseg {nperseg}: lower --nperseg or record longer")
+    acc = SpectralAccumulator(r.fs, nperseg, round(args.overlap * nperseg), window=args.window)
+    acc.update(np.vstack([r.force[None], r.responses]))
+    return acc.spectra()
+
+
+def _impact(r: TimeRun, args: argparse.Namespace) -> ImpactResult:
+    """Hits of one run; InputError (naming the load case) when none can be used."""
+    lc = f"load case {r.load_case}"
+    peak = float(np.max(np.abs(r.force)))
+    if args.level is None and peak == 0:
+        raise InputError(f"{lc}: the force channel is zero throughout: check the hammer channel")
+    level = args.level if args.level is not None else 0.1 * peak
+    settings = ImpactSettings(
+        level=level, record_length=round(args.record * r.fs),
+        pretrigger=round(args.pretrigger * r.fs),
+        slope="rising" if level > 0 else "falling", exp_tau=args.exp_tau,
+    )
+    names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
+    res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
+                          channel_names=names, estimator=args.estimator)
+    if not res.verdicts:
+        raise InputError(f"{lc}: no hit found (the force never crosses {level:g} N): lower "
+                         "--level or check the force channel")
+    if res.H is None:
+        why = "; ".join(f"hit {v.index + 1}: {v.reason}" for v in res.verdicts)
+        raise InputError(f"{lc}: every hit rejected ({why}): measure the point again")
+    return res
+
+
+def frfset_from_time_uff(path: Path, args: argparse.Namespace) -> tuple[FRFSet, int]:
+    """FRFs with coherence and geometry from the time runs of a UFF file.
+
+    Prints each run's verdicts, the coherence gate and the rigidity check; each bad run
+    gets one stderr line and is skipped. Returns the FRF set and the number of bad runs;
+    raises UserError (one line) when no run is usable or a setting fits no run.
+    """
     if not 0 <= args.overlap < 1:
         raise UserError(f"--overlap must be in [0, 1), got {args.overlap}")
     runs, problems = read_time_uff(path, strict=False)
-    for case, msg in problems:
-        print(f"load case {case} skipped: {msg}")
-    if not runs:
-        raise UserError(f"{path}: no usable time run")
-    geometry, _ = read_geometry_uff(path)
-    first = runs[0]
-    for r in runs[1:]:
-        if (r.fs != first.fs or not np.array_equal(r.resp_nodes, first.resp_nodes)
-                or not np.allclose(r.resp_dirs, first.resp_dirs)):
-            raise UserError(
-                f"load case {r.load_case}: sample rate or response DOFs differ from load case "
-                f"{first.load_case}; process such runs in separate files"
-            )
+    for _, msg in problems:
+        skipped(args, msg)
+    n_bad = len(problems)
+    if runs and args.excitation == "random" and max(r.n_samples for r in runs) < args.nperseg:
+        raise UserError(f"the longest run has {max(r.n_samples for r in runs)} samples, fewer "
+                        f"than --nperseg {args.nperseg}: lower --nperseg")
+    first = runs[0] if runs else None
+    good: list[TimeRun] = []
+    for r in runs:
+        assert first is not None
+        if r.fs != first.fs or not (np.array_equal(r.resp_nodes, first.resp_nodes)
+                                    and np.allclose(r.resp_dirs, first.resp_dirs)):
+            what = (f"sample rate {r.fs:g} Hz differs from load case {first.load_case}'s "
+                    f"{first.fs:g} Hz" if r.fs != first.fs else
+                    f"response DOFs differ from load case {first.load_case}'s")
+            skipped(args, f"load case {r.load_case}: {what}: process such runs in separate files")
+            n_bad += 1
+        else:
+            good.append(r)
     # one excitation column per distinct excitation DOF, in order of appearance
-    keys: list[tuple[int, tuple[float, ...]]] = []
-    groups: dict[tuple[int, tuple[float, ...]], list[int]] = {}
-    for i, r in enumerate(runs):
-        key = (int(r.exc_node), tuple(np.round(r.exc_dir, 6)))
-        if key not in groups:
-            keys.append(key)
-            groups[key] = []
-        groups[key].append(i)
-
-    cols, cohs = [], []
-    freq = None
-    for key in keys:
-        members = [runs[i] for i in groups[key]]
+    groups: dict[tuple[int, tuple[float, ...]], list[TimeRun]] = {}
+    for r in good:
+        groups.setdefault((int(r.exc_node), tuple(np.round(r.exc_dir, 6))), []).append(r)
+    cols: dict[tuple[int, tuple[float, ...]], tuple[Any, Any, Any]] = {}
+    for key, members in groups.items():
         if args.excitation == "impact":
-            results = [_impact(r.force, r.responses, r.fs, args) for r in members]
-            res = merge_results(results)
-            for r, one in zip(members, results, strict=True):
+            results = []
+            for r in members:
+                try:
+                    one = _impact(r, args)
+                except InputError as err:
+                    skipped(args, str(err))
+                    n_bad += 1
+                    continue
+                results.append(one)
                 bad = one.rejected
                 print(f"load case {r.load_case} (node {key[0]}): {one.n_accepted} hits accepted"
                       + (", rejected: " + "; ".join(f"hit {v.index + 1}: {v.reason}"
                                                    for v in bad) if bad else ""))
-            if res.H is None or res.coherence is None:
-                raise UserError(f"excitation node {key[0]}: no accepted hit")
-            H, coh, f = res.H, res.coherence, res.freq
+            if results:
+                res = merge_results(results)
+                cols[key] = (res.H, res.coherence, res.freq)
         else:
-            sp = _random_spectra(members[0].force, members[0].responses, members[0].fs, args)
-            for r in members[1:]:
-                sp = combine(sp, _random_spectra(r.force, r.responses, r.fs, args))
-            H, coh = frf(sp, args.estimator)
-            f = sp.freq
-            print(f"excitation node {key[0]}: {sp.n_averages} averages")
-        cols.append(H)
-        cohs.append(coh)
-        freq = f
-    assert freq is not None
-    H_all = np.concatenate(cols, axis=1)
-    coh_all = np.concatenate(cohs, axis=1)
-    # 0 Hz carries no accelerance information (and NaN estimates): start at the first line;
-    # above fs / 2.56 the DAQ's anti-alias filters shape the data
-    fmax = args.fmax if args.fmax is not None else first.fs / 2.56
+            spectra = []
+            for r in members:
+                try:
+                    if not np.any(r.force):
+                        raise InputError(f"load case {r.load_case}: the force channel is zero "
+                                         "throughout: check the shaker's force channel")
+                    spectra.append(_random_spectra(r, args))
+                except InputError as err:
+                    skipped(args, str(err))
+                    n_bad += 1
+            if spectra:
+                sp = spectra[0]
+                for other in spectra[1:]:
+                    sp = combine(sp, other)
+                H, coh = frf(sp, args.estimator)
+                cols[key] = (H, coh, sp.freq)
+                print(f"excitation node {key[0]}: {sp.n_averages} averages")
+    if not cols:
+        raise UserError(f"{path}: no usable time run ({n_bad} bad run(s), see above)")
+    assert first is not None
+    geometry, _ = read_geometry_uff(path)
+    keys = list(cols)
+    meta = {"estimator": args.estimator, "excitation": args.excitation,
+            "exponential_tau": args.exp_tau if args.excitation == "impact" else None}
+    out, n_undefined = _assemble(
+        cols[keys[0]][2], [cols[k][0] for k in keys], [cols[k][1] for k in keys],
+        first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),
+        np.array([k[1] for k in keys]), geometry, meta,
+        args.fmax if args.fmax is not None else first.fs / 2.56, args)
+    print_checks(out, args.coherence)
+    return out, n_bad + n_undefined
+
+
+# ----------------------------------------------------------------------------------------------
+# shared: columns -> FRF set, checks
+# ----------------------------------------------------------------------------------------------
+def _assemble(freq: NDArray[np.float64], Hs: list[Any], cohs: list[Any],
+              resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64],
+              exc_nodes: NDArray[np.int64], exc_dirs: NDArray[np.float64], geometry: Geometry,
+              meta: dict[str, object], fmax: float,
+              args: argparse.Namespace) -> tuple[FRFSet, int]:
+    """Excitation columns -> FRF set on the lines above 0 Hz up to ``fmax`` Hz.
+
+    A column with undefined values there (no force at those frequencies) is reported and
+    dropped; returns the set and the number of columns dropped.
+    """
     keep = (freq > 0) & (freq <= fmax)
     if np.count_nonzero(keep) < 8:
         raise UserError(f"fewer than 8 lines between 0 and --fmax {fmax:g} Hz: raise --fmax "
                         "or the record length")
-    if not np.all(np.isfinite(H_all[..., keep])):
-        raise UserError("some FRF lines are undefined (no force at those frequencies)")
-    out = FRFSet(
-        freq=freq[keep], H=H_all[..., keep], resp_nodes=first.resp_nodes,
-        resp_dirs=first.resp_dirs, exc_nodes=np.array([k[0] for k in keys]),
-        exc_dirs=np.array([k[1] for k in keys]), geometry=geometry,
-        coherence=np.nan_to_num(coh_all[..., keep]),
-        meta={"estimator": args.estimator, "excitation": args.excitation,
-              "exponential_tau": args.exp_tau if args.excitation == "impact" else None},
-    )
+    H = np.concatenate(Hs, axis=1)[..., keep]
+    coh = np.nan_to_num(np.concatenate(cohs, axis=1)[..., keep])
+    finite = np.all(np.isfinite(H), axis=(0, 2))
+    for j in np.flatnonzero(~finite):
+        n = int(np.count_nonzero(~np.all(np.isfinite(H[:, j]), axis=0)))
+        skipped(args, f"excitation node {exc_nodes[j]}: FRF undefined at {n} lines (no force "
+                      "there): excite the whole band")
+    if not finite.any():
+        raise UserError("every FRF column is undefined somewhere (no force at some "
+                        "frequencies): excite the whole band")
+    out = FRFSet(freq=freq[keep], H=H[:, finite], resp_nodes=resp_nodes, resp_dirs=resp_dirs,
+                 exc_nodes=exc_nodes[finite], exc_dirs=exc_dirs[finite], geometry=geometry,
+                 coherence=coh[:, finite], meta=meta)
+    return out, int(np.count_nonzero(~finite))
+
+
+def print_checks(out: FRFSet, threshold: float) -> None:
+    """Print the coherence gate summary and the rigidity check of an FRF set."""
     assert out.coherence is not None
-    print(coherence_gate(out.coherence, out.freq, args.coherence).summary())
+    print(coherence_gate(out.coherence, out.freq, threshold).summary())
     try:
         print(rigidity_check(out).summary())
     except GeometryError as err:
         print(f"rigidity check not possible: {err}")
-    return out
+
+
+def frfset_from_run_file(path: Path, args: argparse.Namespace) -> tuple[FRFSet, int]:
+    """FRFs of a run file's points, every stored hit processed again as ``insitu replay`` does
+    (``app.acquire.analysis.analyse_records``: the plan's settings, the overrides).
+
+    A point without a usable hit gets one stderr line and is left out; returns the FRF set
+    and the number of such points. The time-data options (but ``--coherence`` and
+    ``--fmax``) do not apply: the plan's record settings do.
+    """
+    from app.acquire.analysis import analyse_records, run_frfs
+    from app.io.runfile import RunFileError, read_run
+
+    try:
+        data = read_run(path)
+    except RunFileError as err:
+        raise UserError(str(err)) from err
+    if len(data.records) == 0:
+        raise UserError(f"{path}: the run holds no hit yet: record hits (insitu acquire)")
+    rows = data.channels
+    fmax = args.fmax if args.fmax is not None else data.records.fs / 2.56
+    if data.method != "hammer":  # shaker runs: the run's own FRFs (every point needed)
+        try:
+            frfs = run_frfs(data)[0]
+        except InputError as err:
+            raise UserError(str(err)) from err
+        out, n_bad = _assemble(frfs.freq, [frfs.H], [frfs.coherence], frfs.resp_nodes,
+                               frfs.resp_dirs, frfs.exc_nodes, frfs.exc_dirs, frfs.geometry,
+                               dict(frfs.meta), fmax, args)
+        print_checks(out, args.coherence)
+        return out, n_bad
+    plan, ana = analyse_records(data)
+    rec = data.records
+    good: list[int] = []
+    results: list[ImpactResult] = []
+    n_bad = 0
+    for j, point in enumerate(plan.excitations):
+        mine = np.flatnonzero(rec.point == j)
+        res = ana.point(j)
+        if res is None or res.H is None or res.coherence is None:
+            why = ("no hit recorded" if mine.size == 0 else
+                   f"every hit rejected ({'; '.join(rec.reason[i] or 'rejected' for i in mine)})")
+            skipped(args, f"{point.label}: {why}: hit it again (insitu acquire --resume)")
+            n_bad += 1
+            continue
+        print(f"{point.label}: {ana.n_used(j)} of {mine.size} hits used")
+        good.append(j)
+        results.append(res)
+    if not results:
+        raise UserError(f"{path}: no point has an accepted hit ({n_bad} points, see above)")
+    col = impact_frfset(results, data.geometry, np.array([c.node for c in rows[1:]]),
+                        np.array([c.direction for c in rows[1:]]), plan.exc_nodes[good],
+                        plan.exc_dirs[good])
+    out, n_undefined = _assemble(col.freq, [col.H], [col.coherence], col.resp_nodes,
+                                 col.resp_dirs, col.exc_nodes, col.exc_dirs, col.geometry,
+                                 col.meta, fmax, args)
+    print_checks(out, args.coherence)
+    return out, n_bad + n_undefined

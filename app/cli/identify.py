@@ -1,12 +1,14 @@
 """``insitu identify FILE.uff``: inertia parameters and mount-system stiffness from FRFs.
 
 The file is a run file (``.h5``, written by ``insitu acquire``: its raw hits are
-processed as ``insitu replay`` does), or a UFF file holding FRFs (dataset 58,
-function type 4) with geometry, or time records
+processed as ``insitu replay`` does), an HDF5 FRF file (``.h5``, written by
+``insitu frf``; the two are told apart by the root attribute ``format``), or a UFF
+file holding FRFs (dataset 58, function type 4) with geometry, or time records
 (function type 1, one run per excitation, see ``insitu frf``): then the FRFs and
 their coherence are computed first with the time-data options below, the coherence
 gate keeps low-coherence lines out of the fit, and an exponential window's damping
-is removed from C.
+is removed from C. Bad time runs are reported on one line each and left out; the
+identification then runs on the others and the exit status is 2.
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ from app.acquire.analysis import analyse_run
 from app.cli.common import UserError
 from app.cli.frf import add_processing_arguments, frfset_from_time_uff
 from app.cli.summary import print_result
+from app.io.frf_h5 import FORMAT as FRF_FORMAT
+from app.io.frf_h5 import h5_format, read_frf_h5
 from app.io.runfile import read_run
 from app.io.uff import read_frf_uff
 from app.io.uff_time import uff_holds_time_data
@@ -34,7 +38,8 @@ def add_parser(sub: Any) -> None:
                        description=__doc__)
     p.add_argument("file", type=Path,
                    help="UFF file with geometry (15/2411) and FRFs or time records (58), "
-                        "or a run file (.h5) written by insitu acquire")
+                        "or a run file (.h5) written by insitu acquire, or an FRF file (.h5) "
+                        "written by insitu frf")
     p.add_argument("--out", type=Path, help="write the result JSON here")
     p.add_argument("--mass-band", nargs=2, type=float, metavar=("LO", "HI"),
                    help="mass-line band in Hz (default: chosen from the data)")
@@ -65,6 +70,9 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
 def run(args: argparse.Namespace) -> int:
     if args.refine_points < 0:
         raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
+    if args.file.suffix.lower() in (".h5", ".hdf5") and h5_format(args.file) == FRF_FORMAT:
+        frf = read_frf_h5(args.file)
+        return _report(args, frf, identify(frf, options_from(args)))
     if args.file.suffix.lower() in (".h5", ".hdf5"):  # a run file: raw hits -> FRFs -> result
         data = read_run(args.file)
         if len(data.records) == 0:
@@ -73,9 +81,9 @@ def run(args: argparse.Namespace) -> int:
         return _report(args, frf, result)
     if uff_holds_time_data(args.file):
         print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")
-        frf = frfset_from_time_uff(args.file, args)
-    else:
-        frf = read_frf_uff(args.file)
+        frf, n_bad = frfset_from_time_uff(args.file, args)
+        return max(_report(args, frf, identify(frf, options_from(args))), 2 if n_bad else 0)
+    frf = read_frf_uff(args.file)
     return _report(args, frf, identify(frf, options_from(args)))
 
 

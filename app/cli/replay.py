@@ -1,7 +1,9 @@
 """``insitu replay RUN.h5``: recompute FRFs and the identification from a run's raw records.
 
-Uses the same code as the live run, on the records as stored, with the operator's
-overrides: the FRFs and the result are identical to the live run's.
+Uses the same code as the live run (hammer hits or shaker blocks), on the records
+as stored, with the operator's overrides: the FRFs and the result are identical to
+the live run's. A run whose force was aligned by host timing only is refused.
+To change an override, see ``insitu acquire --resume --override``.
 """
 
 from __future__ import annotations
@@ -31,11 +33,12 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     data = read_run(args.file)
     if len(data.records) == 0:
-        raise UserError(f"{args.file}: the run holds no hit yet")
+        raise UserError(f"{args.file}: the run holds no record yet")
     frf, result, _ = analyse_run(data)
+    what = "blocks" if data.method == "shaker" else "hits"
     console = Console()
     acc = int(np.count_nonzero(data.records.accepted))
-    console.print(f"[bold]{args.file}[/bold] ({data.state}): {len(data.records)} hits, "
+    console.print(f"[bold]{args.file}[/bold] ({data.state}): {len(data.records)} {what}, "
                   f"{acc} used, {frf.H.shape[0]} x {frf.H.shape[1]} FRFs")
     if data.frf is not None:
         same = np.array_equal(data.frf.H, frf.H) and data.result == json.loads(

@@ -83,10 +83,23 @@ def checks_table(result: IdentificationResult) -> Table:
     for name, c in result.checks().items():
         figs = ", ".join(
             f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
-            for k, v in c.items() if k != "pass"
+            for k, v in c.items() if k not in ("pass", "dropped_ranges_hz")
         )
         t.add_row(name, "[green]pass[/green]" if c["pass"] else "[red]FAIL[/red]", figs)
     return t
+
+
+def coherence_line(result: IdentificationResult) -> str:
+    """How many (excitation, line) values the coherence gate dropped in the bands, and where."""
+    if not result.coherence_checked:
+        return "Coherence: not measured (no coherence in the input), nothing dropped"
+    if result.coherence_dropped == 0:
+        return f"Coherence >= {result.coherence_threshold:g} on every line of the bands"
+    ranges = result.coherence_ranges_hz
+    where = ", ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in ranges[:8])
+    more = f" and {len(ranges) - 8} more ranges" if len(ranges) > 8 else ""
+    return (f"Coherence < {result.coherence_threshold:g}: {result.coherence_dropped} "
+            f"(excitation, line) values dropped from the bands, at {where}{more}")
 
 
 def print_result(
@@ -113,5 +126,6 @@ def print_result(
         )
     )
     con.print(checks_table(result))
+    con.print(coherence_line(result))
     for w in result.warnings:
         con.print(f"[yellow]warning:[/yellow] {w}")

@@ -84,6 +84,13 @@ class RecordTable:
     missing: NDArray[np.int32]
     force_raw: NDArray[np.float64] | None = None  # (n, n_raw) hammer force at fs_raw
     fs_raw: float = 0.0
+    #: how the force row is put on the front end's clock: "same-device", "common-channel"
+    #: (a separate force device aligned per hit on the front end's copy of the force) or
+    #: "host-timed" (a separate device aligned by host timing only, about 1 ms)
+    force_alignment: str = "same-device"
+    sync_channel: str = ""
+    sync: NDArray[np.float64] | None = None  # (n, n_samples) common channel, N
+    sync_offset: NDArray[np.float64] | None = None  # (n,) correction it gave, s
 
     def __len__(self) -> int:
         return int(self.point.size)
@@ -150,12 +157,18 @@ class RunWriter:
     def create(cls, path: str | Path, *, plan_data: Mapping[str, Any],
                station_data: Mapping[str, Any], channels: Sequence[ChannelConfig],
                devices: Sequence[str], geometry: Geometry, fs: float, n_samples: int,
-               method: str, fs_raw: float = 0.0, n_raw: int = 0) -> RunWriter:
+               method: str, fs_raw: float = 0.0, n_raw: int = 0,
+               force_alignment: str = "", sync_channel: str = "",
+               attrs: Mapping[str, Any] | None = None) -> RunWriter:
         """A new run file (overwrites ``path``).
 
         ``channels`` are the rows of every record (force first), ``devices`` the device each
         comes from; records are ``n_samples`` long at ``fs`` Hz; ``n_raw`` > 0 stores the
-        hammer's own force samples (``fs_raw`` Hz) of every hit as well.
+        hammer's own force samples (``fs_raw`` Hz) of every hit as well. ``force_alignment``
+        (default: ``same-device``, or ``host-timed`` with ``n_raw``) says how the force row
+        was put on the front end's clock; a ``sync_channel`` (common channel) adds its
+        record and the correction it gave per record. ``attrs`` are extra ``/records``
+        attributes (the shaker's window, for instance).
         """
         p = Path(path)
         try:
@@ -184,10 +197,17 @@ class RunWriter:
         rec = f.create_group("records")
         rec.attrs["fs"] = float(fs)
         rec.attrs["fs_raw"] = float(fs_raw)
+        rec.attrs["force_alignment"] = force_alignment or (
+            "host-timed" if n_raw else "same-device")
+        rec.attrs["sync_channel"] = sync_channel
+        rec.attrs.update(dict(attrs or {}))
         _column(rec, "data", "f8", "see /channels/unit", (len(channels), int(n_samples)))
         rec["data"].attrs["units"] = np.array([c.unit for c in channels], dtype="S16")
         if n_raw:
             _column(rec, "force_raw", "f8", "N", (int(n_raw),))
+        if sync_channel:
+            _column(rec, "sync", "f8", "N", (int(n_samples),))
+            _column(rec, "sync_offset", "f8", "s")
         for name, (dtype, unit) in _COLUMNS.items():
             _column(rec, name, dtype, unit)
         notes = f.create_group("notes")
@@ -231,8 +251,14 @@ class RunWriter:
 
     def add_record(self, point: int, data: NDArray[np.float64], *, time: float,
                    peak_force: float, auto_accepted: bool, reason: str, bad_frames: int = 0,
-                   missing: int = 0, force_raw: NDArray[np.float64] | None = None) -> int:
-        """Append one record with its verdict and flush; returns its index."""
+                   missing: int = 0, force_raw: NDArray[np.float64] | None = None,
+                   sync: NDArray[np.float64] | None = None,
+                   sync_offset: float = float("nan")) -> int:
+        """Append one record with its verdict and flush; returns its index.
+
+        ``sync`` is the common channel's record (N) and ``sync_offset`` the alignment
+        correction it gave (s), for a run created with a ``sync_channel``.
+        """
         rec = self._f["records"]
         i = self.n_records
         values = {"point": point, "time": time, "peak_force": peak_force,
@@ -248,6 +274,11 @@ class RunWriter:
                 raw[:k] = force_raw[:k]
             rec["force_raw"].resize(i + 1, axis=0)
             rec["force_raw"][i] = raw
+        if "sync" in rec:
+            rec["sync"].resize(i + 1, axis=0)
+            rec["sync"][i] = np.nan if sync is None else sync
+            rec["sync_offset"].resize(i + 1, axis=0)
+            rec["sync_offset"][i] = sync_offset
         for name, v in values.items():  # columns last: a record counts once its point is in
             ds = rec[name]
             ds.resize(i + 1, axis=0)
@@ -364,9 +395,12 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
     n = min(rec[c].shape[0] for c in _COLUMNS)  # rows complete in every column
     n = min(n, rec["data"].shape[0])
     data = rec["data"][:n] if with_data else np.zeros((0, *rec["data"].shape[1:]))
-    raw = None
+    raw = sync = None
     if "force_raw" in rec and with_data:
         raw = rec["force_raw"][:n]
+    if "sync" in rec and with_data:
+        sync = rec["sync"][:n]
+    fs_raw = float(rec.attrs.get("fs_raw", 0.0))
     records = RecordTable(
         data=np.asarray(data, dtype=float), fs=float(rec.attrs["fs"]),
         point=rec["point"][:n], time=rec["time"][:n], peak_force=rec["peak_force"][:n],
@@ -374,7 +408,11 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
         reason=tuple(_str(x) for x in rec["reason"][:n]),
         override=tuple(_OVERRIDE_NAMES.get(int(x), "") for x in rec["override"][:n]),
         bad_frames=rec["bad_frames"][:n], missing=rec["missing"][:n],
-        force_raw=raw, fs_raw=float(rec.attrs.get("fs_raw", 0.0)))
+        force_raw=raw, fs_raw=fs_raw,
+        force_alignment=_str(rec.attrs.get("force_alignment",
+                                           "host-timed" if fs_raw else "same-device")),
+        sync_channel=_str(rec.attrs.get("sync_channel", "")), sync=sync,
+        sync_offset=rec["sync_offset"][:n] if "sync_offset" in rec else None)
     nt = f["notes"]
     k = min(nt["time"].shape[0], nt["text"].shape[0])
     notes = tuple((float(t), _str(x)) for t, x in zip(nt["time"][:k], nt["text"][:k],

@@ -275,8 +275,8 @@ def read_time_uff(
             runs.append(_run(load_case, items, units, rotations))
         except InputError as err:
             problems.append((load_case, str(err)))
-    for _, message in problems:
-        log.warning("%s: %s", p.name, message)
+    for _, message in problems:  # the caller gets them (strict=False) or the first raises
+        log.info("%s: %s", p.name, message)
     if strict:
         if problems:
             more = f" ({len(problems) - 1} more run(s) with problems)" if len(problems) > 1 else ""

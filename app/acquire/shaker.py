@@ -1,0 +1,369 @@
+"""The shaker procedure: per point attach, drive, ramp up, average blocks, ramp down.
+
+Same listener events and run file as :class:`~app.acquire.hammer.HammerProcedure`
+(records are blocks, ``/`` attribute ``method = "shaker"``). Per excitation point:
+``on_next_point`` (the operator attaches the shaker there; with ``confirm_attach``
+the run pauses until :meth:`resume`), waveform and level from the plan's
+``[shaker]`` section, output on with its ramp, ``settle`` s streamed and dropped,
+then blocks of ``nperseg`` samples from the front end (force sensor on its force
+input, same clock), each stored and flushed, judged and averaged
+(:mod:`app.acquire.blocks`), until ``averages`` blocks are accepted; then the
+output ramps down and goes off.
+
+The output goes off at the end of each point, on pause and stop, on any error
+(the run pauses on a device error, fails on anything else) and when the
+procedure dies: with an SG-1 (``shaker-scpi``) the device's watchdog is fed by
+the procedure's own worker, after every read, not by a free-running thread, so a
+worker that hangs (a listener blocking it, a deadlock) turns the output off
+within ``heartbeat`` s as surely as a killed process does.
+
+Example
+-------
+>>> proc = ShakerProcedure(plan, bench.station, "run.h5",  # doctest: +SKIP
+...                        listeners=[bench.shaker_operator])
+>>> proc.start(); proc.wait()  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.acquire.analysis import identify_frfs
+from app.acquire.blocks import WINDOWS, BlockAnalysis, block_verdict, shaker_frfset
+from app.acquire.events import HitRecord, PointFRF, Progress
+from app.acquire.hammer import station_summary
+from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
+from app.acquire.procedure import Procedure
+from app.acquire.shaker_io import BlockStream, ShakerDrive
+from app.io.runfile import RunWriter, read_run
+from drivers.base import AcquisitionFrontEnd, ChannelConfig, ExcitationDevice
+from drivers.errors import DeviceError
+from drivers.registry import create_device, get_backend
+from drivers.station import StationConfig
+from processing.data import FRFSet, InputError
+from processing.geometry import GeometryError, GeometryReport
+from processing.identify import IdentificationResult
+
+__all__ = ["ShakerProcedure"]
+
+logger = logging.getLogger(__name__)
+
+
+class ShakerProcedure(Procedure):
+    """Shaker acquisition of a test plan into one run file.
+
+    Parameters
+    ----------
+    plan : TestPlan or None
+        A plan with ``method = "shaker"`` (None with ``resume=True``: the file's).
+    station : StationConfig
+        The responses and a force channel on one front end, and an excitation device.
+    path : str or Path
+        The run file to write (or to continue with ``resume=True``).
+    listeners : iterable
+        :class:`~app.acquire.events.Listener`-like objects.
+    resume : bool
+        Continue the run in ``path``.
+    device_options : mapping
+        Per device name, keyword overrides for the driver.
+    identify, partial : bool
+        As for :class:`~app.acquire.hammer.HammerProcedure`.
+    force_channel : str, optional
+        The front end's force channel (default: its first).
+    shaker : str, optional
+        The station's excitation device (default: its only one).
+    confirm_attach : bool
+        Pause at each point until the operator resumes (the shaker is attached there).
+    heartbeat : float
+        Watchdog time armed on an SG-1, s (the worker beats after every 0.1 s read).
+    """
+
+    def __init__(self, plan: TestPlan | None, station: StationConfig, path: str | Path, *,
+                 listeners: Iterable[Any] = (), resume: bool = False,
+                 device_options: Mapping[str, Mapping[str, Any]] | None = None,
+                 identify: bool = True, partial: bool = False,
+                 force_channel: str | None = None, shaker: str | None = None,
+                 confirm_attach: bool = False, heartbeat: float = 0.5) -> None:
+        super().__init__(listeners)
+        self.path = Path(path)
+        self.resume_file = resume
+        if plan is None:
+            if not resume:
+                raise PlanError("give a test plan (or resume a run file)")
+            plan = parse_plan(read_run(self.path, with_data=False).plan_data,
+                              f"{self.path}:/plan")
+        if plan.method != "shaker":
+            raise PlanError(f"{plan.source}: plan.method is {plan.method!r}; "
+                            "this is the shaker procedure")
+        self.plan, self.station = plan, station
+        self.device_options = {k: dict(v) for k, v in (device_options or {}).items()}
+        self.do_identify = identify
+        self.confirm_attach = confirm_attach
+        self.heartbeat = heartbeat
+        self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
+        self._resolve(force_channel, shaker)
+        self.analysis = BlockAnalysis(plan, [c.name for c in self.rows], np.array(
+            [c.range_v * 1000.0 / c.sensitivity for c in self.rows]))
+        self.frontend: AcquisitionFrontEnd | None = None
+        self.drive: ShakerDrive | None = None
+        self.stream: BlockStream | None = None
+        self.writer: RunWriter | None = None
+        self.point_index = 0
+        self.frf: FRFSet | None = None
+        self.result: IdentificationResult | None = None
+        self.hits: list[HitRecord] = []
+        self._auto: dict[int, bool] = {}
+        self._t0 = time.monotonic()
+        self._t_offset = 0.0
+
+    # -- set-up ---------------------------------------------------------------------------------
+    def _resolve(self, force_choice: str | None, shaker_choice: str | None) -> None:
+        st, plan = self.station, self.plan
+        resp = plan.response_channels(st)
+        owner = {c.name: d.name for d in st.devices.values() for c in d.channels}
+        refs = sorted({owner[c.name] for c in resp})
+        if len(refs) != 1:
+            raise PlanError(f"{plan.source}: the responses are on devices {', '.join(refs)};"
+                            " put them on one front end")
+        self.ref_name = refs[0]
+        forces = [c for c in st.devices[self.ref_name].channels if c.quantity == "force"
+                  and (force_choice is None or c.name == force_choice)]
+        if not forces:
+            which = f" {force_choice!r}" if force_choice else ""
+            raise PlanError(f"{st.source}: no force channel{which} on front end "
+                            f"{self.ref_name!r}: wire the shaker's force sensor to it (one "
+                            "clock for force and responses)")
+        self.force_channel = forces[0]
+        self.rows: tuple[ChannelConfig, ...] = (self.force_channel, *resp)
+        shakers = [d.name for d in st.devices.values()
+                   if issubclass(get_backend(d.backend), ExcitationDevice)
+                   and (shaker_choice is None or d.name == shaker_choice)]
+        if len(shakers) != 1:
+            raise PlanError(f"{st.source}: " + (f"no excitation device {shaker_choice!r}"
+                            if shaker_choice else f"{len(shakers)} excitation devices: "
+                            "give one (shaker=...)" if shakers else
+                            "no excitation device (a shaker backend such as shaker-scpi)"))
+        self.shaker_name = shakers[0]
+
+    def _open_devices(self) -> None:
+        fe = create_device(self.station.devices[self.ref_name],
+                           **self.device_options.get(self.ref_name, {}))
+        if not isinstance(fe, AcquisitionFrontEnd):
+            raise PlanError(f"{self.station.source}: {self.ref_name!r} is not a front end")
+        self.frontend = fe
+        fe.open()
+        if fe.fs != self.plan.record.fs:
+            raise PlanError(f"{self.plan.source}: record.fs is {self.plan.record.fs:g} Hz but "
+                            f"front end {self.ref_name!r} runs at {fe.fs:g} Hz: make them equal")
+        cfg = self.station.devices[self.shaker_name]
+        opts = dict(self.device_options.get(self.shaker_name, {}))
+        if cfg.backend == "shaker-scpi":  # the worker feeds the watchdog (see the module doc)
+            opts = {"ramp": self.plan.shaker.ramp, "heartbeat": 0.0, **opts}
+        dev = create_device(cfg, **opts)
+        if not isinstance(dev, ExcitationDevice):
+            raise PlanError(f"{self.station.source}: {self.shaker_name!r} is not a shaker")
+        self.drive = ShakerDrive(dev, self.plan, self.heartbeat)
+        self.drive.open()
+        names = [c.name for c in fe.channels]
+        self.stream = BlockStream(fe, [names.index(c.name) for c in self.rows], self.plan,
+                                  self.drive.beat)
+
+    def _open_file(self) -> None:
+        s = self.plan.shaker
+        if self.resume_file:
+            run = read_run(self.path)
+            if tuple(c.name for c in run.channels) != tuple(c.name for c in self.rows):
+                raise PlanError(f"{self.path}: recorded channels differ from the station's; "
+                                "resume with the same station")
+            self.writer = RunWriter.resume(self.path)
+            rec = run.records
+            for i in range(len(rec)):
+                self._replay_row(i, int(rec.point[i]), rec.data[i], bool(rec.auto_accepted[i]),
+                                 rec.override[i])
+            self._t_offset = float(rec.time.max()) + 1.0 if len(rec) else 0.0
+            return
+        self.writer = RunWriter.create(
+            self.path, plan_data=self.plan.to_dict(), station_data=station_summary(self.station),
+            channels=self.rows, devices=[self.ref_name] * len(self.rows),
+            geometry=self.plan.geometry(), fs=self.plan.record.fs, n_samples=s.nperseg,
+            method="shaker", attrs={"waveform": s.waveform, "window": WINDOWS[s.waveform],
+                                    "shaker": self.shaker_name})
+
+    def _replay_row(self, i: int, point: int, data: NDArray[np.float64], stored_auto: bool,
+                    override: str) -> None:
+        v = self.analysis.add(i, point, data, override)
+        auto = stored_auto and v is not None and v[0]
+        self._auto[i] = auto
+        self.analysis.set_used(i, v is not None and (override == "accept" if override else auto))
+
+    # -- procedure ------------------------------------------------------------------------------
+    def startup(self) -> None:
+        self._open_devices()
+        self._open_file()
+        self._t0 = time.monotonic()
+
+    def execute(self) -> None:
+        assert self.stream is not None
+        self.stream.start()
+        while todo := [p for p in self.plan.excitations
+                       if self.analysis.n_used(p.index) < self.plan.shaker.averages]:
+            self._acquire_point(todo[0])
+        self.stream.stop()
+        self._complete()
+
+    def _acquire_point(self, point: ExcitationPoint) -> None:
+        assert self.stream is not None and self.drive is not None
+        self.point_index = point.index
+        self.emit("on_next_point", point)
+        if self.confirm_attach:
+            self.pause_for(f"attach the shaker at {point.label}, then resume")
+        need = self.plan.shaker.averages
+        while self.analysis.n_used(point.index) < need:
+            self.poll()
+            try:
+                if not self.drive.driving:
+                    self.drive.on(self.stream)
+                    self.stream.restart_blocks()
+                block = self.stream.next_block()
+                problem = self.drive.check()
+            except DeviceError as err:
+                self._stop_drive_quietly()
+                self.pause_for(f"{err}; acquired blocks are saved. Check the devices, "
+                               "then resume")
+                self.emit("on_next_point", point)
+                continue
+            if problem and block is None:  # the block in progress, NaN-padded: kept, unused
+                block = self.stream.take_partial()
+            if block is not None:
+                self._store(point, block, problem)
+            if problem:
+                self._stop_drive_quietly()
+                self.pause_for(f"{problem}; acquired blocks are saved. Check the shaker, "
+                               "then resume")
+                self.emit("on_next_point", point)
+        self.drive.off(self.stream)
+
+    def _stop_drive_quietly(self) -> None:
+        if self.drive is not None:
+            self.drive.emergency_off()
+
+    def on_pause(self) -> None:
+        self._stop_drive_quietly()
+        if self.stream is not None:
+            self.stream.stop()
+
+    def on_resume(self) -> None:
+        self._close_devices()
+        self._open_devices()
+        assert self.stream is not None
+        self.stream.start()
+
+    def _close_devices(self) -> None:
+        if self.drive is not None:
+            self.drive.shutdown()  # output off first
+            self.drive = None
+        if self.frontend is not None:
+            try:
+                self.frontend.shutdown()
+            except DeviceError as err:
+                logger.warning("%s: shutdown failed: %s", self.frontend.name, err)
+            self.frontend = None
+        self.stream = None
+
+    def shutdown(self) -> None:
+        self._close_devices()
+        if self.writer is not None:
+            state = self.state.value if self.state.value != "running" else "failed"
+            if self.frf is None:
+                self.writer.finish(state, self.message)
+            self.writer = None
+
+    # -- blocks ---------------------------------------------------------------------------------
+    def _store(self, point: ExcitationPoint, data: NDArray[np.float64], problem: str) -> None:
+        assert self.writer is not None and self.stream is not None
+        hit_id = self.writer.n_records
+        v = self.analysis.add(hit_id, point.index, data)
+        auto, reason, peak = v if v is not None else block_verdict(
+            data, self.analysis.names, self.analysis.ranges)
+        if problem:
+            auto, reason = False, problem
+        missing = int(np.count_nonzero(np.isnan(data).any(axis=0)))
+        bad = self.stream.take_bad_frames()
+        t = time.monotonic() - self._t0 + self._t_offset
+        self.writer.add_record(point.index, data, time=t, peak_force=peak, auto_accepted=auto,
+                               reason=reason, bad_frames=bad, missing=missing)
+        self._auto[hit_id] = auto
+        self.analysis.set_used(hit_id, auto and v is not None)
+        self._report(HitRecord(hit_id, point.index, t, peak, auto, reason, "", bad, missing,
+                               data=data, fs=self.plan.record.fs))
+
+    def _report(self, hit: HitRecord) -> None:
+        need = self.plan.shaker.averages
+        hit = HitRecord(**{**hit.__dict__, "point_accepted": self.analysis.n_used(hit.point),
+                           "point_needed": need})
+        if hit.hit_id < len(self.hits):
+            self.hits[hit.hit_id] = hit
+        else:
+            self.hits.append(hit)
+        if not hit.accepted:
+            logger.info("block %d at %s rejected: %s", hit.hit_id, hit.point, hit.reason)
+        self.emit("on_hit", hit)
+        res = self.analysis.point(hit.point)
+        self.emit("on_frf", PointFRF(
+            hit.point, res.freq if res is not None else np.zeros(0),
+            None if res is None else res.H[:, 0, :],
+            None if res is None else res.coherence[:, 0, :],
+            0 if res is None else res.n_accepted))
+        bad = self.frontend.health.bad_frames if self.frontend is not None else 0
+        self.emit("on_progress", Progress(
+            self.point_index, len(self.plan.excitations), self.analysis.n_used(self.point_index),
+            need, len(self.hits), sum(h.accepted for h in self.hits), bad,
+            time.monotonic() - self._t0))
+
+    def apply_override(self, hit_id: int, override: str) -> None:
+        if self.writer is None or not 0 <= hit_id < self.writer.n_records:
+            self.emit("on_error", f"no block {hit_id} to override")
+            return
+        old = self.hits[hit_id] if hit_id < len(self.hits) else None
+        if old is not None and old.data is not None:
+            point, data = old.point, old.data
+        else:
+            rec = read_run(self.path).records
+            point, data = int(rec.point[hit_id]), rec.data[hit_id]
+        if override == "accept" and not np.all(np.isfinite(data)):
+            self.emit("on_error", f"block {hit_id} lost samples and cannot be used")
+            return
+        self.writer.set_override(hit_id, override)
+        auto = self._auto.get(hit_id, False)
+        self.analysis.add(hit_id, point, data, override)
+        self.analysis.set_used(hit_id, override == "accept" or (not override and auto))
+        if old is not None:
+            self._report(HitRecord(**{**old.__dict__, "override": override}))
+
+    def apply_note(self, text: str) -> None:
+        if self.writer is not None:
+            self.writer.add_note(text, time.monotonic() - self._t0 + self._t_offset)
+
+    def _complete(self) -> None:
+        assert self.writer is not None
+        points = [self.analysis.point(j) for j in range(len(self.plan.excitations))]
+        frf = shaker_frfset(self.plan, points, self.plan.geometry(),
+                            *self.plan.response_dofs(self.station))
+        self.frf = frf
+        message, result_json = "", None
+        if self.do_identify and self.geometry_report.ok:
+            try:
+                self.result = identify_frfs(frf)
+                result_json = self.result.to_json()
+            except (InputError, GeometryError) as err:
+                message = f"identification failed: {err}"
+                self.emit("on_error", message)
+        self.writer.finish("finished", message, frf, result_json)
+        self.writer = None

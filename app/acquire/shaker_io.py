@@ -1,0 +1,254 @@
+"""The shaker procedure's two devices: the drive (output, ramps, watchdog) and the block stream.
+
+:class:`ShakerDrive` sets the plan's waveform and level, ramps the output up and
+down while the front end keeps streaming, checks after each block that the
+output is still on, and feeds an SG-1's watchdog from the calling (worker)
+thread. :class:`BlockStream` reads the front end about ten times a second and
+cuts blocks of ``nperseg`` samples: consecutive for random and chirp, starting
+at each burst (found on the force) for burst random.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.acquire.plan import TestPlan
+from drivers.base import AcquisitionFrontEnd, DeviceState, ExcitationDevice
+from drivers.errors import DeviceError, DeviceTimeoutError
+from drivers.shaker_scpi import ScpiShaker, ShakerError
+
+__all__ = ["BURST_PRE", "BlockStream", "ShakerDrive", "burst_onset"]
+
+logger = logging.getLogger(__name__)
+
+#: samples kept before a detected burst onset
+BURST_PRE = 2
+
+
+class ShakerDrive:
+    """The excitation device as the procedure drives it (worker thread only).
+
+    Parameters
+    ----------
+    device : ExcitationDevice
+        Built, not opened.
+    plan : TestPlan
+        Its ``[shaker]`` section and ``record.fs`` (the burst and chirp period is one
+        block, ``nperseg / fs`` s).
+    heartbeat : float
+        SG-1 watchdog time, s; :meth:`beat` sends a heartbeat at most every fifth of it.
+    """
+
+    def __init__(self, device: ExcitationDevice, plan: TestPlan, heartbeat: float) -> None:
+        self.device = device
+        self.settings = plan.shaker
+        self.fs = plan.record.fs
+        self.heartbeat = heartbeat
+        self.scpi = isinstance(device, ScpiShaker)
+        self.driving = False
+        self._last_beat = 0.0
+
+    def open(self) -> None:
+        """Open the device and arm its watchdog (fed by :meth:`beat`)."""
+        self.device.open()
+        if isinstance(self.device, ScpiShaker) and self.heartbeat > 0:
+            self.device.command(f"SYST:HEART:TIM {self.heartbeat:g}")
+
+    def beat(self) -> None:
+        """Feed the watchdog (call it from the worker after every read)."""
+        now = time.monotonic()
+        if (isinstance(self.device, ScpiShaker) and self.heartbeat > 0
+                and now - self._last_beat >= self.heartbeat / 5):
+            self.device.write("SYST:HEART")
+            self._last_beat = now
+
+    def _params(self) -> dict[str, float]:
+        s = self.settings
+        period = s.nperseg / self.fs
+        if s.waveform == "random":
+            return {"f_start": s.f_start, "f_stop": s.f_stop}
+        if s.waveform == "chirp":
+            return {"f_start": s.f_start, "f_stop": s.f_stop, "period": period}
+        return {"f_start": s.f_start, "f_stop": s.f_stop, "period": period, "burst": s.duty}
+
+    def on(self, stream: BlockStream) -> None:
+        """Waveform, level, output on; stream through the ramp and the settling time."""
+        s = self.settings
+        dev = self.device
+        dev.set_waveform(s.waveform, **self._params())
+        dev.set_level(s.level)
+        dev.start()
+        self.driving = True
+        deadline = time.monotonic() + s.ramp + 3.0
+        if isinstance(dev, ScpiShaker):
+            while abs(dev.output_level() - s.level) > 1e-6 * max(1.0, s.level):
+                problem = self.check()
+                if problem:
+                    raise ShakerError(problem, dev.name, 0, problem)
+                if time.monotonic() > deadline:
+                    raise DeviceTimeoutError(f"{dev.name}: output ramp not done in "
+                                             f"{s.ramp + 3.0:g} s", dev.name)
+                stream.discard(stream.CHUNK)
+        else:
+            stream.discard(s.ramp)
+        stream.discard(s.settle)
+        logger.info("%s: %s at %g V, ramped and settled", dev.name, s.waveform, s.level)
+
+    def check(self) -> str:
+        """"" while the output is on, else why it went off (device errors read)."""
+        dev = self.device
+        if isinstance(dev, ScpiShaker):
+            if dev.output_is_on():
+                return ""
+            errs = dev.errors()
+            why = "; ".join(f"{c} {t}" for c, t in errs) or "no error reported"
+            return f"{dev.name}: output went off during the block ({why})"
+        return "" if dev.state is DeviceState.RUNNING else f"{dev.name}: output is off"
+
+    def off(self, stream: BlockStream) -> None:
+        """Ramp the output down and turn it off, streaming until it is at 0."""
+        dev = self.device
+        dev.stop()
+        self.driving = False
+        if isinstance(dev, ScpiShaker):
+            deadline = time.monotonic() + self.settings.ramp + 3.0
+            while dev.output_level() > 0 and time.monotonic() < deadline:
+                stream.discard(stream.CHUNK)
+        else:
+            stream.discard(self.settings.ramp)
+
+    def emergency_off(self) -> None:
+        """Output off now, whatever the state (errors logged, never raised)."""
+        self.driving = False
+        try:
+            self.device.stop()
+            if isinstance(self.device, ScpiShaker):
+                self.device.write("OUTP OFF")
+        except DeviceError as err:
+            logger.error("%s: could not turn the output off: %s", self.device.name, err)
+
+    def shutdown(self) -> None:
+        """Output off and release the device (idempotent; errors logged)."""
+        self.driving = False
+        try:
+            self.device.shutdown()
+        except DeviceError as err:
+            logger.error("%s: shutdown failed: %s", self.device.name, err)
+
+
+def burst_onset(force: NDArray[np.float64], quiet: int, threshold: float) -> int | None:
+    """First sample where ``|force|`` exceeds ``threshold`` after ``quiet`` samples below it.
+
+    Examples
+    --------
+    >>> burst_onset(np.array([0, 3.0, 0, 0, 0, 0.01, 2, 1]), quiet=3, threshold=0.1)
+    6
+    """
+    f = np.abs(np.asarray(force, dtype=float))
+    loud = ~(f <= threshold)  # NaN counts as loud: a lost sample is no proof of silence
+    c = np.concatenate([[0], np.cumsum(loud)])
+    k = np.arange(quiet, f.size)
+    ok = loud[quiet:] & (c[k] - c[k - quiet] == 0)
+    hits = np.flatnonzero(ok)
+    return int(k[hits[0]]) if hits.size else None
+
+
+class BlockStream:
+    """Blocks of the plan's rows (force first) from the front end, worker thread only.
+
+    Parameters
+    ----------
+    frontend : AcquisitionFrontEnd
+        Opened.
+    rows : sequence of int
+        Rows of its blocks to keep: the force, then the plan's responses.
+    plan : TestPlan
+    beat : callable
+        Called after every read (the shaker's watchdog).
+    """
+
+    CHUNK = 0.1  # s per read
+
+    def __init__(self, frontend: AcquisitionFrontEnd, rows: Sequence[int], plan: TestPlan,
+                 beat: Callable[[], None]) -> None:
+        self.fe = frontend
+        self.rows = list(rows)
+        self.n = plan.shaker.nperseg
+        self.burst = plan.shaker.waveform == "burst-random"
+        self.quiet = max(2, int(0.5 * (1.0 - plan.shaker.duty) * self.n))
+        self.beat = beat
+        self._buf = np.zeros((len(self.rows), 0))
+        self._bad_seen = 0
+
+    def start(self) -> None:
+        self.fe.start()
+        self._buf = np.zeros((len(self.rows), 0))
+        self._bad_seen = self.fe.health.bad_frames
+
+    def stop(self) -> None:
+        self.fe.stop()
+
+    def read(self) -> None:
+        """Read about 0.1 s into the buffer and feed the watchdog (device errors raise)."""
+        n = max(1, int(self.fe.fs * self.CHUNK))
+        block = self.fe.read_block(n, timeout=2.0)
+        self.beat()
+        self._buf = np.concatenate([self._buf, block.data[self.rows]], axis=1)
+        if self._buf.shape[1] > 4 * self.n:  # no block found in that much: keep the newest
+            self._buf = self._buf[:, -2 * self.n:]
+
+    def discard(self, seconds: float) -> None:
+        """Stream ``seconds`` and drop them (ramps, settling)."""
+        end = time.monotonic() + seconds
+        while True:
+            self.read()
+            self._buf = self._buf[:, :0]
+            if time.monotonic() >= end:
+                return
+
+    def restart_blocks(self) -> None:
+        """The next block starts with the next samples read."""
+        self._buf = self._buf[:, :0]
+
+    def take_partial(self) -> NDArray[np.float64] | None:
+        """The samples of the block in progress, NaN-padded to a block (None if none);
+        the buffer is emptied."""
+        k = min(self._buf.shape[1], self.n)
+        if k == 0:
+            return None
+        out = np.full((self._buf.shape[0], self.n), np.nan)
+        out[:, :k] = self._buf[:, :k]
+        self._buf = self._buf[:, :0]
+        return out
+
+    def take_bad_frames(self) -> int:
+        """Corrupted frames seen since the last call."""
+        now = self.fe.health.bad_frames
+        n, self._bad_seen = now - self._bad_seen, now
+        return n
+
+    def next_block(self) -> NDArray[np.float64] | None:
+        """Read once; return the next complete block (rows, nperseg) or None yet."""
+        self.read()
+        start = 0
+        if self.burst:
+            f = self._buf[0]
+            finite = np.abs(f[np.isfinite(f)])
+            if finite.size == 0 or finite.max() == 0:
+                return None
+            k = burst_onset(f, self.quiet, 0.02 * float(finite.max()))
+            if k is None:
+                return None
+            start = max(0, k - BURST_PRE)
+        if self._buf.shape[1] - start < self.n:
+            return None
+        out = self._buf[:, start:start + self.n].copy()
+        # a burst's block ends in its quiet tail, which is the next burst's quiet lead
+        keep = start + self.n - (self.quiet if self.burst else 0)
+        self._buf = self._buf[:, keep:]
+        return out

@@ -1,0 +1,95 @@
+"""``insitu frf RUN.h5``: the run file's hits processed as replay does, bad points reported."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from app.acquire import plan_for_bench
+from app.acquire.analysis import hit_result, margin_samples, point_result
+from app.cli.main import main
+from app.io.frf_h5 import read_frf_h5
+from app.io.runfile import RunWriter
+from drivers.base import ChannelConfig
+from hardware_mocks.benches import get_bench
+from hardware_mocks.signals import half_sine, impulse_response, simulate
+
+FS = 256.0
+POINTS = [0, 7, 9]
+
+
+def _hit(k: int, double: bool = False) -> np.ndarray:
+    """One stored record (force N, accelerations m/s^2) of a hit at bench excitation ``k``."""
+    b = get_bench("engine-rigid")
+    g = b.geometry
+    plan = plan_for_bench("engine-rigid", points=POINTS, fs=FS, length=4.0, pretrigger=0.25)
+    n = plan.record.n_samples + 2 * margin_samples(FS)
+    t0 = (margin_samples(FS) + plan.record.n_pretrigger + 2) / FS
+    f = half_sine(n, FS, t0, 0.02, 200.0)
+    if double:
+        f = f + half_sine(n, FS, t0 + 0.1, 0.02, 80.0)
+    ir = impulse_response(b.model, FS, g.coordinates(b.resp_nodes), b.resp_dirs,
+                          g.coordinates(b.exc_nodes[k:k + 1]), b.exc_dirs[k:k + 1])
+    return np.vstack([f[None], simulate(ir, f[None])])
+
+
+@pytest.fixture(scope="module")
+def run_file(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[np.ndarray]]:
+    b = get_bench("engine-rigid")
+    plan = plan_for_bench("engine-rigid", points=POINTS, fs=FS, length=4.0, pretrigger=0.25)
+    chans = [ChannelConfig("F", 0, "force", 2.25)] + [
+        ChannelConfig(f"a{i}", i + 1, "acceleration", 10.2, node=int(nd),
+                      direction=(float(d[0]), float(d[1]), float(d[2])))
+        for i, (nd, d) in enumerate(zip(b.resp_nodes, b.resp_dirs, strict=True))]
+    path = tmp_path_factory.mktemp("run") / "run.h5"
+    good = [_hit(POINTS[0]), _hit(POINTS[0])]
+    w = RunWriter.create(path, plan_data=plan.to_dict(), station_data={}, channels=chans,
+                         devices=["fe"] * len(chans), geometry=plan.geometry(), fs=FS,
+                         n_samples=good[0].shape[1], method="hammer")
+    for i, data in enumerate(good):
+        w.add_record(0, data, time=float(i), peak_force=200.0, auto_accepted=True, reason="")
+    w.add_record(1, _hit(POINTS[1], double=True), time=5.0, peak_force=200.0,
+                 auto_accepted=False, reason="double hit (second impact 100.0 ms after the first)")
+    w.finish("stopped", "stopped by the operator")  # point 3: no hit recorded
+    return path, good
+
+
+def test_frf_from_run_file_skips_points_without_hits(
+        tmp_path: Path, run_file: tuple[Path, list[np.ndarray]],
+        capsys: pytest.CaptureFixture[str]) -> None:
+    path, good = run_file
+    out = tmp_path / "frf.h5"
+    assert main(["frf", str(path), "--out", str(out)]) == 2
+    cap = capsys.readouterr()
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 2 and all(line.endswith("(skipped)") for line in lines)
+    assert "point 2 (node 108" in lines[0] and "every hit rejected (double hit" in lines[0]
+    assert "point 3 (node 110" in lines[1] and "no hit recorded: hit it again" in lines[1]
+    assert "2 of 2 hits used" in cap.out and "2 bad run(s) skipped, exit status 2" in cap.out
+    frf = read_frf_h5(out)
+    b = get_bench("engine-rigid")
+    assert frf.exc_nodes.tolist() == [int(b.exc_nodes[0])]
+    # the same FRFs as the replay code path gives for that point, on 0 < f <= fs / 2.56
+    plan = plan_for_bench("engine-rigid", points=POINTS, fs=FS, length=4.0, pretrigger=0.25)
+    names = ["F", *(f"a{i}" for i in range(12))]
+    ref = point_result([hit_result(d, plan.record, names, None) for d in good])
+    assert ref is not None and ref.H is not None and ref.coherence is not None
+    keep = (ref.freq > 0) & (ref.freq <= FS / 2.56)
+    assert_array_equal(frf.freq, ref.freq[keep])
+    assert_array_equal(frf.H, ref.H[..., keep])
+    assert_array_equal(frf.coherence, ref.coherence[..., keep])
+    assert frf.meta["excitation"] == "impact" and frf.meta["estimator"] == "H1"
+    # the UFF output of the same
+    assert main(["frf", str(path), "--out", str(tmp_path / "frf.uff")]) == 2
+    capsys.readouterr()
+
+
+def test_identify_tells_a_run_file_from_an_frf_file(
+        run_file: tuple[Path, list[np.ndarray]], capsys: pytest.CaptureFixture[str]) -> None:
+    path, _ = run_file
+    assert main(["identify", str(path)]) == 2  # a run file: replayed, a point has no hit
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "has no accepted hit: resume the run" in err

@@ -1,0 +1,105 @@
+"""HDF5 FRF files: round trip, layout, one-line errors, ``insitu identify FRF.h5``."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from app.cli.main import main
+from app.io.frf_h5 import FRFFileError, h5_format, read_frf_h5, write_frf_h5
+from hardware_mocks.benches import get_bench
+from processing.data import FRFSet
+
+
+@pytest.fixture(scope="module")
+def engine() -> tuple[FRFSet, tuple[float, float]]:
+    """Engine-rigid FRFs (1 % noise) with coherence below 0.8 in one range of the mass band."""
+    b = get_bench("engine-rigid")
+    frf = b.frfset(noise=0.01)
+    coh = 1.0 - 0.05 * np.random.default_rng(3).random(frf.H.shape)
+    lo, hi = b.article_bands[0]
+    low = np.flatnonzero((frf.freq >= lo) & (frf.freq <= hi))[5:9]  # 4 lines in the mass band
+    coh[2, 4, low] = 0.5
+    coh[0, 0, -3:] = 0.1  # outside both bands: no effect on the identification
+    meta = {"estimator": "H1", "excitation": "impact", "exponential_tau": 0.5,
+            "n_averages": list(range(frf.H.shape[1]))}
+    return (replace(frf, coherence=coh, meta=meta),
+            (float(frf.freq[low[0]]), float(frf.freq[low[-1]])))
+
+
+def test_round_trip_and_layout(tmp_path: Path, engine: tuple[FRFSet, object]) -> None:
+    frf, _ = engine
+    path = tmp_path / "frf.h5"
+    write_frf_h5(path, frf, source="time.uff")
+    back = read_frf_h5(path)
+    for name in ("freq", "H", "coherence", "resp_nodes", "resp_dirs", "exc_nodes", "exc_dirs"):
+        assert_array_equal(getattr(back, name), getattr(frf, name), err_msg=name)
+    assert_array_equal(back.geometry.node_ids, frf.geometry.node_ids)
+    assert_array_equal(back.geometry.xyz, frf.geometry.xyz)
+    assert back.meta == frf.meta
+    with h5py.File(path, "r") as f:
+        assert f.attrs["format"] == "insitu-frf" and f.attrs["schema_version"] == 1
+        assert f.attrs["source"] == "time.uff" and f.attrs["estimator"] == "H1"
+        units: dict[str, str] = {}
+        f.visititems(lambda n, o: units.update({n: o.attrs["units"]})
+                     if isinstance(o, h5py.Dataset) else None)
+    assert units == {"freq": "Hz", "H": "m/s^2/N", "coherence": "1", "resp_nodes": "1",
+                     "resp_dirs": "1", "exc_nodes": "1", "exc_dirs": "1",
+                     "geometry/node_ids": "1", "geometry/xyz": "m", "meta": "n/a"}
+    assert h5_format(path) == "insitu-frf"
+    # without coherence, and numpy values in meta
+    bare = replace(frf, coherence=None, meta={"tau": np.float64(0.25), "n": np.arange(3)})
+    write_frf_h5(path, bare)
+    again = read_frf_h5(path)
+    assert again.coherence is None and again.meta == {"tau": 0.25, "n": [0, 1, 2]}
+
+
+def test_bad_files_are_one_line(tmp_path: Path, engine: tuple[FRFSet, object]) -> None:
+    frf, _ = engine
+    with pytest.raises(FRFFileError, match="no such FRF file"):
+        read_frf_h5(tmp_path / "missing.h5")
+    (tmp_path / "text.h5").write_text("not hdf5")
+    with pytest.raises(FRFFileError, match="not a readable HDF5 file"):
+        read_frf_h5(tmp_path / "text.h5")
+    assert h5_format(tmp_path / "text.h5") == ""
+    with h5py.File(tmp_path / "run.h5", "w") as f:
+        f.attrs["format"] = "insitu-run"
+    with pytest.raises(FRFFileError, match="not an insitu FRF file"):
+        read_frf_h5(tmp_path / "run.h5")
+    path = tmp_path / "frf.h5"
+    write_frf_h5(path, frf)
+    with h5py.File(path, "a") as f:
+        f.attrs["schema_version"] = 7
+    with pytest.raises(FRFFileError, match="schema version 7; this insitu reads version 1"):
+        read_frf_h5(path)
+    write_frf_h5(path, frf)
+    with h5py.File(path, "a") as f:
+        del f["H"]
+    with pytest.raises(FRFFileError, match="damaged FRF file") as excinfo:
+        read_frf_h5(path)
+    assert "\n" not in str(excinfo.value)
+
+
+def test_identify_reads_frf_file_and_reports_dropped_ranges(
+        tmp_path: Path, engine: tuple[FRFSet, tuple[float, float]],
+        capsys: pytest.CaptureFixture[str]) -> None:
+    frf, (lo, hi) = engine
+    b = get_bench("engine-rigid")
+    path, out = tmp_path / "frf.h5", tmp_path / "result.json"
+    write_frf_h5(path, frf)
+    (mlo, mhi), (slo, shi) = b.article_bands
+    assert main(["identify", str(path), "--out", str(out), "--mass-band", str(mlo), str(mhi),
+                 "--stiffness-band", str(slo), str(shi)]) == 0
+    text = " ".join(capsys.readouterr().out.split())  # rich wraps at the terminal's width
+    res = json.loads(out.read_text())
+    assert abs(res["mass"] - b.model.mass) / b.model.mass < 0.01
+    coh = res["checks"]["coherence"]
+    assert coh["dropped_ranges_hz"] == [[lo, hi]] and coh["dropped_lines"] == 4
+    assert not coh["pass"] and coh["threshold"] == 0.8
+    assert f"4 (excitation, line) values dropped from the bands, at {lo:g}-{hi:g} Hz" in text
