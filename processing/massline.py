@@ -84,7 +84,8 @@ class MassLineProblem:
         self.X = X
         self.shape = X.shape
         self.weights = weights
-        self.shapes = None if shapes is None or not len(shapes) else np.asarray(shapes, float)
+        self.shapes = None if shapes is None or not len(shapes) else _independent(
+            np.asarray(shapes, float))
         self.n_equations = 2 * n6 * n_e * n_l
         Xr = stack_real(X)
         self._sw = (np.sqrt(np.concatenate([weights, weights], axis=-1))
@@ -202,6 +203,18 @@ class MassLineProblem:
         J = w2 * (self._solver @ (MASS_BASIS @ P2).reshape(10, 36).T)
         theta = np.linalg.solve(np.eye(10) - J, a)
         return MassLineFit(theta, self.normal, self.n_equations, None)
+
+
+def _independent(shapes: NDArray[np.float64], rtol: float = 1e-6) -> NDArray[np.float64]:
+    """The shapes (rows) that are linearly independent of the ones before them."""
+    keep: list[int] = []
+    for k in range(shapes.shape[0]):
+        trial = shapes[[*keep, k]]
+        s = np.linalg.svd(trial / np.linalg.norm(trial, axis=1, keepdims=True),
+                          compute_uv=False)
+        if s[-1] > rtol * s[0]:
+            keep.append(k)
+    return shapes[keep]
 
 
 def _normal_operator(s2: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -143,7 +143,13 @@ def elastic_peaks(
     # keep the strongest residual directions only, for speed
     U, _s, _ = np.linalg.svd(R, full_matrices=False)
     R = (U[:, :4].conj().T @ R) if U.shape[1] > 4 else R
-    return tuple(_fit_peak(freq, R, float(freq[i])) for i in idx)
+    fitted = sorted((_fit_peak(freq, R, float(freq[i])) for i in idx), key=lambda p: p.frequency)
+    # two residual peaks of one mode (a dip on its flank) fit to the same mode: keep it once
+    unique: list[ElasticPeak] = []
+    for p in fitted:
+        if not unique or p.frequency > 1.02 * unique[-1].frequency:
+            unique.append(p)
+    return tuple(unique)
 
 
 @dataclass(frozen=True)

@@ -98,3 +98,24 @@ def test_plain_fixed_point_is_the_limit_of_the_article_iteration() -> None:
         K, C = mean(mass_matrix(theta))
     np.testing.assert_allclose(r.theta, theta, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(r.K, K, rtol=1e-9, atol=1e-9 * np.abs(K).max())
+
+
+def test_duplicate_leakage_shapes_do_not_change_the_fit() -> None:
+    """A mode reported twice (two residual peaks on one mode) must not remove information."""
+    from processing.massline import stack_real
+    from processing.selection import mode_shape_basis
+
+    bench = get_bench("block-flexible")
+    frf = bench.frfset()
+    E = response_matrix(frf.resp_xyz, frf.resp_dirs)
+    T = excitation_matrix(frf.exc_xyz, frf.exc_dirs)
+    lo, hi = bench.article_bands[0]
+    sel = (frf.freq >= lo) & (frf.freq <= hi)
+    X = np.einsum("ar,ref->aef", np.linalg.pinv(E), frf.H)[..., sel]
+    w = 2 * np.pi * frf.freq[sel]
+    r = identify(frf)
+    shapes = [stack_real(mode_shape_basis(w, p)) for p in r.elastic_modes]
+    shapes.append(stack_real(w**2 + 0j))
+    once = MassLineProblem(X, shapes=np.array(shapes)).solve(T[:, :, None] + 0j)
+    twice = MassLineProblem(X, shapes=np.array([shapes[0], *shapes])).solve(T[:, :, None] + 0j)
+    np.testing.assert_allclose(twice.theta, once.theta, rtol=1e-9)
