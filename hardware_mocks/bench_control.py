@@ -23,21 +23,39 @@ from __future__ import annotations
 
 import json
 import socket
+import threading
+from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from drivers.station import load_station
+from drivers.station import StationConfig, load_station
 
-__all__ = ["BenchControl", "BenchControlError"]
+__all__ = ["BenchControl", "BenchControlError", "control_address"]
 
 
 class BenchControlError(RuntimeError):
     """The mock bench refused a request or could not be reached (one-line message)."""
 
 
+def control_address(station: StationConfig) -> tuple[str, int]:
+    """Host and port of the control channel named in a station's ``[extra.mock_bench]`` table.
+
+    Raises :class:`BenchControlError` (one line) when the station has none, as a real
+    bench's station file does not.
+    """
+    table = station.extra.get("mock_bench")
+    control = table.get("control") if isinstance(table, Mapping) else None
+    host, _, port = control.rpartition(":") if isinstance(control, str) else ("", "", "")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        what = "no" if control is None else f"a bad ({control!r})"
+        raise BenchControlError(f"{station.source}: {what} [extra.mock_bench] control address "
+                                "(HOST:PORT); only a station written by insitu mock-bench has one")
+    return host, int(port)
+
+
 class BenchControl:
-    """Connection to a mock bench's control channel.
+    """Connection to a mock bench's control channel (usable from several threads).
 
     Parameters
     ----------
@@ -53,38 +71,50 @@ class BenchControl:
         try:
             self._sock = socket.create_connection((host, port), timeout=timeout)
         except OSError as err:
-            raise BenchControlError(f"mock bench control {self.address}: cannot connect: "
-                                    f"{err}") from err
+            raise BenchControlError(f"mock bench control {self.address}: cannot connect "
+                                    f"(is insitu mock-bench running?): "
+                                    f"{err.strerror or err}") from err
         self._buf = b""
+        self._lock = threading.Lock()  # one request and its answer at a time
+        self._dead = ""
 
     @classmethod
     def from_station(cls, path: str | Path, *, timeout: float = 3.0) -> BenchControl:
         """Connect to the bench whose station file (``insitu mock-bench``) is ``path``."""
-        station = load_station(path)
-        control = station.extra.get("mock_bench", {}).get("control")
-        if not isinstance(control, str) or ":" not in control:
-            raise BenchControlError(f"{path}: no [extra.mock_bench] control address; was it "
-                                    f"written by insitu mock-bench?")
-        host, _, port = control.rpartition(":")
-        return cls(host, int(port), timeout=timeout)
+        host, port = control_address(load_station(path))
+        return cls(host, port, timeout=timeout)
 
     def request(self, **fields: Any) -> dict[str, Any]:
         """Send one request and return the bench's answer; a refusal raises BenchControlError."""
+        with self._lock:
+            if self._dead:
+                raise BenchControlError(self._dead)
+            try:
+                self._sock.sendall(json.dumps(fields).encode() + b"\n")
+                while b"\n" not in self._buf:
+                    chunk = self._sock.recv(65536)
+                    if not chunk:
+                        raise BenchControlError(f"mock bench control {self.address}: connection "
+                                                f"closed (bench stopped?)")
+                    self._buf += chunk
+            except TimeoutError as err:
+                # a late answer would be taken for the next request's: give up the connection
+                self._dead = (f"mock bench control {self.address}: no answer within "
+                              f"{self.timeout:g} s")
+                self._sock.close()
+                raise BenchControlError(self._dead) from err
+            except OSError as err:
+                raise BenchControlError(f"mock bench control {self.address}: "
+                                        f"{err.strerror or err}") from err
+            line, _, self._buf = self._buf.partition(b"\n")
         try:
-            self._sock.sendall(json.dumps(fields).encode() + b"\n")
-            while b"\n" not in self._buf:
-                chunk = self._sock.recv(65536)
-                if not chunk:
-                    raise BenchControlError(f"mock bench control {self.address}: connection "
-                                            f"closed (bench stopped?)")
-                self._buf += chunk
-        except TimeoutError as err:
-            raise BenchControlError(f"mock bench control {self.address}: no answer within "
-                                    f"{self.timeout:g} s") from err
-        except OSError as err:
-            raise BenchControlError(f"mock bench control {self.address}: {err}") from err
-        line, _, self._buf = self._buf.partition(b"\n")
-        reply = json.loads(line)
+            reply = json.loads(line)
+        except ValueError as err:
+            raise BenchControlError(f"mock bench control {self.address}: not a JSON answer: "
+                                    f"{line[:80]!r}") from err
+        if not isinstance(reply, dict):
+            raise BenchControlError(f"mock bench control {self.address}: not a JSON object: "
+                                    f"{line[:80]!r}")
         if not reply.get("ok"):
             raise BenchControlError(f"mock bench: {reply.get('error', 'request refused')}")
         return dict(reply)

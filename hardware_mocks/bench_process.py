@@ -30,14 +30,14 @@ from dataclasses import fields
 from types import TracebackType
 from typing import Any
 
-from hardware_mocks.benches import get_bench
+from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.frontend_device import FORCE, FrontEndDevice
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.physics import BenchPhysics
 from hardware_mocks.shaker_device import ShakerDevice
 from hardware_mocks.socketcand import SocketcandServer
 
-__all__ = ["MockBench"]
+__all__ = ["MockBench", "response_channel_names"]
 
 logger = logging.getLogger(__name__)
 
@@ -45,6 +45,22 @@ _counter = itertools.count()
 #: sensitivities of the simulated transducers: accelerometers mV/(m/s^2), force mV/N
 ACCEL_SENSITIVITY = 10.2
 FORCE_SENSITIVITY = 2.25
+
+
+def response_channel_names(bench: Bench) -> list[str]:
+    """Station channel names of the bench's response DOFs: ``a{node}{x|y|z}``.
+
+    The triaxial accelerometer at node 1 gives ``a1x``, ``a1y``, ``a1z`` (its own axes, in
+    the order of :attr:`Bench.resp_dirs`), as in the built-in plans of
+    ``insitu acquire --mock``, so those plans fit this bench's station.
+    """
+    names: list[str] = []
+    seen: dict[int, int] = {}
+    for node in bench.resp_nodes.tolist():
+        k = seen.get(node, 0)
+        seen[node] = k + 1
+        names.append(f"a{node}{'xyz'[k] if k < 3 else k}")
+    return names
 
 
 class MockBench:
@@ -143,14 +159,15 @@ class MockBench:
             f'port = {self.socketcand.port}, channel = "{self.can_channel}", fd = false }}',
             'options = { frame = "classic" }  # python-can\'s socketcand client has no CAN FD',
         ]
+        names = response_channel_names(b)
         for i, w in enumerate(self.wiring):
             lines += ["", "[[devices.frontend.channels]]"]
             if w == FORCE:
                 lines += ['name = "F"', f"input = {i}", 'quantity = "force"',
                           f"sensitivity = {FORCE_SENSITIVITY}", "range = 5.0"]
             else:
-                d = ", ".join(f"{x:g}" for x in b.resp_dirs[w])
-                lines += [f'name = "a{w}"', f"input = {i}", 'quantity = "acceleration"',
+                d = ", ".join(repr(float(x)) for x in b.resp_dirs[w])
+                lines += [f'name = "{names[w]}"', f"input = {i}", 'quantity = "acceleration"',
                           f"sensitivity = {ACCEL_SENSITIVITY}", "range = 5.0",
                           f"node = {int(b.resp_nodes[w])}", f"direction = [{d}]"]
         return "\n".join(lines) + "\n"

@@ -8,30 +8,49 @@ s, as an operator who saw nothing happen would. Faults can be scripted by hit
 number (double hits, overloads) for tests and demos. :class:`MockShakerOperator`
 attaches the mock shaker's stinger at each point the shaker procedure announces.
 
+:class:`RemoteOperator` and :class:`RemoteShakerOperator` do the same to a mock
+bench in another process (``insitu mock-bench``), through its control channel
+(:class:`~hardware_mocks.bench_control.BenchControl`): what ``insitu acquire
+--mock-operator`` attaches. A request the bench refuses, or a bench that went away,
+is kept in their ``error`` (they stop acting), never raised into the procedure.
+
 Example
 -------
 >>> op = MockOperator(hammer_device, faults={1: "double"})  # doctest: +SKIP
 >>> proc.add_listener(op)  # doctest: +SKIP
+>>> with BenchControl.from_station("bench.toml") as control:  # doctest: +SKIP
+...     proc.add_listener(RemoteOperator(control))
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Iterable, Mapping
+from typing import Any, Protocol
 
 import numpy as np
 
-from hardware_mocks.benches import Bench
+from hardware_mocks.bench_control import BenchControl, BenchControlError
+from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.shaker_device import ShakerDevice
 
-__all__ = ["MockOperator", "MockShakerOperator", "excitation_index"]
+__all__ = ["MockOperator", "MockShakerOperator", "RemoteOperator", "RemoteShakerOperator",
+           "check_points", "excitation_index"]
 
 logger = logging.getLogger(__name__)
 
 FAULTS = ("double", "overload")
+#: a plan direction at most this far (cosine) from the bench's excitation is the same DOF
+SAME_DIRECTION = 0.999
+
+
+class Hammer(Protocol):
+    """What hits the bench: the in-process :class:`HammerDevice` or a :class:`BenchControl`."""
+
+    def hit(self, exc: int = 0, peak: float = 200.0, *, duration: float = 0.004,
+            delay: float = 0.05, double: tuple[float, float] | None = None) -> Any: ...
 
 
 def excitation_index(bench: Bench, point: Any) -> int:
@@ -43,13 +62,36 @@ def excitation_index(bench: Bench, point: Any) -> int:
     return int(cand[np.argmax(bench.exc_dirs[cand] @ d)])
 
 
+def check_points(bench: Bench, points: Iterable[Any]) -> list[int]:
+    """The bench excitation DOF of every plan point; ValueError (one line) for a point the
+    bench cannot be excited at: an unknown node, or a direction off the bench's there."""
+    out = []
+    for p in points:
+        label = getattr(p, "label", f"node {p.node}")
+        try:
+            j = excitation_index(bench, p)
+        except ValueError as err:
+            nodes = ", ".join(str(n) for n in dict.fromkeys(bench.exc_nodes.tolist()))
+            raise ValueError(f"{label}: {err} (it has {nodes})") from None
+        d = np.asarray(p.direction, dtype=float)
+        if bench.exc_dirs[j] @ d / np.linalg.norm(d) < SAME_DIRECTION:
+            dirs = "; ".join(f"[{', '.join(f'{x:g}' for x in bench.exc_dirs[k])}]"
+                             for k in np.flatnonzero(bench.exc_nodes == int(p.node)))
+            raise ValueError(f"{label}: the bench excites node {p.node} only along {dirs}")
+        out.append(j)
+    return out
+
+
 class MockOperator:
     """Hits the bench of ``hammer`` at the excitation point the procedure announces.
 
     Parameters
     ----------
-    hammer : HammerDevice
-        The mock hammer (its physics has the bench and its excitation DOFs).
+    hammer : HammerDevice or Hammer
+        The mock hammer (its physics has the bench and its excitation DOFs), or any
+        object with its ``hit`` method (then give ``bench``).
+    bench : Bench, optional
+        The bench hit (default: the in-process hammer's).
     peak : float
         Peak force of a normal hit, N.
     duration : float
@@ -65,13 +107,19 @@ class MockOperator:
         Seconds without a reported hit after which the last hit is repeated (0: never).
     """
 
-    def __init__(self, hammer: HammerDevice, *, peak: float = 200.0, duration: float = 0.004,
-                 pause: float = 0.2, faults: Mapping[int, str] | None = None,
-                 overload_peak: float = 3000.0, patience: float = 8.0) -> None:
+    def __init__(self, hammer: HammerDevice | Hammer, *, bench: Bench | None = None,
+                 peak: float = 200.0, duration: float = 0.004, pause: float = 0.2,
+                 faults: Mapping[int, str] | None = None, overload_peak: float = 3000.0,
+                 patience: float = 8.0) -> None:
         for k, v in (faults or {}).items():
             if v not in FAULTS:
                 raise ValueError(f"fault {v!r} for hit {k}: choose one of {', '.join(FAULTS)}")
+        if bench is None:
+            if not isinstance(hammer, HammerDevice):
+                raise ValueError("give the bench hit by this hammer (bench=...)")
+            bench = hammer.physics.bench
         self.hammer = hammer
+        self.bench = bench
         self.peak, self.duration, self.pause = peak, duration, pause
         self.faults = dict(faults or {})
         self.overload_peak = overload_peak
@@ -87,7 +135,7 @@ class MockOperator:
 
     def exc_index(self, point: Any) -> int:
         """The bench excitation DOF of a plan point (by node, then closest direction)."""
-        return excitation_index(self.hammer.physics.bench, point)
+        return excitation_index(self.bench, point)
 
     def _watch(self, point: Any) -> None:
         """(Re)start the wait for the procedure to report the hit just made."""
@@ -187,3 +235,90 @@ class MockShakerOperator:
 
     def on_finished(self, state: Any) -> None:
         self.shaker.attach(None)
+
+
+class RemoteOperator(MockOperator):
+    """A :class:`MockOperator` whose hits go to a mock bench in another process.
+
+    Parameters
+    ----------
+    control : BenchControl
+        Connection to the bench's control channel (``insitu mock-bench``); not closed here.
+    bench : Bench, optional
+        The bench (default: the built-in one the bench process reports it runs).
+    **kwargs
+        As :class:`MockOperator` (``peak``, ``pause``, ``faults``, ``patience``...).
+
+    Attributes
+    ----------
+    error : str
+        Empty, or why the bench could not be hit (then the operator has stopped).
+    """
+
+    def __init__(self, control: BenchControl, *, bench: Bench | None = None,
+                 **kwargs: Any) -> None:
+        if bench is None:
+            bench = _remote_bench(control)
+        super().__init__(control, bench=bench, **kwargs)
+        self.control = control
+        self.error = ""
+
+    def hit(self, point: Any) -> None:
+        if self.error:
+            return
+        try:
+            super().hit(point)
+        except BenchControlError as err:
+            self.error = str(err)
+            logger.error("operator: %s", err)
+
+
+class RemoteShakerOperator:
+    """Attaches the shaker of a mock bench in another process at each point announced.
+
+    Parameters
+    ----------
+    control : BenchControl
+        Connection to the bench's control channel; not closed here.
+    bench : Bench, optional
+        The bench (default: the one the bench process reports).
+
+    Attributes
+    ----------
+    error : str
+        Empty, or why the shaker could not be moved.
+    """
+
+    def __init__(self, control: BenchControl, *, bench: Bench | None = None) -> None:
+        self.control = control
+        self.bench = bench if bench is not None else _remote_bench(control)
+        self.points: list[int] = []
+        self.error = ""
+
+    def _attach(self, exc: int | None) -> None:
+        if self.error:
+            return
+        try:
+            self.control.attach_shaker(exc)
+        except BenchControlError as err:
+            self.error = str(err)
+            logger.error("operator: %s", err)
+
+    def on_next_point(self, point: Any) -> None:
+        exc = excitation_index(self.bench, point)
+        logger.debug("operator: shaker attached at excitation %d", exc)
+        self.points.append(int(point.index))
+        self._attach(exc)
+
+    def on_finished(self, state: Any) -> None:
+        self._attach(None)
+
+
+def _remote_bench(control: BenchControl) -> Bench:
+    """The built-in bench a mock bench process runs (from its ``status``)."""
+    name = control.status().get("bench")
+    try:
+        return get_bench(str(name))
+    except KeyError as err:
+        raise BenchControlError(f"mock bench control {control.address}: the bench runs "
+                                f"{name!r}, not a built-in bench") from err

@@ -11,6 +11,13 @@ and stored when every point is complete (no device is opened then), otherwise
 the acquisition resumes to complete the points that now lack hits. With a real
 station and a shaker plan, the run waits at each point until the shaker is
 attached there (press Enter).
+
+``--station BENCH.toml --mock-operator`` acquires on a mock bench running in
+another process (``insitu mock-bench --station BENCH.toml``), through the same
+drivers and transports as real hardware; a simulated operator hits each point
+the run names (or attaches the shaker there) through the bench's control
+channel, whose address is in the station's ``[extra.mock_bench]`` table. A run
+that pauses then (a device stopped answering) is stopped, its records kept.
 """
 
 from __future__ import annotations
@@ -33,6 +40,8 @@ from app.acquire.shaker import ShakerProcedure
 from app.cli.common import UserError
 from app.io.runfile import read_run
 from drivers.station import StationConfig, load_station
+from hardware_mocks.bench_control import BenchControl, BenchControlError, control_address
+from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator, check_points
 
 #: what a pause that waits for the operator to attach the shaker says first
 ATTACH = "attach the shaker"
@@ -74,6 +83,9 @@ def add_parser(sub: Any) -> None:
                    help="with --resume: accept, reject or clear the verdict of stored record "
                         "HIT (from 1); repeatable")
     p.add_argument("--mock", action="store_true", help="use the in-process mock bench")
+    p.add_argument("--mock-operator", action="store_true",
+                   help="with --station of a running insitu mock-bench: a simulated operator "
+                        "hits (or moves the shaker) through its control channel")
     p.add_argument("--bench", default="engine", help="mock bench (default engine)")
     p.add_argument("--method", choices=("hammer", "shaker"), default="hammer",
                    help="mock plan: hammer or shaker (chirp, one block per --hits)")
@@ -101,9 +113,38 @@ def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Nam
     if method == "shaker":
         return ShakerProcedure(plan, station, args.out, resume=args.resume,
                                listeners=[bench.shaker_operator] if bench else [],
-                               confirm_attach=bench is None)
+                               confirm_attach=bench is None and not args.mock_operator)
     return HammerProcedure(plan, station, args.out, resume=args.resume,
                            listeners=[bench.operator] if bench else [])
+
+
+def _remote_operator(station: StationConfig, plan: TestPlan, stack: contextlib.ExitStack
+                     ) -> RemoteOperator | RemoteShakerOperator:
+    """The simulated operator of the mock bench process ``station`` connects to."""
+    try:
+        host, port = control_address(station)
+        control = stack.enter_context(BenchControl(host, port))
+        if plan.method == "shaker":
+            operator: RemoteOperator | RemoteShakerOperator = RemoteShakerOperator(control)
+        else:
+            operator = RemoteOperator(control)
+            stack.callback(operator.shutdown)
+    except BenchControlError as err:
+        raise UserError(f"--mock-operator: {err}") from err
+    try:
+        check_points(operator.bench, plan.excitations)
+    except ValueError as err:
+        raise UserError(f"{plan.source}: {err} (mock bench {operator.bench.name!r})") from err
+    return operator
+
+
+def _check_rate(proc: Procedure, plan: TestPlan, station: StationConfig) -> None:
+    """A mock bench's front end runs at its station's ``fs``: refuse another plan rate now."""
+    fs = station.devices[proc.ref_name].fs  # type: ignore[attr-defined]
+    if fs is not None and fs != plan.record.fs:
+        raise UserError(f"{plan.source}: record.fs is {plan.record.fs:g} Hz but the mock "
+                        f"bench's front end runs at {fs:g} Hz: make them equal (insitu "
+                        f"mock-bench --fe-rate {plan.record.fs:g})")
 
 
 def _apply_overrides(args: argparse.Namespace, console: Console) -> bool:
@@ -136,6 +177,9 @@ def _apply_overrides(args: argparse.Namespace, console: Console) -> bool:
 def run(args: argparse.Namespace) -> int:
     if args.override and not args.resume:
         raise UserError("--override changes a stored run: give --resume --out RUN.h5")
+    if args.mock_operator and (args.mock or args.station is None):
+        raise UserError("--mock-operator drives a bench started by insitu mock-bench: give "
+                        "--station with its station file (--mock has its own operator)")
     if args.resume and not args.out.is_file():
         raise UserError(f"{args.out}: no run file to resume")
     if not args.resume and args.out.exists():
@@ -159,7 +203,13 @@ def run(args: argparse.Namespace) -> int:
             if plan is None and not args.resume:
                 raise UserError("give --plan FILE (or --mock for the built-in bench's plan)")
         proc = _procedure(plan, station, args, bench)
+        operator = None
+        if args.mock_operator:
+            _check_rate(proc, proc.plan, station)  # type: ignore[attr-defined]
+            operator = _remote_operator(station, proc.plan, stack)  # type: ignore[attr-defined]
+            proc.add_listener(operator)
         n = len(proc.plan.excitations)  # type: ignore[attr-defined]
+        gave_up = ""
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
             bars = _Bars(progress, n, console)
@@ -167,13 +217,22 @@ def run(args: argparse.Namespace) -> int:
             proc.start()
             try:
                 while proc.wait(0.2) is not RunState.FINISHED and proc.running:
-                    if proc.state is RunState.PAUSED and bars.paused.startswith(ATTACH):
+                    if operator is not None and (operator.error
+                                                 or proc.state is RunState.PAUSED):
+                        # nobody at the bench to fix and resume: stop, the records are kept
+                        gave_up = operator.error or f"run paused: {proc.message}"
+                        proc.stop()
+                        proc.wait()
+                    elif proc.state is RunState.PAUSED and bars.paused.startswith(ATTACH):
                         bars.paused = ""
                         console.input(f"{proc.message}: press Enter ")
                         proc.resume()
             except KeyboardInterrupt:
                 proc.stop()
                 proc.wait()
+    if gave_up:
+        raise UserError(f"{gave_up}; the run stopped, acquired records are in {args.out} "
+                        "(continue with --resume)")
     hits: list[HitRecord] = proc.hits  # type: ignore[attr-defined]
     if proc.state is not RunState.FINISHED:
         raise UserError(f"run {proc.state.value}: {proc.message}; acquired records are in "

@@ -1,0 +1,156 @@
+"""Two processes, as at a real bench: ``insitu mock-bench`` and ``insitu acquire --mock-operator``.
+
+The bench runs in one process; the acquisition in another connects to it with the
+printed station file only (front end over socketcand, TCP), and its simulated operator
+hits each point through the bench's control channel. The run file must then identify
+the bench's model, and ``insitu replay`` must give the same result.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from app.acquire import load_plan
+from app.acquire.analysis import analyse_run
+from app.cli.main import main
+from app.io.runfile import read_run
+from hardware_mocks.benches import get_bench
+from processing.inertia import inertia_properties
+
+ROOT = Path(__file__).resolve().parents[2]
+PLAN = ROOT / "docs" / "mock_bench_plan.toml"
+BENCH = "engine-rigid"
+
+
+def _insitu(*args: str) -> list[str]:
+    return [sys.executable, "-m", "app.cli.main", *args]
+
+
+def _stop(proc: subprocess.Popen[str]) -> tuple[str, str]:
+    """SIGTERM (the bench's clean exit), then kill if it hangs; always reaped."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+    try:
+        return proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.communicate()
+
+
+@pytest.fixture
+def mock_bench(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
+    station = tmp_path / "bench.toml"
+    proc = subprocess.Popen(_insitu("mock-bench", "--bench", BENCH, "--station", str(station)),
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30.0
+        while not station.exists():
+            if proc.poll() is not None or time.monotonic() > deadline:
+                _, err = _stop(proc)
+                pytest.fail(f"mock-bench did not start (status {proc.returncode}): {err}")
+            time.sleep(0.05)
+        yield proc, station
+    finally:
+        _stop(proc)
+
+
+def test_acquire_in_another_process_identifies_the_bench(
+        mock_bench: tuple[subprocess.Popen[str], Path], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    bench_proc, station = mock_bench
+    plan = load_plan(PLAN)
+    assert len(plan.excitations) >= 6
+    out = tmp_path / "run.h5"
+    t0 = time.monotonic()
+    acq = subprocess.run(_insitu("acquire", "--station", str(station), "--plan", str(PLAN),
+                                 "--out", str(out), "--mock-operator"),
+                         cwd=ROOT, capture_output=True, text=True, timeout=120)
+    elapsed = time.monotonic() - t0
+    assert acq.returncode == 0, acq.stderr + acq.stdout[-2000:]
+    assert f"{len(plan.excitations)} records, run written to" in acq.stdout
+    assert elapsed < 40, f"acquisition took {elapsed:.1f} s"
+
+    run = read_run(out)
+    assert run.state == "finished"
+    assert run.records.accepted.all() and len(run.records) == len(plan.excitations)
+    assert run.records.point.tolist() == list(range(len(plan.excitations)))
+    assert (run.records.missing == 0).all() and (run.records.bad_frames == 0).all()
+    assert run.records.force_alignment == "same-device"  # the front end's own force input
+    stored = json.loads(json.dumps(run.result))
+    # tolerances: noise-free sensors and an exact model; what remains comes from the
+    # 1.5 s records, the front end's sampling and the H1 estimator
+    model = get_bench(BENCH).model
+    truth = inertia_properties(model.theta)
+    assert stored["mass"] == pytest.approx(truth.mass, rel=0.01)
+    assert_allclose(stored["cog"], truth.cog, atol=0.002)  # 2 mm
+    assert_allclose(np.diag(np.array(stored["stiffness"])), np.diag(model.K), rtol=0.03)
+
+    # replay from the raw records, in-process and through the command line: the same result
+    frf, result, _ = analyse_run(run)
+    assert run.frf is not None and np.array_equal(frf.H, run.frf.H)
+    assert result is not None and json.loads(json.dumps(result.to_json())) == stored
+    replay = tmp_path / "replay.json"
+    rep = subprocess.run(_insitu("replay", str(out), "--out", str(replay)), cwd=ROOT,
+                         capture_output=True, text=True, timeout=60)
+    assert rep.returncode == 0, rep.stderr
+    assert json.loads(replay.read_text()) == stored
+
+    # the bench really was hit from the other process, once per point
+    from hardware_mocks.bench_control import BenchControl
+
+    with BenchControl.from_station(station) as control:
+        assert control.status()["hits"] == len(plan.excitations)
+
+    # a bench that is not running any more: one line, exit status 2, no run file
+    _, err = _stop(bench_proc)
+    assert bench_proc.returncode == 0, err
+    capsys.readouterr()
+    dead = tmp_path / "dead.h5"
+    assert main(["acquire", "--station", str(station), "--plan", str(PLAN), "--out", str(dead),
+                 "--mock-operator"]) == 2
+    msg = capsys.readouterr().err
+    assert msg.count("\n") == 1 and "cannot connect (is insitu mock-bench running?)" in msg
+    assert not dead.exists()
+
+
+def test_station_without_a_control_channel_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    station = tmp_path / "station.toml"
+    station.write_text('[station]\nname = "real bench"\n\n[devices.frontend]\n'
+                       'backend = "frontend-can"\nfs = 1024\n'
+                       'transport = { interface = "virtual", channel = "nowhere" }\n'
+                       + "".join(f'\n[[devices.frontend.channels]]\nname = "a{n}{a}"\n'
+                                 f'input = {i}\nquantity = "acceleration"\nsensitivity = 10.2\n'
+                                 f'range = 5.0\nnode = {n}\ndirection = [{d}]\n'
+                                 for i, (n, a, d) in enumerate(
+                                     (n, a, d) for n in (1, 2, 3, 4)
+                                     for a, d in zip("xyz", ("1, 0, 0", "0, 1, 0", "0, 0, 1"),
+                                                     strict=True)))
+                       + '\n[[devices.frontend.channels]]\nname = "F"\ninput = 12\n'
+                         'quantity = "force"\nsensitivity = 2.25\nrange = 5.0\n')
+    out = tmp_path / "run.h5"
+    assert main(["acquire", "--station", str(station), "--plan", str(PLAN), "--out", str(out),
+                 "--mock-operator"]) == 2
+    msg = capsys.readouterr().err
+    assert msg.count("\n") == 1, msg
+    assert "no [extra.mock_bench] control address" in msg and not out.exists()
+    # a plan at another rate than the bench's front end: refused before connecting
+    station.write_text(station.read_text().replace("fs = 1024", "fs = 512")
+                       + '\n[extra.mock_bench]\ncontrol = "127.0.0.1:9"\n')
+    assert main(["acquire", "--station", str(station), "--plan", str(PLAN), "--out", str(out),
+                 "--mock-operator"]) == 2
+    assert "front end runs at 512 Hz: make them equal (insitu mock-bench --fe-rate 1024)" in (
+        capsys.readouterr().err)
+    # --mock-operator is for another process's bench only
+    assert main(["acquire", "--mock", "--out", str(out), "--mock-operator"]) == 2
+    assert "--mock-operator drives a bench started by insitu mock-bench" in capsys.readouterr().err
