@@ -10,14 +10,15 @@ Public API (stable; the GUI builds on it):
   ``wait``; both report through the same events and write the same run file; a shaker
   run's "hits" are its blocks);
 - events: :class:`Listener` (``on_next_point``, ``on_hit``, ``on_frf``, ``on_progress``,
-  ``on_paused``, ``on_resumed``, ``on_error``, ``on_finished``), :class:`HitRecord`,
+  ``on_paused``, ``on_resumed``, ``on_error``, ``on_finished``, and ``on_samples`` with a
+  :class:`SampleBlock` after every read, for live traces), :class:`HitRecord`,
   :class:`PointFRF`, :class:`Progress`, :class:`RunState`;
 - the in-process mock bench :class:`InProcessBench` (front end, hammer, shaker, operators);
 - replay: :func:`analyse_run`; overrides of a stored run: :func:`override_run`.
 """
 
 from app.acquire.analysis import analyse_run
-from app.acquire.events import HitRecord, Listener, PointFRF, Progress, RunState
+from app.acquire.events import HitRecord, Listener, PointFRF, Progress, RunState, SampleBlock
 from app.acquire.hammer import HammerProcedure
 from app.acquire.mockbench import InProcessBench, plan_for_bench
 from app.acquire.overrides import OverrideOutcome, override_run
@@ -48,6 +49,7 @@ __all__ = [
     "RecordSettings",
     "ResponsePoint",
     "RunState",
+    "SampleBlock",
     "ShakerProcedure",
     "ShakerSettings",
     "TestPlan",

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["HitRecord", "Listener", "PointFRF", "Progress", "RunState", "dispatch"]
+__all__ = ["HitRecord", "Listener", "PointFRF", "Progress", "RunState", "SampleBlock", "dispatch"]
 
 logger = logging.getLogger(__name__)
 
@@ -123,11 +123,37 @@ class Progress:
         return self.point + (1 if self.point_accepted >= self.point_needed else 0)
 
 
+@dataclass(frozen=True)
+class SampleBlock:
+    """Samples just read from the streams, for live display (not judged, not stored).
+
+    Attributes
+    ----------
+    data : (n_rows, n) float64
+        The procedure's rows as read: the force (N) then the responses (m/s^2), at ``fs``;
+        NaN where samples were lost. With the force on a separate device (a hammer's
+        digitiser) its row is that device's latest samples stretched to ``n``: close in
+        time, not aligned (the hit records are).
+    fs : float
+        Sample rate of ``data``, Hz.
+    names : tuple of str
+        Channel name of each row.
+    t_read : float
+        ``time.monotonic()`` when the samples were read, s.
+    """
+
+    data: NDArray[np.float64]
+    fs: float
+    names: tuple[str, ...]
+    t_read: float
+
+
 class Listener:
     """Callbacks of a running procedure; every method does nothing by default.
 
     All are called from the procedure's worker thread, in this order for a point:
-    ``on_next_point``, then per hit ``on_hit``, ``on_frf``, ``on_progress``.
+    ``on_next_point``, then per hit ``on_hit``, ``on_frf``, ``on_progress``;
+    ``on_samples`` after every read of the streams, in between.
     """
 
     def on_next_point(self, point: Any) -> None:
@@ -142,6 +168,11 @@ class Listener:
 
     def on_progress(self, progress: Progress) -> None:
         """Counters after each hit."""
+
+    def on_samples(self, block: SampleBlock) -> None:
+        """New samples of the procedure's rows (a :class:`SampleBlock`), at the read
+        cadence (about ten times a second) while the devices stream, ramps and settling
+        included. For live traces: return at once (queue the block), the worker waits."""
 
     def on_paused(self, reason: str) -> None:
         """The run paused (operator request, or a device stopped answering: ``reason`` says)."""

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.acquire.analysis import RunAnalysis, frfset, host_timed, identify_frfs, margin_samples
 from app.acquire.events import HitRecord, PointFRF, Progress
@@ -177,7 +178,11 @@ class HammerProcedure(Procedure):
         self._streams = HitStreams(
             ref, [names.index(c.name) for c in self.rows[1:]], fdev,
             [c.name for c in fdev.channels].index(self.force_channel.name),
-            rec.n_pretrigger, rec.n_samples, rec.trigger_level, sync_row=sync)
+            rec.n_pretrigger, rec.n_samples, rec.trigger_level, sync_row=sync,
+            samples=self._samples)
+
+    def _samples(self, data: NDArray[np.float64]) -> None:
+        self.emit_samples(data, self.plan.record.fs, [c.name for c in self.rows])
 
     def _open_file(self) -> None:
         rec = self.plan.record

@@ -12,10 +12,14 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-from collections.abc import Iterable
+import time
+from collections.abc import Iterable, Sequence
 from typing import Any
 
-from app.acquire.events import RunState, dispatch
+import numpy as np
+from numpy.typing import NDArray
+
+from app.acquire.events import RunState, SampleBlock, dispatch
 
 __all__ = ["Procedure", "StopRequestedError"]
 
@@ -42,6 +46,7 @@ class Procedure:
         self._cmds: queue.Queue[tuple[str, Any]] = queue.Queue()
         self._thread: threading.Thread | None = None
         self._done = threading.Event()
+        self._stop_asked = threading.Event()
 
     # -- public API (any thread) ----------------------------------------------------------------
     def add_listener(self, listener: Any) -> None:
@@ -66,7 +71,13 @@ class Procedure:
 
     def stop(self) -> None:
         """End the run early; everything acquired stays in the file (state ``stopped``)."""
+        self._stop_asked.set()  # seen at once by long steps (a shaker's ramp) that poll it
         self._cmds.put(("stop", None))
+
+    @property
+    def stop_asked(self) -> bool:
+        """True once :meth:`stop` was called (any thread)."""
+        return self._stop_asked.is_set()
 
     def accept_hit(self, hit_id: int) -> None:
         """Operator override: use hit ``hit_id`` although the automatic checks rejected it."""
@@ -120,6 +131,11 @@ class Procedure:
     def emit(self, name: str, *args: Any) -> None:
         """Call listener callback ``name`` on every listener."""
         dispatch(self.listeners, name, *args)
+
+    def emit_samples(self, data: NDArray[np.float64], fs: float, names: Sequence[str]) -> None:
+        """Send ``on_samples`` with the rows just read (skipped when no listener has it)."""
+        if any(getattr(listener, "on_samples", None) for listener in self.listeners):
+            self.emit("on_samples", SampleBlock(data, fs, tuple(names), time.monotonic()))
 
     def poll(self) -> None:
         """Handle pending commands; pauses here when asked; raises StopRequestedError on stop."""

@@ -170,10 +170,14 @@ class ShakerProcedure(Procedure):
         if not isinstance(dev, ExcitationDevice):
             raise PlanError(f"{self.station.source}: {self.shaker_name!r} is not a shaker")
         self.drive = ShakerDrive(dev, self.plan, self.heartbeat)
+        self.drive.should_stop = lambda: self.stop_asked
         self.drive.open()
         names = [c.name for c in fe.channels]
         self.stream = BlockStream(fe, [names.index(c.name) for c in self.rows], self.plan,
-                                  self.drive.beat)
+                                  self.drive.beat, samples=self._samples)
+
+    def _samples(self, data: NDArray[np.float64]) -> None:
+        self.emit_samples(data, self.plan.record.fs, [c.name for c in self.rows])
 
     def _open_file(self) -> None:
         s = self.plan.shaker

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.acquire.plan import TestPlan
+from app.acquire.procedure import StopRequestedError
 from drivers.base import AcquisitionFrontEnd, DeviceState, ExcitationDevice
 from drivers.errors import DeviceError, DeviceTimeoutError
 from drivers.shaker_scpi import ScpiShaker, ShakerError
@@ -52,6 +53,8 @@ class ShakerDrive:
         self.scpi = isinstance(device, ScpiShaker)
         self.driving = False
         self._last_beat = 0.0
+        #: set by the procedure: True once the operator asked to stop (checked while ramping)
+        self.should_stop: Callable[[], bool] = lambda: False
 
     def open(self) -> None:
         """Open the device and arm its watchdog (fed by :meth:`beat`)."""
@@ -87,6 +90,7 @@ class ShakerDrive:
         deadline = time.monotonic() + s.ramp + 3.0
         if isinstance(dev, ScpiShaker):
             while abs(dev.output_level() - s.level) > 1e-6 * max(1.0, s.level):
+                self._stop_if_asked()
                 problem = self.check()
                 if problem:
                     raise ShakerError(problem, dev.name, 0, problem)
@@ -95,9 +99,24 @@ class ShakerDrive:
                                              f"{s.ramp + 3.0:g} s", dev.name)
                 stream.discard(stream.CHUNK)
         else:
-            stream.discard(s.ramp)
-        stream.discard(s.settle)
+            self._discard(stream, s.ramp)
+        self._discard(stream, s.settle)
         logger.info("%s: %s at %g V, ramped and settled", dev.name, s.waveform, s.level)
+
+    def _stop_if_asked(self) -> None:
+        if self.should_stop():
+            self.emergency_off()
+            raise StopRequestedError
+
+    def _discard(self, stream: BlockStream, seconds: float) -> None:
+        """Stream and drop ``seconds`` one read at a time, turning the output off at once
+        when a stop is asked meanwhile."""
+        end = time.monotonic() + seconds
+        while True:
+            self._stop_if_asked()
+            stream.discard(min(stream.CHUNK, max(end - time.monotonic(), 0.0)))
+            if time.monotonic() >= end:
+                return
 
     def check(self) -> str:
         """"" while the output is on, else why it went off (device errors read)."""
@@ -170,13 +189,17 @@ class BlockStream:
     plan : TestPlan
     beat : callable
         Called after every read (the shaker's watchdog).
+    samples : callable, optional
+        Called after every read with the rows just read, (len(rows), n).
     """
 
     CHUNK = 0.1  # s per read
 
     def __init__(self, frontend: AcquisitionFrontEnd, rows: Sequence[int], plan: TestPlan,
-                 beat: Callable[[], None]) -> None:
+                 beat: Callable[[], None],
+                 samples: Callable[[NDArray[np.float64]], None] | None = None) -> None:
         self.fe = frontend
+        self.samples = samples
         self.rows = list(rows)
         self.n = plan.shaker.nperseg
         self.burst = plan.shaker.waveform == "burst-random"
@@ -198,7 +221,10 @@ class BlockStream:
         n = max(1, int(self.fe.fs * self.CHUNK))
         block = self.fe.read_block(n, timeout=2.0)
         self.beat()
-        self._buf = np.concatenate([self._buf, block.data[self.rows]], axis=1)
+        rows = block.data[self.rows]
+        if self.samples is not None:
+            self.samples(rows)
+        self._buf = np.concatenate([self._buf, rows], axis=1)
         if self._buf.shape[1] > 4 * self.n:  # no block found in that much: keep the newest
             self._buf = self._buf[:, -2 * self.n:]
 

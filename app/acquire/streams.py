@@ -18,6 +18,7 @@ of a sample, and the hammer's clock fit is shifted by it before resampling again
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -102,14 +103,19 @@ class HitStreams:
     sync_row : int, optional
         Row of ``ref``'s blocks that records the same force (a common channel): each hit
         of a separate force device is aligned on it to a fraction of a sample.
+    samples : callable, optional
+        Called after every read with the force and response rows just read, (1 + n_resp,
+        n) at ``ref.fs`` (a separate device's force stretched to ``n``: for display only).
     """
 
     CHUNK = 0.1  # s per read
 
     def __init__(self, ref: AcquisitionFrontEnd, resp_rows: list[int],
                  force_dev: AcquisitionFrontEnd, force_row: int, n_before: int, n_record: int,
-                 level: float, sync_row: int | None = None) -> None:
+                 level: float, sync_row: int | None = None,
+                 samples: Callable[[NDArray[np.float64]], None] | None = None) -> None:
         self.ref, self.force_dev = ref, force_dev
+        self.samples = samples
         self.separate = force_dev is not ref
         self.sync_row = sync_row if self.separate else None
         self.resp_rows = resp_rows
@@ -155,10 +161,18 @@ class HitStreams:
 
     def read(self) -> None:
         """Read about 0.1 s from every stream (blocks until it is in; device errors raise)."""
-        self._ref.add(self.ref.read_block(max(1, int(self.ref.fs * self.CHUNK)), timeout=2.0))
+        ref = self.ref.read_block(max(1, int(self.ref.fs * self.CHUNK)), timeout=2.0)
+        self._ref.add(ref)
+        force = ref.data[self.force_row]
         if self.separate:
-            self._force.add(self.force_dev.read_block(
-                max(1, int(self.force_dev.fs * self.CHUNK)), timeout=2.0))
+            block = self.force_dev.read_block(max(1, int(self.force_dev.fs * self.CHUNK)),
+                                              timeout=2.0)
+            self._force.add(block)
+            f = block.data[self.force_row]
+            n = ref.data.shape[1]
+            force = np.interp(np.linspace(0, f.size - 1, n), np.arange(f.size), f)
+        if self.samples is not None:
+            self.samples(np.vstack([force[None], ref.data[self.resp_rows]]))
 
     def settle(self, seconds: float = 0.7) -> None:
         """Stream ``seconds`` so the clocks can be measured before the first hit."""

@@ -1,17 +1,20 @@
-"""The acquisition procedure's listener, turned into Qt signals.
+"""The acquisition procedure's listener, turned into Qt signals and a queue.
 
 The procedure calls its listeners from its worker thread; :class:`AcquisitionBridge` only
-emits signals there (Qt queues them to the GUI thread, where the views draw). It never
-touches a widget.
+emits signals there (Qt queues them to the GUI thread, where the views draw) and puts the
+streamed samples (``on_samples``, about ten a second) on :attr:`AcquisitionBridge.samples`,
+which the live traces drain from a QTimer. It never touches a widget and never blocks the
+worker.
 """
 
 from __future__ import annotations
 
+import queue
 from typing import Any
 
 from PySide6 import QtCore
 
-from app.acquire.events import HitRecord, PointFRF, Progress, RunState
+from app.acquire.events import HitRecord, PointFRF, Progress, RunState, SampleBlock
 
 __all__ = ["AcquisitionBridge"]
 
@@ -27,6 +30,13 @@ class AcquisitionBridge(QtCore.QObject):
     resumed = QtCore.Signal()
     error = QtCore.Signal(str)
     finished = QtCore.Signal(object)  # RunState
+
+    def __init__(self, parent: QtCore.QObject | None = None) -> None:
+        super().__init__(parent)
+        self.samples: queue.SimpleQueue[SampleBlock] = queue.SimpleQueue()
+
+    def on_samples(self, block: SampleBlock) -> None:
+        self.samples.put(block)
 
     def on_next_point(self, point: Any) -> None:
         self.next_point.emit(point)

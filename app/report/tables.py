@@ -81,7 +81,12 @@ def check_rows(a: Analysis) -> list[CheckRow]:
     if gate is None:
         rows.append(CheckRow(f"coherence ≥ {thr:g}", None, "no coherence in the data"))
     else:
-        rows.append(CheckRow(f"coherence ≥ {thr:g}", gate.n_dropped == 0, gate.summary()))
+        detail = gate.summary()
+        n_avg = np.asarray(a.frf.meta.get("n_averages", []), dtype=float)
+        if n_avg.size and n_avg.max() <= 1:
+            detail += ("; one average per point: coherence is 1 by definition, this check "
+                       "needs several hits or blocks per point")
+        rows.append(CheckRow(f"coherence ≥ {thr:g}", gate.n_dropped == 0, detail))
     rig = a.rigidity
     if rig is None:
         rows.append(CheckRow("rigidity (sensors predict each other)", None,
@@ -112,6 +117,6 @@ def check_rows(a: Analysis) -> list[CheckRow]:
     rows.append(CheckRow(
         "synthesised vs measured FRFs", r.synthesis.overall < 0.1,
         f"error {r.synthesis.overall:.2%} overall, worst FRF "
-        f"{float(np.max(r.synthesis.per_frf)):.2%}, {r.synthesis.band[0]:g}-"
-        f"{r.synthesis.band[1]:g} Hz (limit 10 %)"))
+        f"{float(np.max(r.synthesis.per_frf)):.2%}, {r.synthesis.band[0]:.1f}-"
+        f"{r.synthesis.band[1]:.1f} Hz (limit 10 %)"))
     return rows

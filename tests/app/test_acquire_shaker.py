@@ -155,3 +155,29 @@ def test_output_off_on_device_error_hung_worker_and_stop(tmp_path: Path) -> None
     rejected = [i for i, h in enumerate(rec.hits) if not h.auto_accepted]
     assert rejected and all("output went off" in run.records.reason[i] for i in rejected)
     assert not run.records.auto_accepted[rejected].any()
+
+
+def test_stop_during_the_ramp_turns_the_output_off_at_once(tmp_path: Path) -> None:
+    """A Stop pressed while the output ramps up (here a 3 s ramp) is not held until the
+    ramp and settling end: the output goes off within a read (0.1 s) or two."""
+    plan = plan_for_bench("engine-rigid", points=[0, 1], fs=FS, method="shaker", shaker={
+        "waveform": "random", "level": 0.5, "f_start": 2.0, "f_stop": 200.0, "averages": 2,
+        "nperseg": 128, "ramp": 3.0, "settle": 1.0})
+    rec = Recorder()
+    with InProcessBench("engine-rigid", fs_frontend=FS) as bench:
+        dev = bench.shaker
+        proc = ShakerProcedure(plan, bench.station, tmp_path / "ramp.h5", partial=True,
+                               listeners=[bench.shaker_operator, rec])
+        proc.start()
+        try:
+            assert _wait(lambda: dev.output and 0.0 < dev.level_now < 0.5), proc.message
+            t0 = time.monotonic()
+            proc.stop()
+            assert _wait(lambda: not dev.output, 2.0)
+            took = time.monotonic() - t0
+            assert proc.wait(10) is RunState.STOPPED
+        finally:
+            proc.stop()
+            proc.wait(10)
+    assert took < 0.5, f"output went off {took:.2f} s after Stop"
+    assert not rec.hits  # stopped before the first block

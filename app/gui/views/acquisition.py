@@ -1,11 +1,14 @@
-"""Acquisition view: run the plan on the station, hit by hit.
+"""Acquisition view: run the plan on the station, hit by hit (hammer) or block by block
+(shaker), as the plan's method says.
 
-The next point is named and highlighted; each hit appears with its automatic verdict
-(accepted, double hit, overload, ...) and can be accepted or rejected by the operator; the
-recorded force and accelerations of the latest hit, and the current point's averaged FRF
-magnitude and coherence, update per hit; the plan's progress shows; pause, resume and stop.
-Stop, an error and closing the window end the procedure at once (devices shut down, the
-shaker output off); everything acquired stays in the run file.
+The next point is named and highlighted; each hit or block appears with its automatic
+verdict (accepted, double hit, overload, output off, ...) and can be accepted or rejected
+by the operator; the live force and accelerations scroll continuously while the devices
+stream; the force record of the latest (or selected) hit or block and the current point's
+averaged FRF magnitude and coherence update with each; the plan's progress shows; pause,
+resume and stop. Stop, a device error and closing the window stop the shaker's output at
+once (the procedure turns it off and shuts the devices down); everything acquired stays in
+the run file.
 """
 
 from __future__ import annotations
@@ -14,26 +17,29 @@ import datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
 from app.acquire.events import HitRecord, PointFRF, Progress, RunState
 from app.acquire.hammer import HammerProcedure
+from app.acquire.plan import TestPlan
+from app.acquire.shaker import ShakerProcedure
 from app.gui.acquisition_bridge import AcquisitionBridge
 from app.gui.session import Session
+from app.gui.views.acq_plots import AcquisitionPlots
 from app.gui.views.plan import PlanView
 from app.gui.views.projections import ProjectionsWidget
 from app.gui.views.station import StationView
-from app.gui.widgets import make_plot, verdict_color
+from app.gui.widgets import verdict_color
 from app.report.analysis import message_of
-from app.report.figures import COLORS
 from app.report.runs import usable_lines
 
 __all__ = ["AcquisitionView"]
 
-_HIT_COLUMNS = ("hit", "point", "time (s)", "peak force (N)", "automatic verdict", "operator",
-                "used")
+#: the long automatic verdict last, so "used" and the override stay in view
+_HIT_COLUMNS = ("hit", "point", "time (s)", "peak force (N)", "used", "operator",
+                "automatic verdict")
+_USED = 4
+_OPERATOR_PAUSE = "paused by the operator"
 
 
 class AcquisitionView(QtWidgets.QWidget):
@@ -45,14 +51,17 @@ class AcquisitionView(QtWidgets.QWidget):
                  parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.station_view, self.plan_view, self.session = station_view, plan_view, session
-        self.procedure: HammerProcedure | None = None
+        self.procedure: HammerProcedure | ShakerProcedure | None = None
+        self.word = "hit"  # "block" in a shaker run
         self.hits: list[HitRecord] = []
         self.state: RunState = RunState.IDLE
         self.run_path = QtWidgets.QLineEdit()
         self.run_path.setPlaceholderText("run file (HDF5) to write")
         browse = QtWidgets.QPushButton("Browse…")
         browse.clicked.connect(self._browse)
-        self.operator_box = QtWidgets.QCheckBox("simulated operator hits (mock bench)")
+        self.operator_box = QtWidgets.QCheckBox("simulated operator (mock bench)")
+        self.operator_box.setToolTip("On the mock bench, a simulated operator hits where the "
+                                     "plan asks, or moves the shaker to each point")
         self.operator_box.setChecked(True)
         self.start_button = QtWidgets.QPushButton("Start")
         self.pause_button = QtWidgets.QPushButton("Pause")
@@ -60,7 +69,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.stop_button = QtWidgets.QPushButton("Stop")
         self.stop_button.setStyleSheet("font-weight:bold; color:#7a1a00;")
         self.start_button.clicked.connect(self.start)
-        self.pause_button.clicked.connect(lambda: self.procedure and self.procedure.pause())
+        self.pause_button.clicked.connect(self.pause)
         self.resume_button.clicked.connect(lambda: self.procedure and self.procedure.resume())
         self.stop_button.clicked.connect(self.stop)
         top = QtWidgets.QHBoxLayout()
@@ -81,6 +90,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.hits_table.setSelectionBehavior(
             QtWidgets.QAbstractItemView.SelectionBehavior.SelectRows)
         self.hits_table.horizontalHeader().setStretchLastSection(True)
+        self.hits_table.itemSelectionChanged.connect(self._selected)
         self.accept_button = QtWidgets.QPushButton("Accept selected hit")
         self.reject_button = QtWidgets.QPushButton("Reject selected hit")
         self.clear_button = QtWidgets.QPushButton("Automatic verdict")
@@ -107,35 +117,15 @@ class AcquisitionView(QtWidgets.QWidget):
         vsplit.addWidget(self.projections)
         vsplit.setSizes([330, 420])
         ll.addWidget(vsplit, 1)
-        self.force_plot = make_plot("Force of the latest hit", "force", "N", "time", "s")
-        self.acc_plot = make_plot("Accelerations of the latest hit", "acceleration", "m/s²",
-                                  "time", "s")
-        self.frf_plot = make_plot("FRF magnitude of the current point (average)",
-                                  "|H| ((m/s²)/N)", logy=True)
-        self.coh_plot = make_plot("Coherence of the current point", "coherence")
-        self.coh_plot.getPlotItem().setYRange(0, 1.05)
-        self.coh_plot.getPlotItem().addItem(pg.InfiniteLine(
-            pos=0.8, angle=0, pen=pg.mkPen(COLORS[1], style=QtCore.Qt.PenStyle.DashLine),
-            label="0.8", labelOpts={"position": 0.03, "color": COLORS[1]}))
-        self._force_curve = self.force_plot.getPlotItem().plot(pen=pg.mkPen(COLORS[1]))
-        self._acc_curves: list[pg.PlotDataItem] = []
-        self._frf_curves: list[pg.PlotDataItem] = []
-        self._coh_curves: list[pg.PlotDataItem] = []
-        plots = QtWidgets.QWidget()
-        pl = QtWidgets.QGridLayout(plots)
-        pl.setContentsMargins(0, 0, 0, 0)
-        pl.addWidget(self.force_plot, 0, 0)
-        pl.addWidget(self.acc_plot, 1, 0)
-        pl.addWidget(self.frf_plot, 0, 1)
-        pl.addWidget(self.coh_plot, 1, 1)
+        self.bridge = AcquisitionBridge(self)
+        self.plots = AcquisitionPlots(self.bridge.samples)
         split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
         split.addWidget(left)
-        split.addWidget(plots)
+        split.addWidget(self.plots)
         split.setSizes([520, 760])
         lay = QtWidgets.QVBoxLayout(self)
         lay.addLayout(top)
         lay.addWidget(split, 1)
-        self.bridge = AcquisitionBridge(self)
         self.bridge.next_point.connect(self._next_point)
         self.bridge.hit.connect(self._hit)
         self.bridge.frf.connect(self._frf)
@@ -143,6 +133,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.bridge.paused.connect(self._paused)
         self.bridge.resumed.connect(lambda: self._set_state(RunState.RUNNING))
         self.bridge.error.connect(lambda m: self.message.emit("error", f"acquisition: {m}"))
+        self._pause_asked = False
         self.bridge.finished.connect(self._finished)
         plan_view.rows_changed.connect(self.projections.set_rows)
         self._set_state(RunState.IDLE)
@@ -161,7 +152,14 @@ class AcquisitionView(QtWidgets.QWidget):
         return base / f"run-{stamp}.h5"
 
     def start(self) -> bool:
-        """Start the plan on the station; False (with a message) when it cannot start."""
+        """Start the plan on the station; False (with a message) when it cannot start.
+
+        A hammer plan runs :class:`HammerProcedure`, a shaker plan :class:`ShakerProcedure`
+        (on the mock bench with the simulated operator, the mock shaker is moved to each
+        point; on a real station the run pauses at each point until the shaker is attached
+        and the operator resumes). A plan whose geometry cannot identify all six DOFs runs
+        as a partial run (FRFs only), with a warning.
+        """
         station, plan = self.station_view.station, self.plan_view.plan
         if self.procedure is not None and self.procedure.running:
             return False
@@ -177,24 +175,50 @@ class AcquisitionView(QtWidgets.QWidget):
         self.station_view.stop_monitor()
         listeners: list[Any] = [self.bridge]
         mock = self.station_view.mock
-        if mock is not None and self.operator_box.isChecked():
-            listeners.append(mock.operator)
+        simulated = mock is not None and self.operator_box.isChecked()
+        shaker = plan.method == "shaker"
+        if simulated and mock is not None:
+            listeners.append(mock.shaker_operator if shaker else mock.operator)
         try:
+            partial = not plan.check(station, strict=False).ok
             path.parent.mkdir(parents=True, exist_ok=True)
-            self.procedure = HammerProcedure(plan, station, path, listeners=listeners)
+            if shaker:
+                self.procedure = ShakerProcedure(plan, station, path, listeners=listeners,
+                                                 partial=partial, confirm_attach=not simulated)
+            else:
+                self.procedure = HammerProcedure(plan, station, path, listeners=listeners,
+                                                 partial=partial)
         except (ValueError, OSError) as err:
             self.message.emit("error", f"cannot start: {message_of(err)}")
             return False
+        self.word = "block" if shaker else "hit"
         self.run_path.setText(str(path))
         self.hits = []
         self.hits_table.setRowCount(0)
+        self.hits_table.setHorizontalHeaderLabels([self.word, *_HIT_COLUMNS[1:]])
+        w = self.word.capitalize()
+        self.accept_button.setText(f"Accept selected {self.word}")
+        self.reject_button.setText(f"Reject selected {self.word}")
+        self.accept_button.setToolTip(f"{w} used although the automatic verdict rejected it")
+        self.reject_button.setToolTip(f"{w} not used although the automatic verdict "
+                                      "accepted it")
+        self.clear_button.setToolTip(f"Back to the automatic verdict of the selected {self.word}")
         self.progress_bar.setRange(0, len(plan.excitations))
         self.progress_bar.setValue(0)
+        self.progress_label.setText("")
+        self.plots.start(self.word)
+        self._pause_asked = False
         self.procedure.start()
         self._set_state(RunState.RUNNING)
-        self.message.emit("info", f"acquisition started: {len(plan.excitations)} points, "
-                          f"{plan.hits} accepted hit(s) each, writing {path.name}")
+        self.message.emit("info" if not partial else "warning", _started(
+            plan, path, partial, "; ".join(self.procedure.geometry_report.messages)))
         return True
+
+    def pause(self) -> None:
+        """Pause after the current hit or block (devices stopped, the shaker output off)."""
+        if self.procedure is not None and self.procedure.running:
+            self._pause_asked = True
+            self.procedure.pause(_OPERATOR_PAUSE)
 
     def stop(self) -> None:
         """End the run now (devices shut down, the shaker output off); data stay saved."""
@@ -204,7 +228,7 @@ class AcquisitionView(QtWidgets.QWidget):
     def _override(self, what: str) -> None:
         row = self.hits_table.currentRow()
         if self.procedure is None or not 0 <= row < len(self.hits):
-            self.message.emit("warning", "select a hit in the table first")
+            self.message.emit("warning", f"select a {self.word} in the table first")
             return
         if not self.procedure.running:
             self.message.emit("warning", "the run has ended: overrides apply while it runs")
@@ -229,121 +253,128 @@ class AcquisitionView(QtWidgets.QWidget):
         plan = self.plan_view.plan
         n = len(plan.excitations) if plan is not None else 0
         d = " ".join(f"{v:+.2f}" for v in point.direction)
-        self.next_label.setText(f"Hit point {point.index + 1} of {n}: node {point.node}, "
+        what = "Shaker at" if self.word == "block" else "Hit"
+        self.next_label.setText(f"{what} point {point.index + 1} of {n}: node {point.node}, "
                                 f"direction ({d})")
         self.projections.highlight(point.xyz)
         self.plan_view.projections.highlight(point.xyz)
-        self._frf_point = point.index
 
     @QtCore.Slot(object)
     def _hit(self, hit: HitRecord) -> None:
         if hit.hit_id < len(self.hits):
+            # an override's report carries no samples: keep the recorded ones
+            if hit.data is None:
+                hit = HitRecord(**{**hit.__dict__, "data": self.hits[hit.hit_id].data,
+                                   "fs": self.hits[hit.hit_id].fs})
             self.hits[hit.hit_id] = hit
         else:
             self.hits.append(hit)
             self.hits_table.setRowCount(len(self.hits))
-        auto = "accepted" if hit.auto_accepted else (hit.reason or "rejected")
         cells = (str(hit.hit_id + 1), str(hit.point + 1), f"{hit.time:.1f}",
-                 f"{hit.peak_force:.1f}", auto, hit.override or "-",
-                 "yes" if hit.accepted else "no")
+                 f"{hit.peak_force:.1f}", "yes" if hit.accepted else "no",
+                 hit.override or "-", _auto(hit))
         for j, text in enumerate(cells):
             item = QtWidgets.QTableWidgetItem(text)
-            if j == 6:
+            if j == _USED:
                 item.setBackground(verdict_color(hit.accepted))
                 item.setForeground(QtCore.Qt.GlobalColor.white)
             self.hits_table.setItem(hit.hit_id, j, item)
         self.hits_table.resizeColumnsToContents()
-        self.hits_table.scrollToBottom()
-        if hit.data is not None and not hit.override:
-            self._traces(hit)
+        if not hit.override and hit.hit_id == len(self.hits) - 1:
+            self.hits_table.scrollToBottom()
+            if not self.hits_table.selectedItems():
+                self.plots.show_record(hit, _verdict(hit))
+        elif self.hits_table.currentRow() == hit.hit_id:
+            self.plots.show_record(hit, _verdict(hit))
 
-    def _traces(self, hit: HitRecord) -> None:
-        assert hit.data is not None
-        t = np.arange(hit.data.shape[1]) / hit.fs
-        self._force_curve.setData(t, hit.data[0])
-        acc = hit.data[1:]
-        plot = self.acc_plot.getPlotItem()
-        if not self._acc_curves:
-            plot.addLegend(offset=(-5, 5), labelTextSize="7pt", colCount=4)
-        names = self._response_names()
-        while len(self._acc_curves) < acc.shape[0]:
-            k = len(self._acc_curves)
-            self._acc_curves.append(plot.plot(pen=pg.mkPen(COLORS[k % len(COLORS)]),
-                                              name=names[k] if k < len(names) else None))
-        for c, y in zip(self._acc_curves, acc, strict=False):
-            c.setData(t, y)
+    def _selected(self) -> None:
+        """Show the record of the selected hit or block."""
+        row = self.hits_table.currentRow()
+        if 0 <= row < len(self.hits) and self.hits_table.selectedItems():
+            self.plots.show_record(self.hits[row], _verdict(self.hits[row]))
 
     @QtCore.Slot(object)
     def _frf(self, frf: PointFRF) -> None:
-        names = self._response_names()
-        for curves, plot in ((self._frf_curves, self.frf_plot), (self._coh_curves, self.coh_plot)):
-            n = 0 if frf.H is None else frf.H.shape[0]
-            if not curves and n and plot is self.frf_plot:
-                plot.getPlotItem().addLegend(offset=(-5, 5), labelTextSize="7pt", colCount=4)
-            while len(curves) < n:
-                k = len(curves)
-                curves.append(plot.getPlotItem().plot(
-                    pen=pg.mkPen(COLORS[k % len(COLORS)]),
-                    name=names[k] if plot is self.frf_plot and k < len(names) else None))
-        # lines above 0 Hz and up to fs / 2.56: above, the anti-alias filters shape the data
-        keep = (frf.freq > 0) & (frf.freq <= frf.freq[-1] / 1.28) if frf.freq.size else frf.freq > 0
-        for k, c in enumerate(self._frf_curves):
-            if frf.H is None:
-                c.setData([], [])
-            else:
-                c.setData(frf.freq[keep], np.abs(frf.H[k, keep]))
-        for k, c in enumerate(self._coh_curves):
-            if frf.coherence is None:
-                c.setData([], [])
-            else:
-                c.setData(frf.freq[keep], np.nan_to_num(frf.coherence[k, keep]))
-        self.frf_plot.getPlotItem().setTitle(
-            f"FRF magnitude, point {frf.point + 1} ({frf.n_averages} hit(s) averaged)",
-            size="10pt")
+        self.plots.show_frf(frf, self._response_names())
 
     def _response_names(self) -> list[str]:
         """Channel names of the responses (rows after the force) of the running plan."""
-        proc = self.procedure
-        rows = getattr(proc, "rows", ())
+        rows = getattr(self.procedure, "rows", ())
         return [c.name for c in rows[1:]]
 
     @QtCore.Slot(object)
     def _progress(self, p: Progress) -> None:
         self.progress_bar.setValue(p.points_done)
+        w = self.word
+        done = "averaged" if w == "block" else "accepted"
         self.progress_label.setText(
-            f"point {p.point + 1}: {p.point_accepted} of {p.point_needed} hits accepted; "
-            f"{p.hits} hits in all, {p.accepted} accepted; {p.bad_frames} bad frames; "
+            f"point {p.point + 1}: {p.point_accepted} of {p.point_needed} {w}s {done}; "
+            f"{p.hits} {w}s in all, {p.accepted} accepted; {p.bad_frames} bad frames; "
             f"{p.elapsed:.0f} s")
 
     @QtCore.Slot(str)
     def _paused(self, reason: str) -> None:
         self._set_state(RunState.PAUSED)
         self.next_label.setText(f"Paused: {reason}")
-        self.message.emit("warning", f"acquisition paused: {reason}")
+        asked, self._pause_asked = self._pause_asked and reason == _OPERATOR_PAUSE, False
+        if asked:
+            self.message.emit("warning", f"acquisition paused: {reason}")
+        elif reason.startswith("attach the shaker"):
+            self.message.emit("warning", f"{reason[0].upper()}{reason[1:]}")
+        else:  # a device failed: the shaker output is off already
+            self.message.emit("error", f"acquisition paused, device problem: {reason}")
 
     @QtCore.Slot(object)
     def _finished(self, state: RunState) -> None:
+        self.plots.stop()
         self._set_state(state)
         self.projections.highlight(None)
         self.plan_view.projections.highlight(None)
         proc = self.procedure
         path = proc.path if proc is not None else None
         n = len(self.hits)
+        things = f"{n} {self.word}{'' if n == 1 else 's'}"
         if state is RunState.FINISHED and proc is not None and proc.frf is not None:
             self.next_label.setText("Finished: every point done")
             self.progress_bar.setValue(self.progress_bar.maximum())
-            self.message.emit("info", f"acquisition finished: {n} hits saved in {path}")
+            self.message.emit("info", f"acquisition finished: {things} saved in {path}")
             self.session.set_frf(usable_lines(proc.frf), path.name if path else "acquisition",
                                  path)
         else:
             why = proc.message if proc is not None and proc.message else state.value
             self.next_label.setText(f"Ended ({state.value}): {why}")
             self.message.emit("warning" if state is RunState.STOPPED else "error",
-                              f"acquisition {state.value}: {why}; the {n} hits acquired are "
-                              f"saved in {path}")
+                              f"acquisition {state.value}: {why}; the {things} acquired "
+                              f"{'is' if n == 1 else 'are'} saved in {path}")
 
     def shutdown(self, timeout: float = 10.0) -> None:
         """Stop the run and wait for the devices to shut down (window closing)."""
         if self.procedure is not None and self.procedure.running:
             self.procedure.stop()
             self.procedure.wait(timeout)
+        self.plots.live.timer.stop()
+
+
+def _auto(hit: HitRecord) -> str:
+    return "accepted" if hit.auto_accepted else (hit.reason or "rejected")
+
+
+def _verdict(hit: HitRecord) -> str:
+    """The verdict in force, in words."""
+    if hit.override:
+        return f"{'accepted' if hit.accepted else 'rejected'} by the operator"
+    return _auto(hit)
+
+
+def _started(plan: TestPlan, path: Path, partial: bool, why: str) -> str:
+    """The message when a run starts."""
+    n = len(plan.excitations)
+    if plan.method == "shaker":
+        s = plan.shaker
+        each = f"{s.averages} block(s) of {s.nperseg / plan.record.fs:g} s each, {s.waveform}"
+    else:
+        each = f"{plan.hits} accepted hit(s) each"
+    text = f"acquisition started: {n} points, {each}, writing {path.name}"
+    if partial:
+        text += f". Partial run (FRFs only, no identification): {why}"
+    return text

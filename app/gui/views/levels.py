@@ -2,18 +2,24 @@
 
 Bars give each channel's peak over the last half second as a percentage of its full scale
 (green below 80 %, orange below 100 %, red at overload, latched until reset); the traces
-show the last seconds of every channel. A QTimer drains the stream's queue (every block is
-used, none dropped) and redraws with ``setData``.
+show the last seconds of every channel. A QTimer (30 Hz) drains the stream's queue into a
+:class:`app.gui.ring.RevealRing` (every block is used, none dropped) and redraws with
+``setData``, revealing the samples by the time elapsed since the last redraw: the traces
+scroll at the timer's rate, whatever the stream's reads a second, at most 0.3 s behind the
+newest sample. ``frames`` counts the timer's ticks and ``frames_new`` the redraws that
+showed new samples.
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
+from app.gui.ring import RevealRing
 from app.gui.streaming import StreamThread
 from app.gui.widgets import make_plot
 from app.report.figures import COLORS
@@ -28,11 +34,11 @@ class LevelsWidget(QtWidgets.QWidget):
 
     Parameters
     ----------
-    fps : redraws per second
+    fps : redraws per second (at most: a tick with no new block draws nothing)
     seconds : length of the traces, s
     """
 
-    def __init__(self, fps: float = 25.0, seconds: float = 2.0,
+    def __init__(self, fps: float = 30.0, seconds: float = 2.0,
                  parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.seconds = seconds
@@ -69,11 +75,12 @@ class LevelsWidget(QtWidgets.QWidget):
         self.timer.timeout.connect(self.update_once)
         self.stream: StreamThread | None = None
         self.frames = 0
+        self.frames_new = 0
         self.samples = 0
         self.latencies: list[float] = []
         self._curves: list[pg.PlotDataItem] = []
-        self._ring = np.zeros((0, 0))
-        self._peak_ring = np.zeros((0, 0))
+        self.ring: RevealRing | None = None
+        self._last_tick = 0.0
         self._latched = np.zeros(0, bool)
 
     def attach(self, stream: StreamThread) -> None:
@@ -83,26 +90,29 @@ class LevelsWidget(QtWidgets.QWidget):
         self.stream = stream
         self._names = src.names
         self._fs = src.fs
+        self._half = max(1, int(0.5 * src.fs))
         self._full = np.where(src.full_scale > 0, src.full_scale, 1.0)
-        self._ring = np.zeros((n_ch, max(2, int(self.seconds * src.fs))))
+        self.ring = RevealRing(n_ch, src.fs, self.seconds)
         self._latched = np.zeros(n_ch, bool)
         plot = self.traces_plot.getPlotItem()
         for c in self._curves:
             plot.removeItem(c)
-        t = np.arange(self._ring.shape[1]) / src.fs - self.seconds
-        self._t = t
-        # live curves: no antialiasing, no finite check (NaN only where samples were lost)
-        self._curves = [plot.plot(t, self._ring[k], name=name, antialias=False,
-                                  skipFiniteCheck=True,
+        n = self.ring.n
+        self._t = (np.arange(n) - n + 1) / src.fs
+        # live curves: no antialiasing (NaN before the first samples and where samples
+        # were lost: the finite check stays on)
+        self._curves = [plot.plot(name=name, antialias=False,
                                   pen=pg.mkPen(COLORS[k % len(COLORS)], width=1))
                         for k, name in enumerate(src.names)]
+        plot.setXRange(-self.seconds, 0, padding=0)
         self.bars_plot.getPlotItem().setXRange(-0.5, n_ch - 0.5)
         ax = self.bars_plot.getPlotItem().getAxis("bottom")
         step = max(1, n_ch // 16)
         ax.setTicks([[(k, src.names[k]) for k in range(0, n_ch, step)]])
-        self.frames = 0
+        self.frames = self.frames_new = 0
         self.samples = 0
         self.latencies = []
+        self._last_tick = time.monotonic()
         self.timer.start()
 
     def detach(self) -> None:
@@ -115,27 +125,25 @@ class LevelsWidget(QtWidgets.QWidget):
         self.overload_label.setText("")
 
     @QtCore.Slot()
-    def update_once(self) -> None:
-        """Drain the queue and redraw (GUI thread)."""
-        if self.stream is None:
+    def update_once(self, catch_up: bool = False) -> None:
+        """Drain the queue and redraw what is due (everything with ``catch_up``; GUI thread)."""
+        if self.stream is None or self.ring is None:
             return
+        now = time.monotonic()
+        dt, self._last_tick = now - self._last_tick, now
+        self.frames += 1
         blocks = self.stream.drain()
-        if not blocks:
+        for b in blocks:
+            self.ring.add(b.data, b.t_read)
+            self.samples += b.data.shape[1]
+            self._latched |= b.overloaded
+        if not self.ring.advance(dt, catch_up):
             return
-        data = np.hstack([b.data for b in blocks])
-        over = np.any([b.overloaded for b in blocks], axis=0)
-        n = data.shape[1]
-        self.samples += n
-        ring = self._ring
-        if n >= ring.shape[1]:
-            ring[:] = data[:, -ring.shape[1]:]
-        else:
-            ring[:, :-n] = ring[:, n:]
-            ring[:, -n:] = data
-        recent = ring[:, -max(1, int(0.5 * self._fs)):]
-        with np.errstate(invalid="ignore"):
-            pct = np.nan_to_num(np.nanmax(np.abs(recent), axis=1)) / self._full * 100
-        self._latched |= over | (pct >= 100)
+        ring = self.ring.view()
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN before the first block
+            pct = np.nan_to_num(np.nanmax(np.abs(ring[:, -self._half:]), axis=1)) / self._full * 100
+        self._latched |= pct >= 100
         brushes = [_RED if self._latched[k] else _ORANGE if p >= 80 else _GREEN
                    for k, p in enumerate(pct)]
         self.bars.setOpts(x=np.arange(pct.size), height=np.minimum(pct, 110), width=0.8,
@@ -148,11 +156,15 @@ class LevelsWidget(QtWidgets.QWidget):
             self.overload_label.setText("OVERLOAD on " + ", ".join(names)
                                         + ": lower the gain or hit softer, then reset")
             self.overload_label.setStyleSheet(f"color:{_RED}; font-weight:bold;")
-        now = time.monotonic()
-        self.latencies.append(now - blocks[0].t_read)
-        self.frames += 1
+        self.latencies += self.ring.latencies(now)
+        self.frames_new += 1
 
     def peak_percent(self) -> np.ndarray:
         """Peak of the last half second per channel, % of full scale (as drawn)."""
-        recent = self._ring[:, -max(1, int(0.5 * self._fs)):]
-        return np.asarray(np.nanmax(np.abs(recent), axis=1) / self._full * 100)
+        if self.ring is None:
+            return np.zeros(0)
+        recent = self.ring.view()[:, -self._half:]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.asarray(np.nan_to_num(np.nanmax(np.abs(recent), axis=1))
+                              / self._full * 100)

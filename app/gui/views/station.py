@@ -28,6 +28,9 @@ _CHANNEL_COLUMNS = ("device", "channel", "input", "quantity", "unit", "sensitivi
                     "range (±V)", "IEPE", "node", "direction (x y z)")
 _EDITABLE = {5, 6, 7, 8, 9}
 _MOCK = "mock:"
+#: the mock bench's built-in shaker plan: periodic chirp, 1 s blocks (1 Hz lines), 2 averages
+MOCK_SHAKER = {"waveform": "chirp", "level": 0.5, "f_start": 2.0, "f_stop": 400.0,
+               "averages": 2, "nperseg": 1024, "ramp": 0.1, "settle": 1.0}
 
 
 class StationView(QtWidgets.QWidget):
@@ -60,6 +63,11 @@ class StationView(QtWidgets.QWidget):
         self.bench_combo = QtWidgets.QComboBox()
         self.bench_combo.addItems(sorted(BENCHES))
         self.bench_combo.setCurrentText("engine-rigid")
+        self.method_combo = QtWidgets.QComboBox()
+        self.method_combo.addItems(["hammer", "shaker"])
+        self.method_combo.setToolTip("The built-in plan offered with the mock bench: impact "
+                                     "hammer, or shaker (periodic chirp)")
+        self.method_combo.setCurrentText(str(settings.value("mock_method", "hammer", str)))
         self.mock_button = QtWidgets.QPushButton("Use mock bench")
         self.mock_button.setToolTip("Simulated front end and hammer on the chosen bench, with "
                                     "a simulated operator who hits where the plan asks")
@@ -78,6 +86,8 @@ class StationView(QtWidgets.QWidget):
         top = QtWidgets.QHBoxLayout()
         top.addWidget(QtWidgets.QLabel("Built-in bench:"))
         top.addWidget(self.bench_combo)
+        top.addWidget(QtWidgets.QLabel("plan:"))
+        top.addWidget(self.method_combo)
         top.addWidget(self.mock_button)
         top.addSpacing(16)
         top.addWidget(self.open_button)
@@ -129,13 +139,16 @@ class StationView(QtWidgets.QWidget):
         self.mock = InProcessBench(name, operator={"pause": 0.05})
         self.bench_combo.setCurrentText(name)
         self._set_station(self.mock.station, f"{_MOCK}{name}")
-        self.plan_offered.emit(plan_for_bench(name, length=1.0))
+        self.plan_offered.emit(self.mock_plan())
 
     def mock_plan(self, points: list[int] | None = None) -> TestPlan | None:
-        """The mock bench's built-in plan (None without a mock bench)."""
+        """The mock bench's built-in plan, hammer or shaker as chosen (None without a mock
+        bench)."""
         if self.mock is None:
             return None
-        return plan_for_bench(self.mock.bench.name, points=points, length=1.0)
+        method = self.method_combo.currentText()
+        return plan_for_bench(self.mock.bench.name, points=points, length=1.0, method=method,
+                              shaker=MOCK_SHAKER if method == "shaker" else None)
 
     def _open_dialog(self) -> None:
         name, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open station file", "",
@@ -290,6 +303,7 @@ class StationView(QtWidgets.QWidget):
     def save_settings(self) -> None:
         if self.source:
             self.settings.setValue("last_station", self.source)
+        self.settings.setValue("mock_method", self.method_combo.currentText())
 
     def shutdown(self) -> None:
         """Stop streaming and the mock bench (window closing)."""
