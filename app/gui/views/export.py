@@ -30,8 +30,8 @@ class ExportView(QtWidgets.QWidget):
         self.html_button = QtWidgets.QPushButton("Export report (HTML)…")
         self.run_button.setToolTip("Copy the run file of this test: raw records, verdicts, "
                                    "settings, FRFs and result")
-        self.uff_button.setToolTip("FRFs with geometry (UFF 164, 2411, 58), readable by "
-                                   "Testlab, ME'scope and 'insitu identify'")
+        self.uff_button.setToolTip("FRFs with geometry (UFF 164, 2411, 58), as pyuff and "
+                                   "'insitu identify' read them")
         self.json_button.setToolTip("The identification result (METHOD.md result JSON)")
         self.html_button.setToolTip("One self-contained HTML page with tables and figures")
         self.run_button.clicked.connect(self._save_run)
