@@ -217,6 +217,7 @@ def process_impacts(
     ranges: ArrayLike | None = None,
     estimator: str = "H1",
     force_accept: bool = False,
+    max_averages: int | None = None,
 ) -> ImpactResult:
     """Find, check, window and average the hits of one impact recording.
 
@@ -242,6 +243,10 @@ def process_impacts(
         ``double_hit_ratio`` of the peak, plus one pulse width and the taper), so the
         rebound's force is not cut off while its response is kept. Incomplete
         records stay rejected.
+    max_averages : int, optional
+        Average only the first ``max_averages`` accepted hits (at least 1); the later
+        ones are not used: their verdict is not accepted, with the reason
+        ``"not used: the first N accepted hits are averaged"``.
 
     Returns
     -------
@@ -267,6 +272,8 @@ def process_impacts(
         raise InputError("impact data contain NaN or infinite samples")
     if not np.isfinite(fs) or fs <= 0:
         raise InputError(f"sample rate must be positive, got {fs}")
+    if max_averages is not None and max_averages < 1:
+        raise InputError(f"max_averages must be at least 1 (or None), got {max_averages}")
     n_ch, n = x.shape
     if not 0 <= force_channel < n_ch:
         raise InputError(f"force channel {force_channel} out of range for {n_ch} channels")
@@ -299,7 +306,7 @@ def process_impacts(
 
     verdicts: list[HitVerdict] = []
     accepted = np.zeros(ok_starts.size, dtype=bool)  # per complete record
-    k = 0
+    k = n_used = 0
     for i, (trig, start, comp) in enumerate(zip(triggers, starts, complete, strict=True)):
         if not comp:
             where = "start" if start < 0 else "end"
@@ -316,10 +323,14 @@ def process_impacts(
         if double[k]:
             dt = (rerise[k] - first_above[k]) / fs * 1e3
             reasons.append(f"double hit (second impact {dt:.1f} ms after the first)")
-        accepted[k] = force_accept or not reasons
+        ok = force_accept or not reasons
         reason = "; ".join(reasons)
         if force_accept and reasons:
             reason = f"accepted by override: {reason}"
+        if ok and max_averages is not None and n_used >= max_averages:
+            ok, reason = False, f"not used: the first {max_averages} accepted hits are averaged"
+        accepted[k] = ok
+        n_used += ok
         verdicts.append(HitVerdict(i, int(trig), int(start), float(peak_force[k]),
                                    bool(accepted[k]), reason))
         k += 1

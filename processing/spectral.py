@@ -19,11 +19,13 @@ multiple coherence of each response.
 
 from __future__ import annotations
 
-import functools
+import itertools
+import threading
+import weakref
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Literal, TypeVar
+from typing import Literal
 
 import numpy as np
 import scipy.fft
@@ -53,15 +55,44 @@ ESTIMATORS = ("H1", "H2", "Hv")
 Scaling = Literal["density", "spectrum"]
 #: summed (Sff, Sfx, Sxx) of some segments
 _Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64]]
-_T = TypeVar("_T")
-#: per-worker scratch arrays: windowed segments, their spectra (double precision), cross
-#: products (single precision)
-_Scratch = tuple[
-    NDArray[np.floating], NDArray[np.complexfloating] | None, NDArray[np.complexfloating] | None
-]
-#: output arrays of one group's sums: cross (n_ref, n_ch, n_f) complex128, squares
-#: (n_ch, 2 n_f) in the spectra's real precision, auto-spectra (n_ch, n_f) float64
-_Outputs = tuple[NDArray[np.complex128], NDArray[np.floating], NDArray[np.float64]]
+#: terms of summed products, see :func:`_products`: P (2 n_ref, n_own, 2 n_f), Q (n_own, 2 n_f)
+_Products = tuple[NDArray[np.floating], NDArray[np.floating]]
+#: scratch of :func:`_products`: reference pairs (n_seg, 2 n_ref, 2 n_f), then P and Q
+_Work = tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]
+#: per-worker scratch of a group: windowed samples, spectra (double precision only),
+#: segment sums, then ``_Work``
+_Scratch = tuple[NDArray[np.floating], NDArray[np.complex128] | None, NDArray[np.floating],
+                 NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """The channels one worker thread handles: its own ``lo:hi`` (the rows of the sums it
+    writes) after the references outside them (``extra``), which it transforms too;
+    ``ref_pos``: where each reference is among the rows it transforms."""
+
+    lo: int
+    hi: int
+    extra: tuple[int, ...]
+    ref_pos: tuple[int, ...]
+
+    @classmethod
+    def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Rows]:
+        """``parts`` workers (at most), each transforming about as many rows: the first
+        one's own rows hold the first references, the others transform them as well."""
+        each = (n_ch + (parts - 1) * len(refs)) / parts
+        inner = [round(each + k * (each - len(refs))) for k in range(parts - 1)]
+        bounds = sorted({0, n_ch, *(b for b in inner if 0 < b < n_ch)})
+        out = []
+        for lo, hi in itertools.pairwise(bounds):
+            extra = tuple(r for r in refs if not lo <= r < hi)
+            pos = tuple(extra.index(r) if r in extra else len(extra) + r - lo for r in refs)
+            out.append(cls(lo, hi, extra, pos))
+        return out
+
+    @property
+    def n_in(self) -> int:
+        return len(self.extra) + self.hi - self.lo
 
 
 class SpectralError(ValueError):
@@ -289,56 +320,54 @@ def _channel_roles(
     return refs, resps
 
 
-def _cross_sums(
+def _products(
     Z: NDArray[np.complexfloating],
-    refs: tuple[int, ...],
-    resps: tuple[int, ...],
-    prod: NDArray[np.complexfloating] | None = None,
-    out: _Outputs | None = None,
-) -> _Sums:
-    """Sums over the leading axis of ``conj(F) F``, ``conj(F) X`` and ``|X|^2``.
+    ref_pos: tuple[int, ...],
+    own: slice,
+    work: _Work | None = None,
+) -> _Products:
+    """Sums over the leading axis of the terms of ``conj(F_a) X`` and ``|X|^2``.
 
-    ``Z`` (n_seg, n_ch, n_f) holds the spectra of all channels of n_seg segments.
-    In single precision the cross products are formed in ``prod`` (scratch of shape
-    (n_seg, n_ref, n_ch, n_f), allocated if not given) and summed in double precision,
-    einsum being slow there; in double precision einsum does it in one pass over ``Z``.
-    The sums go to ``out`` (see ``_Outputs``; allocated if not given) and the results
-    are views of it: fresh megabyte-sized outputs for every group cost page faults
-    that took as long as the products themselves (measured).
+    ``Z`` (n_seg, n_in, n_f) holds the spectra of n_seg segments, the references at
+    ``ref_pos`` and the channels ``X`` at ``own``. Its interleaved real view ``V`` (re, im,
+    re, im, ...) goes through two real einsum passes (products with each reference's
+    ``(re, im)`` and ``(-im, re)`` give the terms of the real and imaginary parts of the
+    cross-spectra) and one for the squares; real einsum is memory bound and twice as fast
+    as the complex one. The pairs of terms are added later, by :func:`_spectra_sums`.
+    Sums in the precision of ``Z``, each value summed over the segments in order whatever
+    the other channels; ``work`` (see ``_Work``) holds the scratch and outputs, allocated
+    if not given.
     """
-    n_seg, n_ch, n_f = Z.shape
-    if out is None:
-        out = _outputs(len(refs), n_ch, n_f, Z.real.dtype)
-    cross, auto2, Sxx = out
-    Zr = np.conj(Z[:, list(refs)])  # (n_seg, n_ref, n_f), small copy
-    if Z.dtype == np.complex64:
-        shape = (n_seg, len(refs), n_ch, n_f)
-        if prod is None or prod.shape != shape:
-            prod = np.empty(shape, dtype=Z.dtype)
-        np.multiply(Zr[:, :, None, :], Z[:, None, :, :], out=prod)
-        np.add.reduce(prod, axis=0, dtype=np.complex128, out=cross)
-    else:
-        np.einsum("saf,sbf->abf", Zr, Z, out=cross)
-    v = np.ascontiguousarray(Z).view(Z.real.dtype)  # interleaved re, im
-    np.einsum("sbf,sbf->bf", v, v, out=auto2)
-    np.add(auto2[:, 0::2], auto2[:, 1::2], out=Sxx, dtype=np.float64)
-    r0 = resps[0] if resps else 0
-    if resps == tuple(range(r0, r0 + len(resps))):  # the usual layout: a view, no copy
-        return cross[:, list(refs)], cross[:, r0 : r0 + len(resps)], Sxx[r0 : r0 + len(resps)]
+    n_seg, _, n_f = Z.shape
+    real = Z.real.dtype
+    V = np.ascontiguousarray(Z).view(real)  # (n_seg, n_in, 2 n_f)
+    X = V[:, own]
+    if work is None:
+        work = _work(n_seg, len(ref_pos), X.shape[1], n_f, real)
+    refpairs, P, Q = work
+    np.take(V, ref_pos, axis=1, out=refpairs[:, 0::2], mode="clip")  # (re, im) of each ref.
+    np.negative(refpairs[:, 0::2, 1::2], out=refpairs[:, 1::2, 0::2])  # (-im, re)
+    np.copyto(refpairs[:, 1::2, 1::2], refpairs[:, 0::2, 0::2])
+    np.einsum("sbk,sak->abk", X, refpairs, out=P)
+    np.einsum("sbk,sbk->bk", X, X, out=Q)
+    return P, Q
+
+
+def _spectra_sums(P: NDArray[np.floating], Q: NDArray[np.floating], refs: tuple[int, ...],
+                  resps: tuple[int, ...]) -> _Sums:
+    """``(Sff, Sfx, Sxx)`` sums (complex128, float64) from the terms of :func:`_products`."""
+    n_ch, n_f = Q.shape[0], Q.shape[1] // 2
+    cross = np.empty((len(refs), n_ch, n_f), np.complex128)
+    np.add(P[0::2, :, 0::2], P[0::2, :, 1::2], out=cross.real, dtype=np.float64)
+    np.add(P[1::2, :, 0::2], P[1::2, :, 1::2], out=cross.imag, dtype=np.float64)
+    Sxx = np.add(Q[:, 0::2], Q[:, 1::2], dtype=np.float64)
     return cross[:, list(refs)], cross[:, list(resps)], Sxx[list(resps)]
 
 
-def _outputs(n_ref: int, n_ch: int, n_f: int, real: np.dtype[np.floating]) -> _Outputs:
-    return (np.empty((n_ref, n_ch, n_f), np.complex128), np.empty((n_ch, 2 * n_f), real),
-            np.empty((n_ch, n_f), np.float64))
-
-
-def _shifted(fn: Callable[[int, int], _T], first: int, i: int, worker: int) -> _T:
-    return fn(first + i, worker)
-
-
-def _add(a: _Sums, b: _Sums) -> _Sums:
-    return a[0] + b[0], a[1] + b[1], a[2] + b[2]
+def _work(n_seg: int, n_ref: int, n_ch: int, n_f: int, real: np.dtype[np.floating]) -> _Work:
+    """Scratch of :func:`_products`: reference pairs, cross and square terms."""
+    return (np.empty((n_seg, 2 * n_ref, 2 * n_f), real), np.empty((2 * n_ref, n_ch, 2 * n_f), real),
+            np.empty((n_ch, 2 * n_f), real))
 
 
 def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
@@ -349,24 +378,26 @@ def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
     return scale
 
 
-def _map_ordered(fn: Callable[[int, int], _T], n: int, workers: int = 1) -> list[_T]:
-    """``[fn(i, k) for i in range(n)]``, by ``workers`` threads ``k`` on contiguous ranges of i.
+def _run_workers(fn: Callable[[int], None], workers: int,
+                 pool: ThreadPoolExecutor | None) -> None:
+    """``fn(k)`` for ``k`` in ``range(workers)``: 0 on this thread, the others on ``pool``'s.
 
-    The only threads of ``processing``: numpy and pocketfft release the GIL, so two
-    threads on disjoint segment groups use both cores. Results come back in order.
+    The only threads of ``processing``: numpy and pocketfft release the GIL, so the
+    workers, each on its own channels, run on all cores. Nothing is handed between
+    threads but the call and its completion. ``pool`` (``workers - 1`` threads) belongs
+    to one accumulator: the workers wait for each other (a barrier), which tasks queued
+    behind another accumulator's could not.
     """
-    if workers <= 1 or n <= 1:
-        return [fn(i, 0) for i in range(n)]
-    workers = min(workers, n)
-    bounds = np.linspace(0, n, workers + 1).astype(int)
-
-    def run(k: int) -> list[_T]:
-        return [fn(i, k) for i in range(bounds[k], bounds[k + 1])]
-
-    with ThreadPoolExecutor(max_workers=workers - 1, thread_name_prefix="spectral") as pool:
-        others = [pool.submit(run, k) for k in range(1, workers)]
-        parts = [run(0)] + [f.result() for f in others]  # this thread takes the first range
-    return [r for part in parts for r in part]
+    if workers <= 1 or pool is None:
+        fn(0)
+        return
+    others = [pool.submit(fn, k) for k in range(1, workers)]
+    try:
+        fn(0)
+    finally:
+        wait(others)  # never return while another thread still writes
+    for fut in others:
+        fut.result()
 
 
 class SpectralAccumulator:
@@ -390,28 +421,35 @@ class SpectralAccumulator:
         Channel indices of the responses (default: every other channel).
     scaling : {'density', 'spectrum'}
         Unit**2/Hz or unit**2, as in scipy.
-    group : int
-        Segments transformed together (one FFT call for all channels of ``group``
-        segments). Fixed per accumulator; results are independent of block sizes.
+    group : int, optional
+        Segments transformed together (one FFT call for ``group`` segments of all
+        the worker's channels); by default 4 for float64 samples, 16 for float32 (the
+        fastest on the benchmark). Fixed once the first block is in; results are
+        independent of block sizes.
     workers : int
-        Threads sharing the segment groups of one :meth:`update` (1 or 2 usually).
+        Threads sharing the channels (1, or 2 on a 2-core machine): each one windows,
+        transforms and multiplies every segment of its own channels, and transforms the
+        references too when they are not among them.
 
     Notes
     -----
-    Float32 samples are transformed in single precision (complex64 FFT) and
-    accumulated in float64; anything else is transformed in double precision.
-    Segments are taken as :func:`scipy.signal.csd` takes them: from the first
-    sample on, every ``nperseg - noverlap`` samples, trailing samples that do not
-    fill a segment unused. With several workers, each :meth:`update` hands every
-    thread the same number of groups and leaves the rest in the tail.
+    Float32 samples are transformed in single precision (complex64 FFT), the
+    products of one group summed in single precision, and the groups accumulated in
+    float64; anything else is transformed and summed in double precision. Segments
+    are taken as :func:`scipy.signal.csd` takes them: from the first sample on,
+    every ``nperseg - noverlap`` samples, trailing samples that do not fill a
+    segment unused. Each value is summed over the segments of a group, then over the
+    groups, always in order: the same bits whatever the block boundaries and the
+    number of workers.
 
-    Memory: the unconsumed tail (less than ``(workers + 1) * group * step + nperseg``
-    samples per channel), a copy of at most that much joined to the next block, the
-    accumulators (``n_ref * n_ch * (n_f + 1)`` complex values), per worker two arrays
-    of ``group * n_ch * nperseg`` values, and ``2 * workers`` sets of one group's sums
-    (``(n_ref + 2) * n_ch * n_f`` complex values each) reused from group to group.
-    Measured with 25 channels, nperseg 8192, 1 s blocks at 51.2 kHz, two workers:
-    under 100 MB (``benchmarks/frf.py``).
+    Memory: two buffers taking turns holding the unconsumed tail (less than
+    ``group * step + nperseg`` samples per channel, plus the start of the next block
+    when no group is complete), the accumulators (``3 * n_ch * nperseg`` values for
+    one reference), and per worker its scratch: windowed samples and spectra of one
+    group (``2 * group * nperseg`` values per channel it transforms) and one group's
+    sums, all allocated once and reused (fresh memory costs a page fault per 4 kB on
+    first touch). Measured with 25 channels, nperseg 8192, 1 s blocks at 51.2 kHz,
+    two workers: under 100 MB (``benchmarks/frf.py``).
 
     Examples
     --------
@@ -437,7 +475,7 @@ class SpectralAccumulator:
         references: Sequence[int] = (0,),
         responses: Sequence[int] | None = None,
         scaling: Scaling = "density",
-        group: int = 4,
+        group: int | None = None,
         workers: int = 1,
     ) -> None:
         if not np.isfinite(fs) or fs <= 0:
@@ -452,7 +490,7 @@ class SpectralAccumulator:
             raise SpectralError(f"detrend must be 'constant' or False, got {detrend!r}")
         if scaling not in ("density", "spectrum"):
             raise SpectralError(f"scaling must be 'density' or 'spectrum', got {scaling!r}")
-        if group < 1 or workers < 1:
+        if (group is not None and group < 1) or workers < 1:
             raise SpectralError(f"group and workers must be >= 1, got {group}, {workers}")
         if isinstance(window, (str, tuple)):
             win = np.asarray(scipy.signal.get_window(window, nperseg), dtype=float)
@@ -467,9 +505,12 @@ class SpectralAccumulator:
         self.window = win
         self.detrend = detrend
         self.scaling: Scaling = scaling
-        self.group = int(group)
+        self._group = group
+        self.group = 4 if group is None else int(group)
         self.workers = int(workers)
         self._references = tuple(int(r) for r in references)
+        self._pool: ThreadPoolExecutor | None = None
+        self._pool_size = 0
         self._responses = None if responses is None else tuple(int(r) for r in responses)
         W = np.fft.rfft(win)
         self._dc_bins = np.flatnonzero(np.abs(W) > 1e-12 * np.abs(W[0]))
@@ -485,11 +526,10 @@ class SpectralAccumulator:
         self._n_ch = 0
         self._refs: tuple[int, ...] = ()
         self._resps: tuple[int, ...] = ()
-        self._sums: _Sums | None = None
+        self._rows: list[_Rows] = []
         self._n_seg = 0
         self._n_samples = 0
         self._scratch: list[_Scratch] = []
-        self._outs: list[_Outputs] = []
 
     @property
     def n_averages(self) -> int:
@@ -510,58 +550,71 @@ class SpectralAccumulator:
 
     # -- work ----------------------------------------------------------------------------------
     def _first_block(self, block: NDArray[np.generic]) -> None:
-        self._n_ch = block.shape[0]
-        self._refs, self._resps = _channel_roles(self._n_ch, self._references, self._responses)
+        self._n_ch = n_ch = block.shape[0]
+        self._refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
         self._dtype = np.dtype(np.float32 if block.dtype == np.float32 else np.float64)
+        if self._group is None:  # the fastest measured (benchmarks/frf.py)
+            self.group = 16 if self._dtype == np.float32 else 4
         self._win = self.window.astype(self._dtype)
-        self._tail = np.empty((self._n_ch, 0), dtype=self._dtype)
-
-    def _group_sums(self, seg: NDArray[np.floating], worker: int | None = None,
-                    slot: int | None = None) -> _Sums:
-        """Sums of one group: ``seg`` (n_ch, n_seg, nperseg) strided view of the samples.
-
-        A full group reuses the scratch arrays of ``worker`` and writes its sums to the
-        output arrays of ``slot`` (its place in the groups awaiting commit; the result is
-        a view of them): allocating them anew for every group costs page faults that
-        serialise the threads.
-        """
-        n_seg = seg.shape[1]
-        sums_out = None
-        if worker is not None and n_seg == self.group:
-            buf, spec, prod = self._workspace(worker)
-            if slot is not None:
-                assert self._dtype is not None
-                while len(self._outs) <= slot:
-                    self._outs.append(_outputs(len(self._refs), self._n_ch, self.freq.size,
-                                               self._dtype))
-                sums_out = self._outs[slot]
-        else:
-            buf, spec, prod = np.empty((n_seg, self._n_ch, self.nperseg), self._dtype), None, None
-        np.multiply(seg.transpose(1, 0, 2), self._win, out=buf)
-        # one FFT per precision whatever the buffers, so that results never depend on how
-        # the samples were cut into blocks
-        Z: NDArray[np.complexfloating]
-        if self._dtype == np.float64:
-            out = None if spec is None else spec.view(np.complex128)
-            Z = np.fft.rfft(buf, axis=-1, out=out)  # numpy's pocketfft can write in place
-        else:  # scipy's is twice as fast as numpy's in single precision
-            Z = scipy.fft.rfft(buf, axis=-1, workers=1)
-        if self.detrend == "constant":
-            mean = seg.mean(axis=-1).T  # (n_seg, n_ch), in the samples' precision like scipy
-            Z[..., self._dc_bins] -= (mean[..., None] * self._dc_values).astype(Z.dtype)
-        return _cross_sums(Z, self._refs, self._resps, prod, sums_out)
+        # two buffers taking turns holding the tail (a prefix of the first)
+        self._stores = [np.empty((n_ch, 0), self._dtype) for _ in range(2)]
+        self._tail = self._stores[0]
+        self._rows = _Rows.split(n_ch, self._refs, self.workers)
+        n_threads = len(self._rows) - 1
+        if n_threads > self._pool_size:  # a pool of its own, shut down when the accumulator goes
+            if self._pool is not None:
+                self._pool.shutdown(wait=False)
+            self._pool = ThreadPoolExecutor(n_threads, thread_name_prefix="spectral")
+            self._pool_size = n_threads
+            weakref.finalize(self, self._pool.shutdown, wait=False)
+        # the sums' terms (see _products), rows written by one worker each
+        n_f = self.freq.size
+        self._P = np.zeros((2 * len(self._refs), n_ch, 2 * n_f))
+        self._Q = np.zeros((n_ch, 2 * n_f))
 
     def _workspace(self, worker: int) -> _Scratch:
+        """Worker ``worker``'s scratch for a group: windowed samples, spectra (double
+        precision; scipy's single-precision FFT has no ``out``), segment sums, then
+        :func:`_products`' arrays; allocated once, reused for every group."""
+        assert self._dtype is not None
         while len(self._scratch) <= worker:
-            n_f = self.freq.size
-            single = self._dtype == np.float32
+            rows = self._rows[len(self._scratch)]
+            G, n_f = self.group, self.freq.size
             self._scratch.append((
-                np.empty((self.group, self._n_ch, self.nperseg), dtype=self._dtype),
-                None if single else np.empty((self.group, self._n_ch, n_f), np.complex128),
-                np.empty((self.group, len(self._refs), self._n_ch, n_f), np.complex64)
-                if single else None,
+                np.empty((G, rows.n_in, self.nperseg), self._dtype),
+                None if self._dtype == np.float32 else np.empty((G, rows.n_in, n_f),
+                                                                np.complex128),
+                np.empty((rows.n_in, G), self._dtype),
+                *_work(G, len(self._refs), rows.hi - rows.lo, n_f, self._dtype),
             ))
         return self._scratch[worker]
+
+    def _group_products(self, seg: NDArray[np.floating], rows: _Rows,
+                        scratch: _Scratch) -> _Products:
+        """Terms of the sums of one group for the channels of ``rows``: ``seg`` (n_ch, n_seg,
+        nperseg) strided view of all channels' samples; ``scratch`` (see ``_workspace``)
+        holds every intermediate; its first n_seg entries are used."""
+        n_seg, n_x = seg.shape[1], len(rows.extra)
+        buf, spec, sums, refpairs, P, Q = scratch
+        buf, sums, refpairs = buf[:n_seg], sums[:, :n_seg], refpairs[:n_seg]
+        own = seg[rows.lo : rows.hi]
+        np.multiply(own.transpose(1, 0, 2), self._win, out=buf[:, n_x:])
+        if n_x:  # references handled by another worker: transformed here too (small copy)
+            np.multiply(seg[list(rows.extra)].transpose(1, 0, 2), self._win, out=buf[:, :n_x])
+        # one FFT per precision whatever the buffers, so that results never depend on how
+        # the samples were cut into blocks or channels
+        Z: NDArray[np.complexfloating]
+        if spec is not None:
+            Z = np.fft.rfft(buf, axis=-1, out=spec[:n_seg])  # numpy's pocketfft writes to `out`
+        else:  # scipy's is twice as fast as numpy's in single precision
+            Z = scipy.fft.rfft(buf, axis=-1, workers=1, overwrite_x=True)
+        if self.detrend == "constant":
+            np.add.reduce(own, axis=-1, out=sums[n_x:])
+            if n_x:
+                np.add.reduce(seg[list(rows.extra)], axis=-1, out=sums[:n_x])
+            mean = sums.T / self.nperseg  # (n_seg, n_in), in the samples' precision like scipy
+            Z[..., self._dc_bins] -= (mean[..., None] * self._dc_values).astype(Z.dtype)
+        return _products(Z, rows.ref_pos, slice(n_x, None), (refpairs, P, Q))
 
     def _segments(self, data: NDArray[np.floating], start: int, n_seg: int) -> NDArray[np.floating]:
         view = data[:, start : start + self._span(n_seg)]
@@ -579,60 +632,89 @@ class SpectralAccumulator:
         assert self._tail is not None
         if arr.shape[0] != self._n_ch:
             raise SpectralError(f"block has {arr.shape[0]} channels, expected {self._n_ch}")
-        if not np.isfinite(np.add.reduce(arr, axis=None, dtype=np.float64)):  # one cheap pass
-            raise SpectralError("block contains NaN or infinite samples; nothing was added")
         arr = arr.astype(self._dtype, copy=False)
-        self._n_samples += arr.shape[-1]
-        tail = self._tail
-        n_tail, n_new = tail.shape[-1], arr.shape[-1]
+        n_tail, n_new = self._tail.shape[-1], arr.shape[-1]
         hop = self.group * self.step  # samples between group starts
         span = self._span(self.group)
         avail = n_tail + n_new
         n_groups = 0 if avail < span else (avail - span) // hop + 1
-        # as many groups for each thread; the rest waits in the tail for the next block
-        n_groups -= n_groups % self.workers
-        if n_groups == 0:
-            self._tail = np.concatenate([tail, arr], axis=-1)
-            return
-        # groups inside the tail or the block are views; only those straddling both are cut
-        # from a joined copy
-        n_inside = min(n_groups, max(0, (n_tail - span) // hop + 1))
+        # groups starting in the tail are views of it, once the block's first samples they
+        # need are appended to it (all of the block if no group is complete); the others
+        # are views of the block
         n_head = min(n_groups, -(-n_tail // hop))
-        off = n_inside * hop
-        head = tail
-        if n_head > n_inside:
-            need = (n_head - 1) * hop + span - n_tail
-            head = np.concatenate([tail[:, off:], arr[:, :need]], axis=-1)
-
-        chunk = 2 * self.workers  # groups whose sums wait for their turn to be committed
-
-        def job(g: int, worker: int) -> _Sums:
-            if g < n_inside:
-                seg = self._segments(tail, g * hop, self.group)
-            elif g < n_head:
-                seg = self._segments(head, g * hop - off, self.group)
-            else:
-                seg = self._segments(arr, g * hop - n_tail, self.group)
-            return self._group_sums(seg, worker, g % chunk)  # a slot per group of a chunk
-
-        for first in range(0, n_groups, chunk):
-            n_run = min(chunk, n_groups - first)
-            self._commit(_map_ordered(functools.partial(_shifted, job, first), n_run,
-                                      self.workers))
-        self._n_seg += n_groups * self.group
-        start = n_groups * hop  # first unconsumed sample, counted from the tail's start
-        if start >= n_tail:
-            self._tail = arr[:, start - n_tail :].copy()
+        if n_groups == 0:
+            need = n_new
         else:
-            self._tail = np.concatenate([tail[:, start:], arr], axis=-1)
+            need = max(0, (n_head - 1) * hop + span - n_tail) if n_head else 0
+        if n_tail + need > self._stores[0].shape[-1]:  # no room: move to the other buffer
+            self._reserve(1, n_tail + need)[:, :n_tail] = self._tail
+            self._stores.reverse()
+            self._tail = self._stores[0][:, :n_tail]
+        tail = self._stores[0][:, : n_tail + need]
+        start = n_groups * hop  # first unconsumed sample, counted from the tail's start
+        keep: tuple[NDArray[np.floating], ...] = ()
+        if n_groups:  # the samples kept for the next block go to the other buffer
+            keep = (tail[:, start:], arr[:, need:]) if start < n_tail else (
+                arr[:, start - n_tail :],)
+        n_keep = sum(part.shape[-1] for part in keep)
+        dst = self._reserve(1, n_keep)[:, :n_keep]
+        finite = [True] * len(self._rows)
+        ready = threading.Barrier(len(self._rows))
 
-    def _commit(self, results: Sequence[_Sums]) -> None:
-        for parts in results:  # in group order: the sums do not depend on block boundaries
-            if self._sums is None:
-                self._sums = (parts[0].copy(), parts[1].copy(), parts[2].copy())
-            else:
-                for total, part in zip(self._sums, parts, strict=True):
-                    np.add(total, part, out=total)
+        def segments(g: int) -> NDArray[np.floating]:
+            if g < n_head:
+                return self._segments(tail, g * hop, self.group)
+            return self._segments(arr, g * hop - n_tail, self.group)
+
+        def job(worker: int) -> None:
+            """The worker's channels: checked, appended to the tail; then, once every worker
+            has done so, every group in order, and the samples kept copied."""
+            rows = self._rows[worker]
+            mine = slice(rows.lo, rows.hi)
+            try:
+                # one cheap pass; a huge but finite block may overflow the sum: look closer
+                x = arr[mine]
+                finite[worker] = bool(np.isfinite(np.add.reduce(x, axis=None))
+                                      or np.isfinite(x).all())
+                tail[mine, n_tail:] = x[:, :need]
+            except BaseException:
+                ready.abort()
+                raise
+            ready.wait()  # the other workers read the references' rows of the tail
+            if not all(finite):
+                return
+            scratch = self._workspace(worker)
+            P, Q = self._P[:, mine], self._Q[mine]
+            for g in range(n_groups):
+                dP, dQ = self._group_products(segments(g), rows, scratch)
+                np.add(P, dP, out=P)
+                np.add(Q, dQ, out=Q)
+            i = 0
+            for part in keep:
+                dst[mine, i : i + part.shape[-1]] = part[mine]
+                i += part.shape[-1]
+
+        _run_workers(job, len(self._rows), self._pool)
+        if not all(finite):
+            raise SpectralError("block contains NaN or infinite samples; nothing was added")
+        self._n_samples += n_new
+        if n_groups == 0:
+            self._tail = tail
+            return
+        self._n_seg += n_groups * self.group
+        self._stores.reverse()
+        self._tail = dst
+
+    def _reserve(self, i: int, n: int) -> NDArray[np.floating]:
+        """Buffer ``i`` (0: the tail's, 1: the other) with room for ``n`` samples per channel.
+
+        Grown when needed, never given back: fresh memory costs a page fault per 4 kB on
+        first touch, more than the copies into it.
+        """
+        if self._stores[i].shape[-1] < n:
+            self._stores[i] = np.empty((self._n_ch, max(n, self._stores[i].shape[-1] * 5 // 4)),
+                                       self._dtype)
+        return self._stores[i]
 
     def spectra(self) -> CrossSpectra:
         """The current averaged spectra (the accumulator goes on accepting blocks).
@@ -648,18 +730,24 @@ class SpectralAccumulator:
                 f"no complete segment yet: {self._n_samples} samples per channel received, "
                 f"{self.nperseg} needed"
             )
-        sums = self._sums
-        for start in range(0, n_pending, self.group):  # the same groups as update() forms
-            k = min(self.group, n_pending - start)
-            parts = self._group_sums(self._segments(self._tail, start * self.step, k))
-            sums = parts if sums is None else _add(sums, parts)
-        assert sums is not None
+        P, Q = self._P.copy(), self._Q.copy()
+        if n_pending:  # the last, incomplete group, as update() will form it, in the scratch
+            seg = self._segments(self._tail, 0, n_pending)
+
+            def job(worker: int) -> None:
+                rows = self._rows[worker]
+                mine = slice(rows.lo, rows.hi)
+                dP, dQ = self._group_products(seg, rows, self._workspace(worker))
+                np.add(P[:, mine], dP, out=P[:, mine])
+                np.add(Q[mine], dQ, out=Q[mine])
+
+            _run_workers(job, len(self._rows), self._pool)
         n = self._n_seg + n_pending
         norm = self.fs * np.sum(self.window**2) if self.scaling == "density" else np.sum(
             self.window
         ) ** 2
         scale = _onesided_scale(self.freq.size, self.nperseg, float(norm)) / n
-        Sff, Sfx, Sxx = sums
+        Sff, Sfx, Sxx = _spectra_sums(P, Q, self._refs, self._resps)
         return CrossSpectra(
             self.freq, Sff * scale, Sfx * scale, Sxx * scale, n, self._refs, self._resps
         )
@@ -728,7 +816,7 @@ def record_spectra(
                 f"windows of shape {w.shape} do not broadcast to the records {rec.shape}"
             ) from None
     Z = scipy.fft.rfft(x, axis=-1, overwrite_x=True)
-    Sff, Sfx, Sxx = _cross_sums(Z, refs, resps)
+    Sff, Sfx, Sxx = _spectra_sums(*_products(Z, refs, slice(None)), refs, resps)
     freq = np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64)
     scale = _onesided_scale(freq.size, n, fs * n) / n_rec
     return CrossSpectra(freq, Sff * scale, Sfx * scale, Sxx * scale, n_rec, refs, resps)

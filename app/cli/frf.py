@@ -75,6 +75,10 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
                    help="random: samples per segment (line spacing fs/nperseg)")
     p.add_argument("--overlap", type=float, default=0.5, help="random: segment overlap, 0..<1")
     p.add_argument("--window", default="hann", help="random: window (hann, boxcar, ...)")
+    p.add_argument("--averages", type=int, metavar="N",
+                   help="use at most N averages: random, the first N segments of each run; "
+                        "impact, the first N accepted hits of each excitation point "
+                        "(default: all)")
     p.add_argument("--level", type=float,
                    help="impact: trigger level, N (default: 10 %% of the run's largest force)")
     p.add_argument("--record", type=float, default=1.0, help="impact: record length, s")
@@ -120,13 +124,19 @@ def _random_spectra(r: TimeRun, args: argparse.Namespace) -> CrossSpectra:
     if r.n_samples < nperseg:
         raise InputError(f"load case {r.load_case}: {r.n_samples} samples, fewer than "
                          f"--nperseg {nperseg}: lower --nperseg or record longer")
-    acc = SpectralAccumulator(r.fs, nperseg, round(args.overlap * nperseg), window=args.window)
-    acc.update(np.vstack([r.force[None], r.responses]))
+    noverlap = round(args.overlap * nperseg)
+    acc = SpectralAccumulator(r.fs, nperseg, noverlap, window=args.window)
+    n = r.n_samples
+    if args.averages is not None:  # the samples of the first N segments
+        n = min(n, (args.averages - 1) * (nperseg - noverlap) + nperseg)
+    acc.update(np.vstack([r.force[None, :n], r.responses[:, :n]]))
     return acc.spectra()
 
 
-def _impact(r: TimeRun, args: argparse.Namespace) -> ImpactResult:
-    """Hits of one run; InputError (naming the load case) when none can be used."""
+def _impact(r: TimeRun, args: argparse.Namespace, max_averages: int | None = None
+            ) -> ImpactResult:
+    """Hits of one run, the first ``max_averages`` accepted ones averaged; InputError (naming
+    the load case) when none can be used."""
     lc = f"load case {r.load_case}"
     peak = float(np.max(np.abs(r.force)))
     if args.level is None and peak == 0:
@@ -139,7 +149,8 @@ def _impact(r: TimeRun, args: argparse.Namespace) -> ImpactResult:
     )
     names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
     res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
-                          channel_names=names, estimator=args.estimator)
+                          channel_names=names, estimator=args.estimator,
+                          max_averages=max_averages)
     if not res.verdicts:
         raise InputError(f"{lc}: no hit found (the force never crosses {level:g} N): lower "
                          "--level or check the force channel")
@@ -158,6 +169,8 @@ def frfset_from_time_uff(path: Path, args: argparse.Namespace) -> tuple[FRFSet, 
     """
     if not 0 <= args.overlap < 1:
         raise UserError(f"--overlap must be in [0, 1), got {args.overlap}")
+    if args.averages is not None and args.averages < 1:
+        raise UserError(f"--averages must be at least 1, got {args.averages}")
     runs, problems = read_time_uff(path, strict=False)
     for _, msg in problems:
         skipped(args, msg)
@@ -185,19 +198,29 @@ def frfset_from_time_uff(path: Path, args: argparse.Namespace) -> tuple[FRFSet, 
     cols: dict[tuple[int, tuple[float, ...]], tuple[Any, Any, Any]] = {}
     for key, members in groups.items():
         if args.excitation == "impact":
-            results = []
+            results: list[ImpactResult] = []
             for r in members:
+                left = None
+                if args.averages is not None:  # the first N accepted hits of the point
+                    left = args.averages - sum(one.n_accepted for one in results)
+                    if left == 0:
+                        print(f"load case {r.load_case} (node {key[0]}): not used, the first "
+                              f"{args.averages} accepted hits of the point are averaged")
+                        continue
                 try:
-                    one = _impact(r, args)
+                    one = _impact(r, args, left)
                 except InputError as err:
                     skipped(args, str(err))
                     n_bad += 1
                     continue
                 results.append(one)
-                bad = one.rejected
+                bad = [v for v in one.rejected if not v.reason.startswith("not used")]
+                n_unused = len(one.rejected) - len(bad)
                 print(f"load case {r.load_case} (node {key[0]}): {one.n_accepted} hits accepted"
                       + (", rejected: " + "; ".join(f"hit {v.index + 1}: {v.reason}"
-                                                   for v in bad) if bad else ""))
+                                                   for v in bad) if bad else "")
+                      + (f"; {n_unused} more not used (--averages {args.averages})"
+                         if n_unused else ""))
             if results:
                 res = merge_results(results)
                 cols[key] = (res.H, res.coherence, res.freq)
@@ -289,6 +312,9 @@ def frfset_from_run_file(path: Path, args: argparse.Namespace) -> tuple[FRFSet, 
     from app.acquire.analysis import analyse_records, run_frfs
     from app.io.runfile import RunFileError, read_run
 
+    if args.averages is not None:
+        raise UserError("--averages applies to UFF time records: a run file's averages are "
+                        "the hits or blocks the run uses (its plan and the operator's choices)")
     try:
         data = read_run(path)
     except RunFileError as err:

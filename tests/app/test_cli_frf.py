@@ -79,3 +79,55 @@ def test_frf_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[s
                  "999999"]) == 2
     err = capsys.readouterr().err.strip()
     assert "fewer than --nperseg" in err and "\n" not in err
+
+
+def test_averages_random_uses_the_first_segments(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    runs, g = _runs("random")
+    src, out = tmp_path / "time.uff", tmp_path / "frf.uff"
+    write_time_uff(src, runs, g, binary=True)  # type: ignore[arg-type]
+    assert main(["frf", str(src), "--out", str(out), "--nperseg", "1024", "--averages",
+                 "10"]) == 0
+    text = capsys.readouterr().out
+    assert text.count(": 10 averages") == 2
+    # the same as the runs cut to the samples of their first 10 segments (50 % overlap)
+    n = 9 * 512 + 1024
+    cut = [TimeRun(r.load_case, r.fs, r.force[:n], r.exc_node, r.exc_dir, r.responses[:, :n],
+                   r.resp_nodes, r.resp_dirs) for r in runs]
+    src2, out2 = tmp_path / "cut.uff", tmp_path / "cut_frf.uff"
+    write_time_uff(src2, cut, g, binary=True)  # type: ignore[arg-type]
+    assert main(["frf", str(src2), "--out", str(out2), "--nperseg", "1024"]) == 0
+    assert ": 10 averages" in capsys.readouterr().out
+    np.testing.assert_array_equal(read_frf_uff(out).H, read_frf_uff(out2).H)
+    # more than there are: all of them
+    assert main(["frf", str(src), "--out", str(out), "--nperseg", "1024", "--averages",
+                 "100000"]) == 0
+    assert ": 127 averages" in capsys.readouterr().out
+    assert main(["frf", str(src), "--out", str(out), "--averages", "0"]) == 2
+    assert "--averages must be at least 1" in capsys.readouterr().err
+
+
+def test_averages_impact_uses_the_first_accepted_hits_of_a_point(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    runs, g = _runs("impact")
+    r1 = runs[0]  # a second run at the first run's point
+    again = TimeRun(3, r1.fs, r1.force, r1.exc_node, r1.exc_dir, r1.responses, r1.resp_nodes,
+                    r1.resp_dirs)
+    src, out = tmp_path / "time.uff", tmp_path / "frf.uff"
+    write_time_uff(src, [*runs, again], g, binary=True)  # type: ignore[arg-type]
+    opts = ["--method", "impact", "--record", "4", "--pretrigger", "0.25"]
+    assert main(["frf", str(src), "--out", str(out), *opts, "--averages", "2"]) == 0
+    text = capsys.readouterr().out
+    assert "load case 1 (node" in text
+    assert "2 hits accepted; 1 more not used (--averages 2)" in text
+    assert "2 hits accepted, rejected: hit 2: double hit" in text  # point 2: none left over
+    assert "load case 3 (node" in text and "not used, the first 2 accepted hits" in text
+    assert main(["frf", str(src), "--out", str(out), *opts, "--averages", "4"]) == 0
+    text = capsys.readouterr().out
+    assert "3 hits accepted\n" in text and "1 hits accepted; 2 more not used" in text
+    # with 3: exactly the hits of the first run at that point
+    assert main(["frf", str(src), "--out", str(out), *opts, "--averages", "3"]) == 0
+    src2, out2 = tmp_path / "two.uff", tmp_path / "two_frf.uff"
+    write_time_uff(src2, runs, g, binary=True)  # type: ignore[arg-type]
+    assert main(["frf", str(src2), "--out", str(out2), *opts]) == 0
+    np.testing.assert_array_equal(read_frf_uff(out).H, read_frf_uff(out2).H)

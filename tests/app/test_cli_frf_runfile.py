@@ -93,3 +93,14 @@ def test_identify_tells_a_run_file_from_an_frf_file(
     assert main(["identify", str(path)]) == 2  # a run file: replayed, a point has no hit
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "has no accepted hit: resume the run" in err
+
+
+def test_averages_is_refused_for_a_run_file(run_file: tuple[Path, list[np.ndarray]],
+                                            tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    path, _ = run_file
+    out = tmp_path / "frf.h5"
+    assert main(["frf", str(path), "--out", str(out), "--averages", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--averages applies to UFF time records" in err and "\n" not in err
+    assert not out.exists()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 
 from hardware_mocks.benches import get_bench
 from hardware_mocks.signals import frf_laplace, half_sine, impulse_response, simulate
@@ -144,6 +144,24 @@ def test_merge_and_frfset(engine, recording):
     assert fs_set.H.shape == (12, 2, L // 2 + 1)
     assert fs_set.meta["exponential_tau"] == TAU
     assert fs_set.coherence is not None
+
+
+def test_max_averages_uses_the_first_accepted_hits(recording):
+    settings = ImpactSettings(20.0, L, PRE, exp_tau=TAU)
+    res = process_impacts(recording, FS, settings, max_averages=5)
+    # hits 0-3 and 6 are the first five accepted (4: double hit, 5: clipped)
+    assert [v.index for v in res.verdicts if v.accepted] == [0, 1, 2, 3, 6]
+    unused = [v for v in res.verdicts if v.reason.startswith("not used")]
+    assert [v.index for v in unused] == [7, 8, 9, 10]
+    assert unused[0].reason == "not used: the first 5 accepted hits are averaged"
+    assert res.meta["n_averages"] == 5 and res.spectra is not None
+    assert res.spectra.n_averages == 5
+    first = process_impacts(recording[:, : int(34 * FS)], FS, settings)  # hits 0-6 only
+    assert first.n_accepted == 5 and first.H is not None and res.H is not None
+    assert_array_equal(res.H, first.H)
+    assert process_impacts(recording, FS, settings, max_averages=50).n_accepted == 9
+    with pytest.raises(InputError, match="max_averages must be at least 1"):
+        process_impacts(recording, FS, settings, max_averages=0)
 
 
 def test_no_accepted_hit_is_reported_not_raised(recording):

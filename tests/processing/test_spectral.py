@@ -85,17 +85,19 @@ def test_channel_roles_and_h1_matches_scipy_ratio():
     assert_allclose(h1(sp)[:, 0], Pfx / Pff, rtol=1e-10)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(
     cuts=st.lists(st.integers(0, 6000), max_size=12),
-    workers=st.sampled_from([1, 2]),
+    workers=st.sampled_from([1, 2, 3, 5]),
     group=st.sampled_from([1, 3, 4]),
     dtype=st.sampled_from([np.float64, np.float32]),
+    refs=st.sampled_from([(0,), (3,), (1, 3)]),
 )
-def test_streaming_is_bitwise_identical_to_one_shot(cuts, workers, group, dtype):
-    data = _signals(n=6000, n_resp=2).astype(dtype)
-    ref = welch_spectra(data, FS, 200, 150, group=group)
-    acc = SpectralAccumulator(FS, 200, 150, group=group, workers=workers)
+def test_streaming_is_bitwise_identical_to_one_shot(cuts, workers, group, dtype, refs):
+    # workers split the channels: each transforms its own and the references outside them
+    data = _signals(n=6000, n_resp=3).astype(dtype)
+    ref = welch_spectra(data, FS, 200, 150, group=group, references=refs)
+    acc = SpectralAccumulator(FS, 200, 150, group=group, workers=workers, references=refs)
     for block in np.split(data, sorted(cuts), axis=-1):
         acc.update(block)
     sp = acc.spectra()
@@ -103,6 +105,32 @@ def test_streaming_is_bitwise_identical_to_one_shot(cuts, workers, group, dtype)
     assert_array_equal(sp.Sfx, ref.Sfx)
     assert_array_equal(sp.Sff, ref.Sff)
     assert_array_equal(sp.Sxx, ref.Sxx)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_rejected_block_changes_nothing(workers):
+    data = _signals(n=8000)
+    acc = SpectralAccumulator(FS, 256, workers=workers)
+    acc.update(data[:, :3000])
+    bad = data[:, 3000:5000].copy()
+    bad[2, 1500] = np.nan  # in the second worker's channels
+    with pytest.raises(SpectralError, match="NaN or infinite"):
+        acc.update(bad)
+    with pytest.raises(SpectralError, match="NaN or infinite"):
+        acc.update(np.full((4, 10), np.inf))
+    acc.update(data[:, 3000:])
+    assert acc.n_samples == 8000
+    assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
+
+
+def test_reset_with_more_channels_gets_enough_threads():
+    acc = SpectralAccumulator(FS, 256, workers=5)
+    acc.update(_signals(n=3000, n_resp=1))  # 2 channels: 2 workers
+    acc.reset()
+    data = _signals(n=3000, n_resp=5)  # 6 channels: 5 workers, waiting for each other
+    acc.update(data)
+    assert len(acc._rows) == 5
+    assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
 
 
 def test_spectra_can_be_read_while_streaming():
