@@ -18,18 +18,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.acquire.analysis import RunAnalysis, frfset, host_timed, identify_frfs, margin_samples
+from app.acquire.analysis import RunAnalysis, frfset, host_timed, margin_samples
 from app.acquire.events import HitRecord, PointFRF, Progress
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
-from app.acquire.procedure import Procedure
+from app.acquire.recording import RecordingProcedure
 from app.acquire.streams import HitStreams, RawHit
 from app.io.runfile import RunWriter, read_run
 from drivers.base import AcquisitionFrontEnd, ChannelConfig
 from drivers.errors import DeviceError
 from drivers.registry import create_device
 from drivers.station import StationConfig
-from processing.data import FRFSet, InputError
-from processing.geometry import GeometryError, GeometryReport
+from processing.data import FRFSet
+from processing.geometry import GeometryReport
 from processing.identify import IdentificationResult
 
 __all__ = ["HammerProcedure", "station_summary"]
@@ -49,7 +49,7 @@ def station_summary(station: StationConfig) -> dict[str, Any]:
     return out
 
 
-class HammerProcedure(Procedure):
+class HammerProcedure(RecordingProcedure):
     """Impact-hammer acquisition of a test plan into one run file.
 
     Parameters
@@ -272,14 +272,6 @@ class HammerProcedure(Procedure):
                 logger.warning("%s: shutdown failed: %s", dev.name, err)
         self.devices.clear()
 
-    def shutdown(self) -> None:
-        self._close_devices()
-        if self.writer is not None:
-            state = self.state.value if self.state.value != "running" else "failed"
-            if self.frf is None:
-                self.writer.finish(state, self.message)
-            self.writer = None
-
     # -- hits -----------------------------------------------------------------------------------
     def _store(self, point: ExcitationPoint, raw: RawHit) -> None:
         assert self.writer is not None
@@ -346,10 +338,6 @@ class HammerProcedure(Procedure):
         if old is not None:
             self._report(HitRecord(**{**old.__dict__, "override": override}))
 
-    def apply_note(self, text: str) -> None:
-        if self.writer is not None:
-            self.writer.add_note(text, time.monotonic() - self._t0 + self._t_offset)
-
     def _complete(self) -> None:
         """All points done: FRFs, identification, final state in the file."""
         assert self.writer is not None
@@ -357,16 +345,5 @@ class HammerProcedure(Procedure):
         resp = self.rows[1:]
         frf = frfset(self.plan, [p for p in points if p is not None], self.plan.geometry(),
                      *self.plan.response_dofs(self.station))
-        self.frf = frf
-        message = ""
-        result_json = None
-        if self.do_identify and self.geometry_report.ok:
-            try:
-                self.result = identify_frfs(frf)
-                result_json = self.result.to_json()
-            except (InputError, GeometryError) as err:
-                message = f"identification failed: {err}"
-                self.emit("on_error", message)
         assert len(resp) == frf.H.shape[0]
-        self.writer.finish("finished", message, frf, result_json)
-        self.writer = None
+        self._finish_run(frf)

@@ -35,20 +35,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.acquire.analysis import identify_frfs
 from app.acquire.blocks import WINDOWS, BlockAnalysis, block_verdict, shaker_frfset
 from app.acquire.events import HitRecord, PointFRF, Progress
 from app.acquire.hammer import station_summary
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
-from app.acquire.procedure import Procedure
+from app.acquire.recording import RecordingProcedure
 from app.acquire.shaker_io import BlockStream, ShakerDrive
 from app.io.runfile import RunWriter, read_run
 from drivers.base import AcquisitionFrontEnd, ChannelConfig, ExcitationDevice
 from drivers.errors import DeviceError
 from drivers.registry import create_device, get_backend
 from drivers.station import StationConfig
-from processing.data import FRFSet, InputError
-from processing.geometry import GeometryError, GeometryReport
+from processing.data import FRFSet
+from processing.geometry import GeometryReport
 from processing.identify import IdentificationResult
 
 __all__ = ["ShakerProcedure"]
@@ -56,7 +55,7 @@ __all__ = ["ShakerProcedure"]
 logger = logging.getLogger(__name__)
 
 
-class ShakerProcedure(Procedure):
+class ShakerProcedure(RecordingProcedure):
     """Shaker acquisition of a test plan into one run file.
 
     Parameters
@@ -281,14 +280,6 @@ class ShakerProcedure(Procedure):
             self.frontend = None
         self.stream = None
 
-    def shutdown(self) -> None:
-        self._close_devices()
-        if self.writer is not None:
-            state = self.state.value if self.state.value != "running" else "failed"
-            if self.frf is None:
-                self.writer.finish(state, self.message)
-            self.writer = None
-
     # -- blocks ---------------------------------------------------------------------------------
     def _store(self, point: ExcitationPoint, data: NDArray[np.float64], problem: str) -> None:
         assert self.writer is not None and self.stream is not None
@@ -351,23 +342,9 @@ class ShakerProcedure(Procedure):
         if old is not None:
             self._report(HitRecord(**{**old.__dict__, "override": override}))
 
-    def apply_note(self, text: str) -> None:
-        if self.writer is not None:
-            self.writer.add_note(text, time.monotonic() - self._t0 + self._t_offset)
-
     def _complete(self) -> None:
         assert self.writer is not None
         points = [self.analysis.point(j) for j in range(len(self.plan.excitations))]
         frf = shaker_frfset(self.plan, points, self.plan.geometry(),
                             *self.plan.response_dofs(self.station))
-        self.frf = frf
-        message, result_json = "", None
-        if self.do_identify and self.geometry_report.ok:
-            try:
-                self.result = identify_frfs(frf)
-                result_json = self.result.to_json()
-            except (InputError, GeometryError) as err:
-                message = f"identification failed: {err}"
-                self.emit("on_error", message)
-        self.writer.finish("finished", message, frf, result_json)
-        self.writer = None
+        self._finish_run(frf)
