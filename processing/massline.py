@@ -205,8 +205,15 @@ class MassLineProblem:
         return MassLineFit(theta, self.normal, self.n_equations, None)
 
 
-def _independent(shapes: NDArray[np.float64], rtol: float = 1e-6) -> NDArray[np.float64]:
-    """The shapes (rows) that are linearly independent of the ones before them."""
+def _independent(shapes: NDArray[np.float64], rtol: float = 1e-2) -> NDArray[np.float64]:
+    """The shapes (rows) that are independent of the ones before them over these lines.
+
+    A shape is dropped when, with the kept ones, the smallest singular value of the
+    normalised set falls under ``rtol`` times the largest (about: it lies within
+    ``rtol`` radians of their span). Modes far above the mass line and the ``w^2``
+    term are nearly one shape there; keeping them all makes the leakage
+    coefficients, hence the cleaned accelerances, blow up.
+    """
     keep: list[int] = []
     for k in range(shapes.shape[0]):
         trial = shapes[[*keep, k]]
