@@ -473,7 +473,7 @@ def identify_arrays(
         if fit.leakage is not None:
             Minv = np.linalg.inv(M)
             Yk = -np.einsum("ia,aks->iks", Minv, fit.leakage)  # B - M X = -M Y b
-            leak_all = np.einsum("iks,sl->ikl", Yk, np.array(shapes_c))
+            leak_all = np.einsum("iks,sl->ikl", Yk, np.array(shapes_c)[problem.shape_index])
             X_clean_m = Xm - leak_all[..., mass_sel]
             X_clean_s = Xs - leak_all[..., stiff_sel]
             s_moments = None

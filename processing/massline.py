@@ -84,8 +84,11 @@ class MassLineProblem:
         self.X = X
         self.shape = X.shape
         self.weights = weights
-        self.shapes = None if shapes is None or not len(shapes) else _independent(
-            np.asarray(shapes, float))
+        #: indices of the given shapes kept (the others depend on them over these lines)
+        self.shape_index = (np.zeros(0, int) if shapes is None or not len(shapes)
+                            else _independent(np.asarray(shapes, float)))
+        self.shapes = (None if shapes is None or not len(shapes)
+                       else np.asarray(shapes, float)[self.shape_index])
         self.n_equations = 2 * n6 * n_e * n_l
         Xr = stack_real(X)
         self._sw = (np.sqrt(np.concatenate([weights, weights], axis=-1))
@@ -205,8 +208,8 @@ class MassLineProblem:
         return MassLineFit(theta, self.normal, self.n_equations, None)
 
 
-def _independent(shapes: NDArray[np.float64], rtol: float = 1e-2) -> NDArray[np.float64]:
-    """The shapes (rows) that are independent of the ones before them over these lines.
+def _independent(shapes: NDArray[np.float64], rtol: float = 1e-3) -> NDArray[np.int64]:
+    """Indices of the shapes (rows) independent of the ones before them over these lines.
 
     A shape is dropped when, with the kept ones, the smallest singular value of the
     normalised set falls under ``rtol`` times the largest (about: it lies within
@@ -221,7 +224,7 @@ def _independent(shapes: NDArray[np.float64], rtol: float = 1e-2) -> NDArray[np.
                           compute_uv=False)
         if s[-1] > rtol * s[0]:
             keep.append(k)
-    return shapes[keep]
+    return np.array(keep, dtype=np.int64)
 
 
 def _normal_operator(s2: NDArray[np.float64]) -> NDArray[np.float64]:
