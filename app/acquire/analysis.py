@@ -115,10 +115,12 @@ class RunAnalysis:
     def set_used(self, hit_id: int, used: bool) -> None:
         self._accepted[hit_id] = used
 
-    def point(self, point: int) -> ImpactResult | None:
+    def point(self, point: int, max_averages: int | None = None) -> ImpactResult | None:
+        """The point's FRF column from its used hits (the first ``max_averages`` of them,
+        in acquisition order, when given); None if it has none."""
         ids = sorted(h for h, p in self._point_of.items() if p == point)
-        return point_result([r for h in ids if self._accepted.get(h) and
-                             (r := self._results[h]) is not None])
+        used = [r for h in ids if self._accepted.get(h) and (r := self._results[h]) is not None]
+        return point_result(used if max_averages is None else used[:max_averages])
 
     def n_used(self, point: int) -> int:
         return sum(1 for h, p in self._point_of.items() if p == point and self._accepted.get(h))
@@ -185,17 +187,18 @@ def check_identifiable(run: RunData) -> None:
         raise InputError(f"{run.path}: not identified: {host_timed(dev, ref)}")
 
 
-def run_frfs(run: RunData) -> tuple[FRFSet, Any]:
+def run_frfs(run: RunData, max_averages: int | None = None) -> tuple[FRFSet, Any]:
     """The FRFs of a run's stored records (every point needs an accepted record) and the
-    analysis they come from; :func:`analyse_run` without the identification."""
+    analysis they come from; :func:`analyse_run` without the identification. With
+    ``max_averages``, each point averages only its first used records."""
     resp = run.channels[1:]
     resp_nodes, resp_dirs = np.array([c.node for c in resp]), np.array([c.direction for c in resp])
     if run.method == "shaker":
         splan, blocks = analyse_blocks(run)
-        cols = [blocks.point(j) for j in range(len(splan.excitations))]
+        cols = [blocks.point(j, max_averages) for j in range(len(splan.excitations))]
         return shaker_frfset(splan, cols, run.geometry, resp_nodes, resp_dirs), blocks
     plan, ana = analyse_records(run)
-    points: list[Any] = [ana.point(j) for j in range(len(plan.excitations))]
+    points: list[Any] = [ana.point(j, max_averages) for j in range(len(plan.excitations))]
     for j, r in enumerate(points):
         if r is None:
             raise InputError(f"{run.path}: excitation {plan.excitations[j].label} has no "

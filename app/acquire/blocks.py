@@ -125,9 +125,12 @@ class BlockAnalysis:
     def n_used(self, point: int) -> int:
         return sum(1 for h, p in self._point_of.items() if p == point and self._accepted.get(h))
 
-    def point(self, point: int) -> BlockResult | None:
-        """The averaged column of ``point`` from its accepted blocks (None if none)."""
+    def point(self, point: int, max_averages: int | None = None) -> BlockResult | None:
+        """The averaged column of ``point`` from its accepted blocks (the first
+        ``max_averages`` of them when given; None if none)."""
         ids = sorted(h for h, p in self._point_of.items() if p == point and self._accepted.get(h))
+        if max_averages is not None:
+            ids = ids[:max_averages]
         if not ids:
             return None
         st = self._points.get(point)

@@ -306,15 +306,16 @@ def frfset_from_run_file(path: Path, args: argparse.Namespace) -> tuple[FRFSet, 
     (``app.acquire.analysis.analyse_records``: the plan's settings, the overrides).
 
     A point without a usable hit gets one stderr line and is left out; returns the FRF set
-    and the number of such points. The time-data options (but ``--coherence`` and
-    ``--fmax``) do not apply: the plan's record settings do.
+    and the number of such points. The time-data options (but ``--coherence``, ``--fmax``
+    and ``--averages``: the first N used hits or blocks of each point) do not apply: the
+    plan's record settings do.
     """
     from app.acquire.analysis import analyse_records, run_frfs
     from app.io.runfile import RunFileError, read_run
 
-    if args.averages is not None:
-        raise UserError("--averages applies to UFF time records: a run file's averages are "
-                        "the hits or blocks the run uses (its plan and the operator's choices)")
+    if args.averages is not None and args.averages < 1:
+        raise UserError(f"--averages must be at least 1, got {args.averages}")
+
     try:
         data = read_run(path)
     except RunFileError as err:
@@ -325,7 +326,7 @@ def frfset_from_run_file(path: Path, args: argparse.Namespace) -> tuple[FRFSet, 
     fmax = args.fmax if args.fmax is not None else data.records.fs / 2.56
     if data.method != "hammer":  # shaker runs: the run's own FRFs (every point needed)
         try:
-            frfs = run_frfs(data)[0]
+            frfs = run_frfs(data, args.averages)[0]
         except InputError as err:
             raise UserError(str(err)) from err
         out, n_bad = _assemble(frfs.freq, [frfs.H], [frfs.coherence], frfs.resp_nodes,
@@ -340,14 +341,15 @@ def frfset_from_run_file(path: Path, args: argparse.Namespace) -> tuple[FRFSet, 
     n_bad = 0
     for j, point in enumerate(plan.excitations):
         mine = np.flatnonzero(rec.point == j)
-        res = ana.point(j)
+        res = ana.point(j, args.averages)
         if res is None or res.H is None or res.coherence is None:
             why = ("no hit recorded" if mine.size == 0 else
                    f"every hit rejected ({'; '.join(rec.reason[i] or 'rejected' for i in mine)})")
             skipped(args, f"{point.label}: {why}: hit it again (insitu acquire --resume)")
             n_bad += 1
             continue
-        print(f"{point.label}: {ana.n_used(j)} of {mine.size} hits used")
+        n_used = ana.n_used(j) if args.averages is None else min(ana.n_used(j), args.averages)
+        print(f"{point.label}: {n_used} of {mine.size} hits used")
         good.append(j)
         results.append(res)
     if not results:

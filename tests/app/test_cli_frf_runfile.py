@@ -95,12 +95,20 @@ def test_identify_tells_a_run_file_from_an_frf_file(
     assert err.count("\n") == 1 and "has no accepted hit: resume the run" in err
 
 
-def test_averages_is_refused_for_a_run_file(run_file: tuple[Path, list[np.ndarray]],
-                                            tmp_path: Path,
-                                            capsys: pytest.CaptureFixture[str]) -> None:
-    path, _ = run_file
+def test_averages_on_a_run_file_uses_the_first_hits(run_file: tuple[Path, list[np.ndarray]],
+                                                     tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    path, good = run_file
     out = tmp_path / "frf.h5"
-    assert main(["frf", str(path), "--out", str(out), "--averages", "1"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "--averages applies to UFF time records" in err and "\n" not in err
-    assert not out.exists()
+    assert main(["frf", str(path), "--out", str(out), "--averages", "1"]) == 2  # 2 bad points
+    assert "1 of 2 hits used" in capsys.readouterr().out
+    frf = read_frf_h5(out)
+    assert frf.meta["n_averages"] == [1]
+    plan = plan_for_bench("engine-rigid", points=POINTS, fs=FS, length=4.0, pretrigger=0.25)
+    names = ["F", *(f"a{i}" for i in range(12))]
+    ref = point_result([hit_result(good[0], plan.record, names, None)])
+    assert ref is not None and ref.H is not None
+    keep = (ref.freq > 0) & (ref.freq <= FS / 2.56)
+    assert_array_equal(frf.H, ref.H[..., keep])
+    assert main(["frf", str(path), "--out", str(out), "--averages", "0"]) == 2
+    assert "--averages must be at least 1" in capsys.readouterr().err
