@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import logging
 import queue
-import threading
 import time
 from collections.abc import Sequence
 from importlib.resources import files
@@ -48,7 +47,7 @@ from drivers.errors import (
     ProtocolError,
 )
 from drivers.station import CanTransportConfig, DeviceConfig
-from drivers.stream import SampleBuffer
+from drivers.stream import ReaderThread, SampleBuffer
 from drivers.transports import CanLink
 
 __all__ = ["FULL_SCALE", "CanFrontEnd", "FrameLayout", "load_dbc"]
@@ -130,8 +129,7 @@ class CanFrontEnd(AcquisitionFrontEnd):
                                 for ch in self.channels])
         self._buffer = SampleBuffer(len(self.channels), name)
         self._acks: queue.Queue[tuple[int, int]] = queue.Queue()
-        self._reader: threading.Thread | None = None
-        self._stop_reader = threading.Event()
+        self._reader = ReaderThread(name)
         self.serial_number = 0
         self.last_status: dict[str, int] = {}
 
@@ -172,7 +170,7 @@ class CanFrontEnd(AcquisitionFrontEnd):
             if remaining <= 0:
                 raise DeviceTimeoutError(f"{self.name}: no answer to {opcode} within "
                                          f"{self.reply_timeout:g} s", self.name)
-            if self._reader is not None and self._reader.is_alive():
+            if self._reader.is_alive():
                 try:
                     ack_op, result = self._acks.get(timeout=remaining)
                 except queue.Empty:
@@ -223,26 +221,17 @@ class CanFrontEnd(AcquisitionFrontEnd):
     def _start_internal(self) -> None:
         self.health = StreamHealth()
         self._buffer.reset()
-        self._stop_reader.clear()
         self.command("START")
-        self._reader = threading.Thread(target=self._read_loop, name=f"{self.name}-reader",
-                                        daemon=True)
-        self._reader.start()
+        self._reader.start(self._read_loop)
 
     def _stop_internal(self) -> None:
         try:
             self.command("STOP")
         finally:
-            self._join_reader()
-
-    def _join_reader(self) -> None:
-        self._stop_reader.set()
-        reader, self._reader = self._reader, None
-        if reader is not None and reader is not threading.current_thread():
-            reader.join(1.0)
+            self._reader.join()
 
     def _shutdown_internal(self) -> None:
-        self._join_reader()
+        self._reader.join()
         self._link.close()
 
     def request_status(self) -> dict[str, int]:
@@ -291,7 +280,7 @@ class CanFrontEnd(AcquisitionFrontEnd):
                 self.health.overloaded.add(self.channels[i].name)
             self._buffer.append(block, t_rx, rows)
 
-        while not self._stop_reader.is_set():
+        while not self._reader.stopping:
             msg = self._link.recv(0.05)
             if msg is None:
                 continue

@@ -47,7 +47,7 @@ from drivers.errors import (
     ProtocolError,
 )
 from drivers.station import DeviceConfig, SerialTransportConfig
-from drivers.stream import SampleBuffer
+from drivers.stream import ReaderThread, SampleBuffer
 from drivers.transports import SerialLink
 
 __all__ = ["FULL_SCALE", "HammerFrame", "SerialHammer", "decode_frames", "encode_command"]
@@ -171,8 +171,7 @@ class SerialHammer(AcquisitionFrontEnd):
         self.stall_timeout = stall_timeout
         self._link = SerialLink(url, baudrate, name)
         self._buffer = SampleBuffer(1, name)
-        self._reader: threading.Thread | None = None
-        self._stop_reader = threading.Event()
+        self._reader = ReaderThread(name)
         self._ended = threading.Event()
         self._leftover = bytearray()
         self._scale = self.channels[0].range_v / FULL_SCALE[sample_width // 8] * (
@@ -228,11 +227,8 @@ class SerialHammer(AcquisitionFrontEnd):
         self._buffer.reset()
         self._leftover.clear()
         self._ended.clear()
-        self._stop_reader.clear()
         self._expect_ok("START")
-        self._reader = threading.Thread(target=self._read_loop, name=f"{self.name}-reader",
-                                        daemon=True)
-        self._reader.start()
+        self._reader.start(self._read_loop)
 
     def _stop_internal(self) -> None:
         try:
@@ -240,23 +236,17 @@ class SerialHammer(AcquisitionFrontEnd):
             if not self._ended.wait(self.reply_timeout + 0.5):
                 raise DeviceTimeoutError(f"{self.name}: no end-of-stream frame after STOP",
                                          self.name)
-            self._join_reader()
+            self._reader.join()
             tail = bytes(self._leftover)
             if b"\n" not in tail:
                 tail += self._link.readline(self.reply_timeout)
             if tail.split(b"\n")[0].strip() != b"OK":
                 raise ProtocolError(f"{self.name}: STOP answered {tail!r}", self.name)
         finally:
-            self._join_reader()
-
-    def _join_reader(self) -> None:
-        self._stop_reader.set()
-        reader, self._reader = self._reader, None
-        if reader is not None and reader is not threading.current_thread():
-            reader.join(1.0)
+            self._reader.join()
 
     def _shutdown_internal(self) -> None:
-        self._join_reader()
+        self._reader.join()
         self._link.close()
 
     # -- streaming --------------------------------------------------------------------------------
@@ -265,7 +255,7 @@ class SerialHammer(AcquisitionFrontEnd):
         expected_seq: int | None = None
         frame_len = 0
         try:
-            while not self._stop_reader.is_set():
+            while not self._reader.stopping:
                 data = self._link.read_some()
                 if not data:
                     continue

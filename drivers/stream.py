@@ -13,6 +13,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -146,3 +147,41 @@ class SampleBuffer:
             self._buffered -= n
         missing = int(np.count_nonzero(np.isnan(out).any(axis=0)))
         return out, first, missing, frozenset(overloaded)
+
+
+class ReaderThread:
+    """A streaming device's background reader thread: started for each run, asked to stop
+    and joined idempotently (also from the reader itself, which then does not wait).
+
+    Parameters
+    ----------
+    name : str
+        Device name; the thread is called ``"<name>-reader"``.
+    """
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self, target: Callable[[], None]) -> None:
+        """Run ``target`` in a new daemon thread."""
+        self._stop.clear()
+        self._thread = threading.Thread(target=target, name=f"{self.name}-reader", daemon=True)
+        self._thread.start()
+
+    @property
+    def stopping(self) -> bool:
+        """True once :meth:`join` asked the reader to end."""
+        return self._stop.is_set()
+
+    def is_alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def join(self, timeout: float = 1.0) -> None:
+        """Ask the reader to end and wait up to ``timeout`` s for it (idempotent)."""
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+
