@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.acquire.analysis import RunAnalysis, frfset, host_timed, margin_samples
-from app.acquire.events import HitRecord, PointFRF, Progress
+from app.acquire.events import HitRecord
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
 from app.acquire.recording import RecordingProcedure
 from app.acquire.streams import HitStreams, RawHit
@@ -127,12 +127,7 @@ class HammerProcedure(RecordingProcedure):
     def _resolve_channels(self) -> None:
         st, plan = self.station, self.plan
         resp = plan.response_channels(st)
-        owner = {c.name: d.name for d in st.devices.values() for c in d.channels}
-        ref_names = sorted({owner[c.name] for c in resp})
-        if len(ref_names) != 1:
-            raise PlanError(f"{plan.source}: the responses are on devices {', '.join(ref_names)};"
-                            " put them on one front end")
-        self.ref_name = ref_names[0]
+        self.ref_name = self._response_frontend()
         forces = [(d.name, c) for d in st.devices.values() for c in d.channels
                   if c.quantity == "force"]
         if not forces:
@@ -214,11 +209,6 @@ class HammerProcedure(RecordingProcedure):
             sync_channel="" if self.sync_channel is None else self.sync_channel.name)
 
     # -- procedure ------------------------------------------------------------------------------
-    def startup(self) -> None:
-        self._open_devices()
-        self._open_file()
-        self._t0 = time.monotonic()
-
     def execute(self) -> None:
         assert self._streams is not None
         self._start_streams()
@@ -298,27 +288,11 @@ class HammerProcedure(RecordingProcedure):
         self._report(HitRecord(hit_id, point.index, t, peak, auto, reason, "", raw.bad_frames,
                                raw.missing, data=raw.data, fs=self.plan.record.fs))
 
-    def _report(self, hit: HitRecord) -> None:
-        n = self.analysis.n_used(hit.point)
-        hit = HitRecord(**{**hit.__dict__, "point_accepted": n, "point_needed": self.plan.hits})
-        if hit.hit_id < len(self.hits):
-            self.hits[hit.hit_id] = hit
-        else:
-            self.hits.append(hit)
-        if not hit.accepted:
-            logger.info("hit %d at %s rejected: %s", hit.hit_id, hit.point, hit.reason)
-        self.emit("on_hit", hit)
-        res = self.analysis.point(hit.point)
-        freq = res.freq if res is not None else np.zeros(0)
-        self.emit("on_frf", PointFRF(
-            hit.point, freq, None if res is None or res.H is None else res.H[:, 0, :],
-            None if res is None or res.coherence is None else res.coherence[:, 0, :],
-            0 if res is None else res.n_accepted))
-        bad = self._streams.bad_frames if self._streams is not None else 0
-        self.emit("on_progress", Progress(
-            self.point_index, len(self.plan.excitations), self.analysis.n_used(self.point_index),
-            self.plan.hits, len(self.hits), sum(h.accepted for h in self.hits), bad,
-            time.monotonic() - self._t0))
+    def _records_needed(self) -> int:
+        return self.plan.hits
+
+    def _bad_frames(self) -> int:
+        return self._streams.bad_frames if self._streams is not None else 0
 
     def apply_override(self, hit_id: int, override: str) -> None:
         if self.writer is None or not 0 <= hit_id < self.writer.n_records:

@@ -1,28 +1,47 @@
 """What the hammer and shaker procedures share: a run file, its notes and its last step.
 
 :class:`RecordingProcedure` is a :class:`~app.acquire.procedure.Procedure` that writes
-one run file (:class:`app.io.runfile.RunWriter`). Subclasses open their devices and the
-file in ``startup``, close their devices in :meth:`_close_devices`, and call
-:meth:`_finish_run` with the run's FRFs when every point is done.
+one run file (:class:`app.io.runfile.RunWriter`). Subclasses open their devices in
+:meth:`_open_devices` and the file in :meth:`_open_file`, close their devices in
+:meth:`_close_devices`, say how many records a point needs and how many frames went bad,
+report each record with :meth:`_report`, and call :meth:`_finish_run` with the run's FRFs
+when every point is done.
 """
 
 from __future__ import annotations
 
+import logging
 import time
+from typing import Any
+
+import numpy as np
 
 from app.acquire.analysis import identify_frfs
+from app.acquire.events import HitRecord, PointFRF, Progress
+from app.acquire.plan import PlanError, TestPlan
 from app.acquire.procedure import Procedure
 from app.io.runfile import RunWriter
+from drivers.station import StationConfig
 from processing.data import FRFSet, InputError
 from processing.geometry import GeometryError, GeometryReport
 from processing.identify import IdentificationResult
 
 __all__ = ["RecordingProcedure"]
 
+logger = logging.getLogger(__name__)
+
 
 class RecordingProcedure(Procedure):
     """A procedure that records into a run file (see the module docstring)."""
 
+    #: what one record is called in messages: "hit" (hammer) or "block" (shaker)
+    record_word = "hit"
+
+    plan: TestPlan
+    station: StationConfig
+    analysis: Any  # RunAnalysis (hammer) or BlockAnalysis (shaker)
+    hits: list[HitRecord]
+    point_index: int
     writer: RunWriter | None
     frf: FRFSet | None
     result: IdentificationResult | None
@@ -31,9 +50,64 @@ class RecordingProcedure(Procedure):
     _t0: float
     _t_offset: float
 
-    def _close_devices(self) -> None:
-        """Shut every device down (idempotent); subclasses own their devices."""
+    def _open_devices(self) -> None:
+        """Create, open and configure the devices; subclasses own their devices."""
         raise NotImplementedError
+
+    def _open_file(self) -> None:
+        """Create (or reopen, to resume) the run file."""
+        raise NotImplementedError
+
+    def _close_devices(self) -> None:
+        """Shut every device down (idempotent)."""
+        raise NotImplementedError
+
+    def _records_needed(self) -> int:
+        """Accepted records each point needs."""
+        raise NotImplementedError
+
+    def _bad_frames(self) -> int:
+        """Corrupted frames seen so far."""
+        raise NotImplementedError
+
+    def startup(self) -> None:
+        self._open_devices()
+        self._open_file()
+        self._t0 = time.monotonic()
+
+    def _response_frontend(self) -> str:
+        """Name of the one device that records every response of the plan."""
+        st, plan = self.station, self.plan
+        owner = {c.name: d.name for d in st.devices.values() for c in d.channels}
+        names = sorted({owner[c.name] for c in plan.response_channels(st)})
+        if len(names) != 1:
+            raise PlanError(f"{plan.source}: the responses are on devices {', '.join(names)};"
+                            " put them on one front end")
+        return names[0]
+
+    def _report(self, hit: HitRecord) -> None:
+        """Keep ``hit`` (new, or a re-judged one), then send on_hit, the point's FRF and
+        the progress."""
+        hit = HitRecord(**{**hit.__dict__, "point_accepted": self.analysis.n_used(hit.point),
+                           "point_needed": self._records_needed()})
+        if hit.hit_id < len(self.hits):
+            self.hits[hit.hit_id] = hit
+        else:
+            self.hits.append(hit)
+        if not hit.accepted:
+            logger.info("%s %d at %s rejected: %s", self.record_word, hit.hit_id, hit.point,
+                        hit.reason)
+        self.emit("on_hit", hit)
+        res = self.analysis.point(hit.point)
+        self.emit("on_frf", PointFRF(
+            hit.point, res.freq if res is not None else np.zeros(0),
+            None if res is None or res.H is None else res.H[:, 0, :],
+            None if res is None or res.coherence is None else res.coherence[:, 0, :],
+            0 if res is None else res.n_accepted))
+        self.emit("on_progress", Progress(
+            self.point_index, len(self.plan.excitations), self.analysis.n_used(self.point_index),
+            self._records_needed(), len(self.hits), sum(h.accepted for h in self.hits),
+            self._bad_frames(), time.monotonic() - self._t0))
 
     def shutdown(self) -> None:
         """Devices off, then the file closed with the run's state unless it is complete."""

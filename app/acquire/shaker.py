@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.acquire.blocks import WINDOWS, BlockAnalysis, block_verdict, shaker_frfset
-from app.acquire.events import HitRecord, PointFRF, Progress
+from app.acquire.events import HitRecord
 from app.acquire.hammer import station_summary
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
 from app.acquire.recording import RecordingProcedure
@@ -84,6 +84,8 @@ class ShakerProcedure(RecordingProcedure):
         Watchdog time armed on an SG-1, s (the worker beats after every 0.1 s read).
     """
 
+    record_word = "block"
+
     def __init__(self, plan: TestPlan | None, station: StationConfig, path: str | Path, *,
                  listeners: Iterable[Any] = (), resume: bool = False,
                  device_options: Mapping[str, Mapping[str, Any]] | None = None,
@@ -126,12 +128,7 @@ class ShakerProcedure(RecordingProcedure):
     def _resolve(self, force_choice: str | None, shaker_choice: str | None) -> None:
         st, plan = self.station, self.plan
         resp = plan.response_channels(st)
-        owner = {c.name: d.name for d in st.devices.values() for c in d.channels}
-        refs = sorted({owner[c.name] for c in resp})
-        if len(refs) != 1:
-            raise PlanError(f"{plan.source}: the responses are on devices {', '.join(refs)};"
-                            " put them on one front end")
-        self.ref_name = refs[0]
+        self.ref_name = self._response_frontend()
         forces = [c for c in st.devices[self.ref_name].channels if c.quantity == "force"
                   and (force_choice is None or c.name == force_choice)]
         if not forces:
@@ -207,11 +204,6 @@ class ShakerProcedure(RecordingProcedure):
         self.analysis.set_used(i, v is not None and (override == "accept" if override else auto))
 
     # -- procedure ------------------------------------------------------------------------------
-    def startup(self) -> None:
-        self._open_devices()
-        self._open_file()
-        self._t0 = time.monotonic()
-
     def execute(self) -> None:
         assert self.stream is not None
         self.stream.start()
@@ -299,28 +291,11 @@ class ShakerProcedure(RecordingProcedure):
         self._report(HitRecord(hit_id, point.index, t, peak, auto, reason, "", bad, missing,
                                data=data, fs=self.plan.record.fs))
 
-    def _report(self, hit: HitRecord) -> None:
-        need = self.plan.shaker.averages
-        hit = HitRecord(**{**hit.__dict__, "point_accepted": self.analysis.n_used(hit.point),
-                           "point_needed": need})
-        if hit.hit_id < len(self.hits):
-            self.hits[hit.hit_id] = hit
-        else:
-            self.hits.append(hit)
-        if not hit.accepted:
-            logger.info("block %d at %s rejected: %s", hit.hit_id, hit.point, hit.reason)
-        self.emit("on_hit", hit)
-        res = self.analysis.point(hit.point)
-        self.emit("on_frf", PointFRF(
-            hit.point, res.freq if res is not None else np.zeros(0),
-            None if res is None else res.H[:, 0, :],
-            None if res is None else res.coherence[:, 0, :],
-            0 if res is None else res.n_accepted))
-        bad = self.frontend.health.bad_frames if self.frontend is not None else 0
-        self.emit("on_progress", Progress(
-            self.point_index, len(self.plan.excitations), self.analysis.n_used(self.point_index),
-            need, len(self.hits), sum(h.accepted for h in self.hits), bad,
-            time.monotonic() - self._t0))
+    def _records_needed(self) -> int:
+        return self.plan.shaker.averages
+
+    def _bad_frames(self) -> int:
+        return self.frontend.health.bad_frames if self.frontend is not None else 0
 
     def apply_override(self, hit_id: int, override: str) -> None:
         if self.writer is None or not 0 <= hit_id < self.writer.n_records:

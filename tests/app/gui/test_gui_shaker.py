@@ -64,8 +64,13 @@ def test_shaker_run_shows_blocks_averages_and_live_traces(
                     timeout=10000)
     qtbot.waitUntil(lambda: acq.hits_table.rowCount() >= 1, timeout=15000)
     assert dev.output and dev.exc is not None  # driving, the stinger on the first point
-    assert "1 of 2 blocks averaged" in acq.progress_label.text()
-    assert "(1 block averaged)" in acq.plots.frf_plot.getPlotItem().titleLabel.text
+    # the block's row, its FRF and the progress are three signals from the worker, which
+    # computes the point's FRF between them: wait for the later two as well
+    qtbot.waitUntil(lambda: "1 of 2 blocks averaged" in acq.progress_label.text(),
+                    timeout=5000)
+    qtbot.waitUntil(
+        lambda: "(1 block averaged)" in acq.plots.frf_plot.getPlotItem().titleLabel.text,
+        timeout=5000)
     qtbot.waitUntil(lambda: acq.state is not RunState.RUNNING, timeout=20000)
     assert acq.state is RunState.FINISHED, (acq.next_label.text(), window.messages.text)
     assert _output_went_off_by_command(dev)
