@@ -15,16 +15,15 @@ Example
 
 from __future__ import annotations
 
-import threading
 import time
 from dataclasses import dataclass
-from types import TracebackType
 
 import numpy as np
 
 from hardware_mocks.benches import get_bench
 from hardware_mocks.physics import BenchPhysics, DeviceClock, Hit
 from hardware_mocks.pty_port import PtyPort
+from hardware_mocks.serial_device import SerialMockDevice
 
 __all__ = ["HammerDevice", "HammerFaults", "crc16_ccitt_false"]
 
@@ -75,7 +74,7 @@ class HammerFaults:
     silent: bool = False
 
 
-class HammerDevice:
+class HammerDevice(SerialMockDevice):
     """The hammer and its digitiser, seen from the serial port.
 
     Parameters
@@ -122,40 +121,15 @@ class HammerDevice:
         self._produced = 0
         self._frame_no = 0
         self._rx = bytearray()
-        self._stop = threading.Event()
-        self._unplug = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="mock-hammer", daemon=True)
-        self._thread.start()
-
-    @property
-    def path(self) -> str:
-        """The serial port to give the driver."""
-        return self._port.path
+        self._start_firmware("mock-hammer")
 
     def hit(self, exc: int = 0, peak: float = 200.0, duration: float = 0.004,
             double: tuple[float, float] | None = None, delay: float = 0.05) -> list[Hit]:
         """Hit the bench at excitation DOF ``exc``; see :meth:`BenchPhysics.hit`."""
         return self.physics.hit(exc, peak, duration, delay, double)
 
-    def unplug(self) -> None:
-        """Pull the cable: the driver's port goes away mid-run (returns once it has)."""
-        self._unplug.set()
-        deadline = time.monotonic() + 1.0
-        while not self._port.closed and time.monotonic() < deadline:
-            time.sleep(0.005)
-
-    def shutdown(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(2.0)
-        self._port.close()
-
     def __enter__(self) -> HammerDevice:
         return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.shutdown()
 
     # -- device firmware ---------------------------------------------------------------------
     def _run(self) -> None:

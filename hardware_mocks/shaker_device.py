@@ -42,13 +42,13 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from types import TracebackType
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hardware_mocks.physics import BenchPhysics
 from hardware_mocks.pty_port import PtyPort
+from hardware_mocks.serial_device import SerialMockDevice
 
 __all__ = ["ShakerDevice", "ShakerFaults"]
 
@@ -75,7 +75,7 @@ class ShakerFaults:
     silent: bool = False
 
 
-class ShakerDevice:
+class ShakerDevice(SerialMockDevice):
     """The generator/amplifier as seen from its serial port.
 
     Parameters
@@ -114,10 +114,7 @@ class ShakerDevice:
         self._lock = threading.Lock()
         self._reset()
         self._last_update = time.monotonic()
-        self._stop = threading.Event()
-        self._unplug = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="mock-shaker", daemon=True)
-        self._thread.start()
+        self._start_firmware("mock-shaker")
         if exc is not None:
             self.attach(exc)
 
@@ -134,10 +131,6 @@ class ShakerDevice:
         self.level_now = 0.0
         self.watchdog = 0.0
         self._last_heartbeat = time.monotonic()
-
-    @property
-    def path(self) -> str:
-        return self._port.path
 
     @property
     def errors(self) -> list[int]:
@@ -218,27 +211,13 @@ class ShakerDevice:
         with self._lock:
             self._fail(103)
 
-    def unplug(self) -> None:
-        """Pull the cable; the device sees no host and turns its output off."""
-        self._unplug.set()
-        deadline = time.monotonic() + 1.0
-        while not self._port.closed and time.monotonic() < deadline:
-            time.sleep(0.005)
-
     def shutdown(self) -> None:
         if self.physics is not None:
             self.physics.remove_source(self)
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(2.0)
-        self._port.close()
+        super().shutdown()
 
     def __enter__(self) -> ShakerDevice:
         return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.shutdown()
 
     # -- firmware ---------------------------------------------------------------------------------
     def _fail(self, code: int) -> None:
