@@ -122,6 +122,11 @@ class ChannelConfig:
         """SI unit of the physical values: ``"N"`` or ``"m/s^2"``."""
         return QUANTITY_UNITS[self.quantity]
 
+    @property
+    def full_scale(self) -> float:
+        """Full-scale range in the physical unit: range (V) x 1000 / sensitivity (mV/unit)."""
+        return self.range_v * 1000.0 / self.sensitivity
+
     def volts_to_physical(self, volts: NDArray[np.float64]) -> NDArray[np.float64]:
         """Convert input voltages (V) to physical units using the sensitivity (mV/unit)."""
         return np.asarray(volts, dtype=float) * (1000.0 / self.sensitivity)

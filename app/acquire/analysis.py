@@ -126,15 +126,20 @@ class RunAnalysis:
         return sum(1 for h, p in self._point_of.items() if p == point and self._accepted.get(h))
 
 
+def _run_setup(run: RunData) -> tuple[TestPlan, list[str], NDArray[np.float64]]:
+    """A run file's plan, record row names and their full-scale ranges."""
+    from app.acquire.plan import parse_plan
+
+    rows = run.channels
+    return (parse_plan(run.plan_data, f"{run.path}:/plan"), [c.name for c in rows],
+            np.array([c.range_v * 1000.0 / c.sensitivity for c in rows]))
+
+
 def analyse_records(run: RunData) -> tuple[TestPlan, RunAnalysis]:
     """Recompute every stored record's verdict and spectra (no FRF set, no identification);
     ``RunAnalysis.point(j)`` is then point ``j``'s FRF column or None."""
-    from app.acquire.plan import parse_plan
-
-    plan = parse_plan(run.plan_data, f"{run.path}:/plan")
-    rows = run.channels
-    ranges = np.array([c.range_v * 1000.0 / c.sensitivity for c in rows])
-    ana = RunAnalysis(plan, [c.name for c in rows], ranges)
+    plan, names, ranges = _run_setup(run)
+    ana = RunAnalysis(plan, names, ranges)
     rec = run.records
     for i in range(len(rec)):
         res = ana.add(i, int(rec.point[i]), rec.data[i], rec.override[i])
@@ -150,12 +155,8 @@ def analyse_blocks(run: RunData) -> tuple[TestPlan, BlockAnalysis]:
     A block rejected live for what its samples cannot show (the shaker's output went
     off) keeps that verdict: the stored automatic verdict can be confirmed, never upgraded.
     """
-    from app.acquire.plan import parse_plan
-
-    plan = parse_plan(run.plan_data, f"{run.path}:/plan")
-    rows = run.channels
-    ranges = np.array([c.range_v * 1000.0 / c.sensitivity for c in rows])
-    blocks = BlockAnalysis(plan, [c.name for c in rows], ranges)
+    plan, names, ranges = _run_setup(run)
+    blocks = BlockAnalysis(plan, names, ranges)
     rec = run.records
     for i in range(len(rec)):
         v = blocks.add(i, int(rec.point[i]), rec.data[i], rec.override[i])

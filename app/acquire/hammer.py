@@ -114,7 +114,7 @@ class HammerProcedure(RecordingProcedure):
         self.devices: dict[str, AcquisitionFrontEnd] = {}
         self.writer: RunWriter | None = None
         self.analysis = RunAnalysis(plan, [c.name for c in self.rows], np.array(
-            [c.range_v * 1000.0 / c.sensitivity for c in self.rows]))
+            [c.full_scale for c in self.rows]))
         self.point_index = 0
         self.frf: FRFSet | None = None
         self.result: IdentificationResult | None = None

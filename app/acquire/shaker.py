@@ -111,7 +111,7 @@ class ShakerProcedure(RecordingProcedure):
         self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
         self._resolve(force_channel, shaker)
         self.analysis = BlockAnalysis(plan, [c.name for c in self.rows], np.array(
-            [c.range_v * 1000.0 / c.sensitivity for c in self.rows]))
+            [c.full_scale for c in self.rows]))
         self.frontend: AcquisitionFrontEnd | None = None
         self.drive: ShakerDrive | None = None
         self.stream: BlockStream | None = None

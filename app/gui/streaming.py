@@ -55,7 +55,7 @@ class BlockSource:
 
 def full_scale(channels: Sequence[ChannelConfig]) -> NDArray[np.float64]:
     """Full-scale range of each channel in its unit: range (V) x 1000 / sensitivity (mV/unit)."""
-    return np.array([c.range_v * 1000.0 / c.sensitivity for c in channels])
+    return np.array([c.full_scale for c in channels])
 
 
 class DeviceSource(BlockSource):
