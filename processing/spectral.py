@@ -33,6 +33,8 @@ import scipy.signal
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
+from processing._welch_kernel import CHUNK, accumulate
+
 __all__ = [
     "ESTIMATORS",
     "CrossSpectra",
@@ -55,44 +57,48 @@ ESTIMATORS = ("H1", "H2", "Hv")
 Scaling = Literal["density", "spectrum"]
 #: summed (Sff, Sfx, Sxx) of some segments
 _Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64]]
-#: terms of summed products, see :func:`_products`: P (2 n_ref, n_own, 2 n_f), Q (n_own, 2 n_f)
-_Products = tuple[NDArray[np.floating], NDArray[np.floating]]
-#: scratch of :func:`_products`: reference pairs (n_seg, 2 n_ref, 2 n_f), then P and Q
-_Work = tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]
-#: per-worker scratch of a group: windowed samples, spectra (double precision only),
-#: segment sums, then ``_Work``
-_Scratch = tuple[NDArray[np.floating], NDArray[np.complex128] | None, NDArray[np.floating],
-                 NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]]
 
 
 @dataclass(frozen=True)
 class _Rows:
-    """The channels one worker thread handles: its own ``lo:hi`` (the rows of the sums it
-    writes) after the references outside them (``extra``), which it transforms too;
-    ``ref_pos``: where each reference is among the rows it transforms."""
+    """The channels one worker thread handles: ``lo:hi`` (the rows of the sums it writes);
+    ``ref_local``: where the references are among them, or None when they are not all
+    there (the worker then transforms the references too)."""
 
     lo: int
     hi: int
-    extra: tuple[int, ...]
-    ref_pos: tuple[int, ...]
+    ref_local: tuple[int, ...] | None
 
     @classmethod
     def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Rows]:
         """``parts`` workers (at most), each transforming about as many rows: the first
-        one's own rows hold the first references, the others transform them as well."""
+        one's rows hold the first references, the others transform them as well."""
         each = (n_ch + (parts - 1) * len(refs)) / parts
         inner = [round(each + k * (each - len(refs))) for k in range(parts - 1)]
         bounds = sorted({0, n_ch, *(b for b in inner if 0 < b < n_ch)})
         out = []
         for lo, hi in itertools.pairwise(bounds):
-            extra = tuple(r for r in refs if not lo <= r < hi)
-            pos = tuple(extra.index(r) if r in extra else len(extra) + r - lo for r in refs)
-            out.append(cls(lo, hi, extra, pos))
+            inside = all(lo <= r < hi for r in refs)
+            out.append(cls(lo, hi, tuple(r - lo for r in refs) if inside else None))
         return out
 
-    @property
-    def n_in(self) -> int:
-        return len(self.extra) + self.hi - self.lo
+    def n_in(self, n_ref: int) -> int:
+        """Rows transformed: its own, and the references if they are elsewhere."""
+        return self.hi - self.lo + (0 if self.ref_local is not None else n_ref)
+
+
+@dataclass(frozen=True)
+class _Scratch:
+    """One worker's buffers for a group, allocated once and reused (fresh memory costs a
+    page fault per 4 kB on first touch): windowed samples (windows applied in time only)
+    and spectra (double precision only: scipy's single-precision FFT has no ``out``),
+    both flat so that any number of segments gives contiguous views; then the kernel's
+    scratch (see :func:`processing._welch_kernel.accumulate`)."""
+
+    buf: NDArray[np.floating] | None
+    spec: NDArray[np.complex128] | None
+    fg: NDArray[np.float64]
+    x: NDArray[np.float64]
 
 
 class SpectralError(ValueError):
@@ -320,42 +326,10 @@ def _channel_roles(
     return refs, resps
 
 
-def _products(
-    Z: NDArray[np.complexfloating],
-    ref_pos: tuple[int, ...],
-    own: slice,
-    work: _Work | None = None,
-) -> _Products:
-    """Sums over the leading axis of the terms of ``conj(F_a) X`` and ``|X|^2``.
-
-    ``Z`` (n_seg, n_in, n_f) holds the spectra of n_seg segments, the references at
-    ``ref_pos`` and the channels ``X`` at ``own``. Its interleaved real view ``V`` (re, im,
-    re, im, ...) goes through two real einsum passes (products with each reference's
-    ``(re, im)`` and ``(-im, re)`` give the terms of the real and imaginary parts of the
-    cross-spectra) and one for the squares; real einsum is memory bound and twice as fast
-    as the complex one. The pairs of terms are added later, by :func:`_spectra_sums`.
-    Sums in the precision of ``Z``, each value summed over the segments in order whatever
-    the other channels; ``work`` (see ``_Work``) holds the scratch and outputs, allocated
-    if not given.
-    """
-    n_seg, _, n_f = Z.shape
-    real = Z.real.dtype
-    V = np.ascontiguousarray(Z).view(real)  # (n_seg, n_in, 2 n_f)
-    X = V[:, own]
-    if work is None:
-        work = _work(n_seg, len(ref_pos), X.shape[1], n_f, real)
-    refpairs, P, Q = work
-    np.take(V, ref_pos, axis=1, out=refpairs[:, 0::2], mode="clip")  # (re, im) of each ref.
-    np.negative(refpairs[:, 0::2, 1::2], out=refpairs[:, 1::2, 0::2])  # (-im, re)
-    np.copyto(refpairs[:, 1::2, 1::2], refpairs[:, 0::2, 0::2])
-    np.einsum("sbk,sak->abk", X, refpairs, out=P)
-    np.einsum("sbk,sbk->bk", X, X, out=Q)
-    return P, Q
-
-
 def _spectra_sums(P: NDArray[np.floating], Q: NDArray[np.floating], refs: tuple[int, ...],
                   resps: tuple[int, ...]) -> _Sums:
-    """``(Sff, Sfx, Sxx)`` sums (complex128, float64) from the terms of :func:`_products`."""
+    """``(Sff, Sfx, Sxx)`` sums (complex128, float64) from the terms summed by
+    :func:`processing._welch_kernel.accumulate`."""
     n_ch, n_f = Q.shape[0], Q.shape[1] // 2
     cross = np.empty((len(refs), n_ch, n_f), np.complex128)
     np.add(P[0::2, :, 0::2], P[0::2, :, 1::2], out=cross.real, dtype=np.float64)
@@ -364,10 +338,37 @@ def _spectra_sums(P: NDArray[np.floating], Q: NDArray[np.floating], refs: tuple[
     return cross[:, list(refs)], cross[:, list(resps)], Sxx[list(resps)]
 
 
-def _work(n_seg: int, n_ref: int, n_ch: int, n_f: int, real: np.dtype[np.floating]) -> _Work:
-    """Scratch of :func:`_products`: reference pairs, cross and square terms."""
-    return (np.empty((n_seg, 2 * n_ref, 2 * n_f), real), np.empty((2 * n_ref, n_ch, 2 * n_f), real),
-            np.empty((n_ch, 2 * n_f), real))
+#: the window of spectra already windowed in time
+_NO_TAPS = np.ones(1)
+#: the most lines a window may spread over to be applied in frequency
+_MAX_TAPS = 8
+
+
+def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """The window as a short convolution in frequency, ``rfft(win)[:M + 1] / n``, when it is
+    a periodic cosine sum of at most ``_MAX_TAPS`` terms to 1e-13 of its peak (Hann, Hamming,
+    Blackman, flat top, rectangular, as :func:`scipy.signal.get_window` gives them); else None.
+
+    Applied in frequency, such a window and the mean removal cost nothing more than the
+    products (see :mod:`processing._welch_kernel`), and the FFT reads the samples in place.
+    """
+    n = win.size
+    W = np.fft.rfft(win) / n
+    M = int(np.flatnonzero(np.abs(W) > 1e-13 * np.abs(W).max())[-1])
+    if M > _MAX_TAPS or 2 * M + 1 > n or np.abs(W[: M + 1].imag).max() > 1e-13 * abs(W[0]):
+        return None
+    taps = np.ascontiguousarray(W[: M + 1].real)
+    m = np.arange(1, M + 1)[:, None]
+    rebuilt = taps[0] + 2 * np.sum(taps[1:, None] * np.cos(2 * np.pi * m * np.arange(n) / n),
+                                   axis=0)
+    if np.abs(rebuilt - win).max() > 1e-13 * np.abs(win).max():
+        return None
+    return taps
+
+
+def _interleaved(Z: NDArray[np.complexfloating]) -> NDArray[np.floating]:
+    """Real view ``(re, im, re, im, ...)`` of spectra contiguous along their last axis."""
+    return Z.view(Z.real.dtype)
 
 
 def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
@@ -423,33 +424,37 @@ class SpectralAccumulator:
         Unit**2/Hz or unit**2, as in scipy.
     group : int, optional
         Segments transformed together (one FFT call for ``group`` segments of all
-        the worker's channels); by default 4 for float64 samples, 16 for float32 (the
-        fastest on the benchmark). Fixed once the first block is in; results are
-        independent of block sizes.
+        the worker's channels); by default 8 for float32 samples, 4 for float64 (the
+        fastest on the benchmark within its memory). Results are independent of the
+        block sizes.
     workers : int
-        Threads sharing the channels (1, or 2 on a 2-core machine): each one windows,
-        transforms and multiplies every segment of its own channels, and transforms the
-        references too when they are not among them.
+        Threads sharing the channels (1, or 2 on a 2-core machine): each one transforms
+        and multiplies every segment of its own channels, and transforms the references
+        too when they are not among them.
 
     Notes
     -----
-    Float32 samples are transformed in single precision (complex64 FFT), the
-    products of one group summed in single precision, and the groups accumulated in
-    float64; anything else is transformed and summed in double precision. Segments
-    are taken as :func:`scipy.signal.csd` takes them: from the first sample on,
-    every ``nperseg - noverlap`` samples, trailing samples that do not fill a
-    segment unused. Each value is summed over the segments of a group, then over the
-    groups, always in order: the same bits whatever the block boundaries and the
-    number of workers.
+    Float32 samples are transformed in single precision (complex64 FFT), anything
+    else in double precision; the products are formed and summed in float64
+    (:mod:`processing._welch_kernel`, compiled by numba on first use and cached).
+    Segments are taken as :func:`scipy.signal.csd` takes them: from the first
+    sample on, every ``nperseg - noverlap`` samples, trailing samples that do not
+    fill a segment unused. A window that is a short cosine sum (Hann, Hamming,
+    Blackman, flat top, rectangular) is applied in frequency, as a convolution over
+    ``2 M + 1`` lines, and the mean removal by zeroing the un-windowed spectrum's
+    line 0: the FFT reads the samples where they are and no pass windows them; any
+    other window is applied to the samples. Each value is summed over the segments
+    in order: the same bits whatever the block boundaries and the number of workers.
 
     Memory: two buffers taking turns holding the unconsumed tail (less than
     ``group * step + nperseg`` samples per channel, plus the start of the next block
-    when no group is complete), the accumulators (``3 * n_ch * nperseg`` values for
-    one reference), and per worker its scratch: windowed samples and spectra of one
-    group (``2 * group * nperseg`` values per channel it transforms) and one group's
-    sums, all allocated once and reused (fresh memory costs a page fault per 4 kB on
-    first touch). Measured with 25 channels, nperseg 8192, 1 s blocks at 51.2 kHz,
-    two workers: under 100 MB (``benchmarks/frf.py``).
+    when no group is complete), the sums (``3 * n_ch * nperseg`` values for one
+    reference), and per worker its scratch: spectra of one group (``group *
+    nperseg`` values per channel it transforms, plus as many windowed samples for a
+    window applied in time) and the windowed references, all allocated once and
+    reused (fresh memory costs a page fault per 4 kB on first touch). Measured with
+    25 channels, nperseg 8192, 1 s blocks at 51.2 kHz, two workers: under 100 MB
+    (``benchmarks/frf.py``).
 
     Examples
     --------
@@ -506,12 +511,13 @@ class SpectralAccumulator:
         self.detrend = detrend
         self.scaling: Scaling = scaling
         self._group = group
-        self.group = 4 if group is None else int(group)
+        self.group = 8 if group is None else int(group)
         self.workers = int(workers)
         self._references = tuple(int(r) for r in references)
         self._pool: ThreadPoolExecutor | None = None
         self._pool_size = 0
         self._responses = None if responses is None else tuple(int(r) for r in responses)
+        self._taps = _cosine_taps(win)
         W = np.fft.rfft(win)
         self._dc_bins = np.flatnonzero(np.abs(W) > 1e-12 * np.abs(W[0]))
         self._dc_values = W[self._dc_bins]
@@ -553,8 +559,8 @@ class SpectralAccumulator:
         self._n_ch = n_ch = block.shape[0]
         self._refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
         self._dtype = np.dtype(np.float32 if block.dtype == np.float32 else np.float64)
-        if self._group is None:  # the fastest measured (benchmarks/frf.py)
-            self.group = 16 if self._dtype == np.float32 else 4
+        if self._group is None:  # the fastest measured (benchmarks/frf.py), with 4 in double
+            self.group = 8 if self._dtype == np.float32 else 4  # precision for the memory
         self._win = self.window.astype(self._dtype)
         # two buffers taking turns holding the tail (a prefix of the first)
         self._stores = [np.empty((n_ch, 0), self._dtype) for _ in range(2)]
@@ -567,54 +573,64 @@ class SpectralAccumulator:
             self._pool = ThreadPoolExecutor(n_threads, thread_name_prefix="spectral")
             self._pool_size = n_threads
             weakref.finalize(self, self._pool.shutdown, wait=False)
-        # the sums' terms (see _products), rows written by one worker each
+        # the sums' terms (see processing._welch_kernel), rows written by one worker each
         n_f = self.freq.size
         self._P = np.zeros((2 * len(self._refs), n_ch, 2 * n_f))
         self._Q = np.zeros((n_ch, 2 * n_f))
 
     def _workspace(self, worker: int) -> _Scratch:
-        """Worker ``worker``'s scratch for a group: windowed samples, spectra (double
-        precision; scipy's single-precision FFT has no ``out``), segment sums, then
-        :func:`_products`' arrays; allocated once, reused for every group."""
+        """Worker ``worker``'s scratch (see ``_Scratch``), allocated at its first group."""
         assert self._dtype is not None
         while len(self._scratch) <= worker:
-            rows = self._rows[len(self._scratch)]
+            n_in = self._rows[len(self._scratch)].n_in(len(self._refs))
             G, n_f = self.group, self.freq.size
-            self._scratch.append((
-                np.empty((G, rows.n_in, self.nperseg), self._dtype),
-                None if self._dtype == np.float32 else np.empty((G, rows.n_in, n_f),
-                                                                np.complex128),
-                np.empty((rows.n_in, G), self._dtype),
-                *_work(G, len(self._refs), rows.hi - rows.lo, n_f, self._dtype),
+            self._scratch.append(_Scratch(
+                None if self._taps is not None else np.empty(n_in * G * self.nperseg,
+                                                             self._dtype),
+                None if self._dtype == np.float32 else np.empty(n_in * G * n_f, np.complex128),
+                np.empty((G, 2 * len(self._refs), 2 * n_f)),
+                np.empty(CHUNK),
             ))
         return self._scratch[worker]
 
-    def _group_products(self, seg: NDArray[np.floating], rows: _Rows,
-                        scratch: _Scratch) -> _Products:
-        """Terms of the sums of one group for the channels of ``rows``: ``seg`` (n_ch, n_seg,
-        nperseg) strided view of all channels' samples; ``scratch`` (see ``_workspace``)
-        holds every intermediate; its first n_seg entries are used."""
-        n_seg, n_x = seg.shape[1], len(rows.extra)
-        buf, spec, sums, refpairs, P, Q = scratch
-        buf, sums, refpairs = buf[:n_seg], sums[:, :n_seg], refpairs[:n_seg]
-        own = seg[rows.lo : rows.hi]
-        np.multiply(own.transpose(1, 0, 2), self._win, out=buf[:, n_x:])
-        if n_x:  # references handled by another worker: transformed here too (small copy)
-            np.multiply(seg[list(rows.extra)].transpose(1, 0, 2), self._win, out=buf[:, :n_x])
+    def _transform(self, seg: NDArray[np.floating], scratch: _Scratch,
+                   first: int) -> NDArray[np.complexfloating]:
+        """Spectra (k, n_seg, n_f) of the segments ``seg`` (k, n_seg, nperseg), in the
+        scratch from row ``first`` on; windowed and detrended here only when the window
+        is not applied in frequency by the kernel."""
+        k, n_seg, N = seg.shape
+        n_f = self.freq.size
+        lo, hi = first * n_seg, (first + k) * n_seg
+        x = seg
+        if scratch.buf is not None:  # a window applied in time
+            x = scratch.buf[lo * N : hi * N].reshape(k, n_seg, N)
+            np.multiply(seg, self._win, out=x)
         # one FFT per precision whatever the buffers, so that results never depend on how
         # the samples were cut into blocks or channels
         Z: NDArray[np.complexfloating]
-        if spec is not None:
-            Z = np.fft.rfft(buf, axis=-1, out=spec[:n_seg])  # numpy's pocketfft writes to `out`
+        if scratch.spec is not None:  # numpy's pocketfft writes to `out`
+            Z = np.fft.rfft(x, axis=-1, out=scratch.spec[lo * n_f : hi * n_f].reshape(k, n_seg,
+                                                                                        n_f))
         else:  # scipy's is twice as fast as numpy's in single precision
-            Z = scipy.fft.rfft(buf, axis=-1, workers=1, overwrite_x=True)
-        if self.detrend == "constant":
-            np.add.reduce(own, axis=-1, out=sums[n_x:])
-            if n_x:
-                np.add.reduce(seg[list(rows.extra)], axis=-1, out=sums[:n_x])
-            mean = sums.T / self.nperseg  # (n_seg, n_in), in the samples' precision like scipy
+            Z = scipy.fft.rfft(x, axis=-1, workers=1, overwrite_x=x is not seg)
+        if scratch.buf is not None and self.detrend == "constant":
+            mean = np.add.reduce(seg, axis=-1) / N  # in the samples' precision, like scipy
             Z[..., self._dc_bins] -= (mean[..., None] * self._dc_values).astype(Z.dtype)
-        return _products(Z, rows.ref_pos, slice(n_x, None), (refpairs, P, Q))
+        return Z
+
+    def _group_accumulate(self, seg: NDArray[np.floating], rows: _Rows, scratch: _Scratch,
+                          P: NDArray[np.float64], Q: NDArray[np.float64]) -> None:
+        """Add one group to the sums ``P``, ``Q`` (rows ``rows.lo:rows.hi``): ``seg`` (n_ch,
+        n_seg, nperseg) strided view of all channels' samples."""
+        zown = self._transform(seg[rows.lo : rows.hi], scratch, 0)
+        if rows.ref_local is not None:
+            zref = zown[list(rows.ref_local)]
+        else:
+            zref = self._transform(seg[list(self._refs)], scratch, rows.hi - rows.lo)
+        taps = self._taps if self._taps is not None else _NO_TAPS
+        accumulate(_interleaved(zref), _interleaved(zown), self.nperseg, taps,
+                   self._taps is not None and self.detrend == "constant", rows.lo, P, Q,
+                   scratch.fg, scratch.x)
 
     def _segments(self, data: NDArray[np.floating], start: int, n_seg: int) -> NDArray[np.floating]:
         view = data[:, start : start + self._span(n_seg)]
@@ -684,11 +700,8 @@ class SpectralAccumulator:
             if not all(finite):
                 return
             scratch = self._workspace(worker)
-            P, Q = self._P[:, mine], self._Q[mine]
             for g in range(n_groups):
-                dP, dQ = self._group_products(segments(g), rows, scratch)
-                np.add(P, dP, out=P)
-                np.add(Q, dQ, out=Q)
+                self._group_accumulate(segments(g), rows, scratch, self._P, self._Q)
             i = 0
             for part in keep:
                 dst[mine, i : i + part.shape[-1]] = part[mine]
@@ -735,11 +748,7 @@ class SpectralAccumulator:
             seg = self._segments(self._tail, 0, n_pending)
 
             def job(worker: int) -> None:
-                rows = self._rows[worker]
-                mine = slice(rows.lo, rows.hi)
-                dP, dQ = self._group_products(seg, rows, self._workspace(worker))
-                np.add(P[:, mine], dP, out=P[:, mine])
-                np.add(Q[mine], dQ, out=Q[mine])
+                self._group_accumulate(seg, self._rows[worker], self._workspace(worker), P, Q)
 
             _run_workers(job, len(self._rows), self._pool)
         n = self._n_seg + n_pending
@@ -815,8 +824,12 @@ def record_spectra(
             raise SpectralError(
                 f"windows of shape {w.shape} do not broadcast to the records {rec.shape}"
             ) from None
-    Z = scipy.fft.rfft(x, axis=-1, overwrite_x=True)
-    Sff, Sfx, Sxx = _spectra_sums(*_products(Z, refs, slice(None)), refs, resps)
+    Z = np.ascontiguousarray(scipy.fft.rfft(x, axis=-1, overwrite_x=True).swapaxes(0, 1))
+    n_f = Z.shape[-1]
+    P, Q = np.zeros((2 * len(refs), n_ch, 2 * n_f)), np.zeros((n_ch, 2 * n_f))
+    accumulate(_interleaved(Z[list(refs)]), _interleaved(Z), n, _NO_TAPS, False, 0, P, Q,
+               np.empty((n_rec, 2 * len(refs), 2 * n_f)), np.empty(CHUNK))
+    Sff, Sfx, Sxx = _spectra_sums(P, Q, refs, resps)
     freq = np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64)
     scale = _onesided_scale(freq.size, n, fs * n) / n_rec
     return CrossSpectra(freq, Sff * scale, Sfx * scale, Sxx * scale, n_rec, refs, resps)

@@ -49,6 +49,10 @@ def _signals(n: int = 20000, n_resp: int = 3, seed: int = 0) -> np.ndarray:
         (500, 123, "hamming", "constant", "spectrum"),
         (257, 0, ("tukey", 0.3), False, "density"),
         (128, 96, "boxcar", "constant", "density"),
+        (255, 100, "blackman", "constant", "density"),
+        (64, 32, "flattop", "constant", "spectrum"),
+        (5, 2, "hann", "constant", "density"),
+        (300, 150, scipy.signal.get_window("hann", 300, fftbins=False), "constant", "density"),
     ],
 )
 def test_matches_scipy_csd_and_welch(nperseg, noverlap, window, detrend, scaling):
@@ -66,6 +70,16 @@ def test_matches_scipy_csd_and_welch(nperseg, noverlap, window, detrend, scaling
     assert_allclose(sp.Sxx, Pxx, rtol=1e-10, atol=1e-10 * Pxx.max())
     ov = nperseg // 2 if noverlap is None else noverlap
     assert sp.n_averages == (data.shape[1] - ov) // (nperseg - ov)
+
+
+def test_short_cosine_windows_are_applied_in_frequency_others_in_time():
+    # both paths are checked against scipy above; here, that each window takes its path
+    cosine = ("hann", "hamming", "blackman", "flattop", "boxcar", ("general_cosine", [1, 0.3]))
+    for window in cosine:
+        assert SpectralAccumulator(FS, 256, window=window)._taps is not None, window
+    for window in (("tukey", 0.3), ("kaiser", 8.0), scipy.signal.get_window("hann", 256, False)):
+        assert SpectralAccumulator(FS, 256, window=window)._taps is None, window
+    assert_allclose(SpectralAccumulator(FS, 256)._taps, [0.5, -0.25], rtol=1e-14)
 
 
 def test_float32_input_matches_scipy_in_single_precision():
