@@ -9,9 +9,9 @@ windowed (periodic Hann by default). Time is the last axis of every input.
 
 :class:`SpectralAccumulator` takes samples block by block and keeps only the
 samples not yet consumed, so a live display, a long recording and a replay all
-go through the same code. Segments are summed in fixed groups of consecutive
-segments, in order, so the result is bit for bit the same whatever the block
-sizes and the number of worker threads.
+go through the same code. Every complete segment is used as soon as it is in,
+each value summed over the segments in order, so the result is bit for bit the
+same whatever the block sizes and the number of worker threads.
 
 Several references (shakers) give ``H = G_xf G_ff^-1`` per line and the
 multiple coherence of each response.
@@ -326,16 +326,13 @@ def _channel_roles(
     return refs, resps
 
 
-def _spectra_sums(P: NDArray[np.floating], Q: NDArray[np.floating], refs: tuple[int, ...],
+def _spectra_sums(P: NDArray[np.float64], Q: NDArray[np.float64], refs: tuple[int, ...],
                   resps: tuple[int, ...]) -> _Sums:
-    """``(Sff, Sfx, Sxx)`` sums (complex128, float64) from the terms summed by
-    :func:`processing._welch_kernel.accumulate`."""
-    n_ch, n_f = Q.shape[0], Q.shape[1] // 2
-    cross = np.empty((len(refs), n_ch, n_f), np.complex128)
-    np.add(P[0::2, :, 0::2], P[0::2, :, 1::2], out=cross.real, dtype=np.float64)
-    np.add(P[1::2, :, 0::2], P[1::2, :, 1::2], out=cross.imag, dtype=np.float64)
-    Sxx = np.add(Q[:, 0::2], Q[:, 1::2], dtype=np.float64)
-    return cross[:, list(refs)], cross[:, list(resps)], Sxx[list(resps)]
+    """``(Sff, Sfx, Sxx)`` sums (complex128, float64) from the sums of
+    :func:`processing._welch_kernel.accumulate`: P (2 n_ref, n_ch, n_f), Q (n_ch, n_f)."""
+    cross = np.empty((P.shape[0] // 2, *P.shape[1:]), np.complex128)
+    cross.real, cross.imag = P[0::2], P[1::2]
+    return cross[:, list(refs)], cross[:, list(resps)], Q[list(resps)]
 
 
 #: the window of spectra already windowed in time
@@ -423,10 +420,10 @@ class SpectralAccumulator:
     scaling : {'density', 'spectrum'}
         Unit**2/Hz or unit**2, as in scipy.
     group : int, optional
-        Segments transformed together (one FFT call for ``group`` segments of all
-        the worker's channels); by default 8 for float32 samples, 4 for float64 (the
-        fastest on the benchmark within its memory). Results are independent of the
-        block sizes.
+        Most segments transformed together (one FFT call for up to ``group`` segments
+        of all the worker's channels); by default 16 for float32 samples, 4 for float64
+        (the fastest on the benchmark). Results are independent of
+        it (the FFT of a segment does not depend on the others in its call; tested).
     workers : int
         Threads sharing the channels (1, or 2 on a 2-core machine): each one transforms
         and multiplies every segment of its own channels, and transforms the references
@@ -447,14 +444,14 @@ class SpectralAccumulator:
     in order: the same bits whatever the block boundaries and the number of workers.
 
     Memory: two buffers taking turns holding the unconsumed tail (less than
-    ``group * step + nperseg`` samples per channel, plus the start of the next block
-    when no group is complete), the sums (``3 * n_ch * nperseg`` values for one
-    reference), and per worker its scratch: spectra of one group (``group *
-    nperseg`` values per channel it transforms, plus as many windowed samples for a
-    window applied in time) and the windowed references, all allocated once and
-    reused (fresh memory costs a page fault per 4 kB on first touch). Measured with
-    25 channels, nperseg 8192, 1 s blocks at 51.2 kHz, two workers: under 100 MB
-    (``benchmarks/frf.py``).
+    ``nperseg`` samples per channel, plus the start of the next block when no
+    segment is complete; about two segments' samples are copied per block), the
+    sums (``3 * n_ch * nperseg`` values for one reference), and per worker its
+    scratch: spectra of one group (``group * nperseg`` values per channel it
+    transforms, plus as many windowed samples for a window applied in time) and the
+    windowed references, all allocated once and reused (fresh memory costs a page
+    fault per 4 kB on first touch). Measured with 25 channels, nperseg 8192, 1 s
+    blocks at 51.2 kHz, two workers: under 100 MB (``benchmarks/frf.py``).
 
     Examples
     --------
@@ -539,17 +536,13 @@ class SpectralAccumulator:
 
     @property
     def n_averages(self) -> int:
-        """Segments averaged so far (including those waiting for a full group)."""
-        return self._n_seg + self._pending_segments()
+        """Segments averaged so far (every complete segment received)."""
+        return self._n_seg
 
     @property
     def n_samples(self) -> int:
         """Samples per channel received so far."""
         return self._n_samples
-
-    def _pending_segments(self) -> int:
-        n = 0 if self._tail is None else self._tail.shape[-1]
-        return 0 if n < self.nperseg else (n - self.nperseg) // self.step + 1
 
     def _span(self, n_seg: int) -> int:
         return (n_seg - 1) * self.step + self.nperseg
@@ -559,8 +552,8 @@ class SpectralAccumulator:
         self._n_ch = n_ch = block.shape[0]
         self._refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
         self._dtype = np.dtype(np.float32 if block.dtype == np.float32 else np.float64)
-        if self._group is None:  # the fastest measured (benchmarks/frf.py), with 4 in double
-            self.group = 8 if self._dtype == np.float32 else 4  # precision for the memory
+        if self._group is None:  # the fastest measured (benchmarks/frf.py): the sums are read
+            self.group = 16 if self._dtype == np.float32 else 4  # and written once per group
         self._win = self.window.astype(self._dtype)
         # two buffers taking turns holding the tail (a prefix of the first)
         self._stores = [np.empty((n_ch, 0), self._dtype) for _ in range(2)]
@@ -575,8 +568,8 @@ class SpectralAccumulator:
             weakref.finalize(self, self._pool.shutdown, wait=False)
         # the sums' terms (see processing._welch_kernel), rows written by one worker each
         n_f = self.freq.size
-        self._P = np.zeros((2 * len(self._refs), n_ch, 2 * n_f))
-        self._Q = np.zeros((n_ch, 2 * n_f))
+        self._P = np.zeros((2 * len(self._refs), n_ch, n_f))
+        self._Q = np.zeros((n_ch, n_f))
 
     def _workspace(self, worker: int) -> _Scratch:
         """Worker ``worker``'s scratch (see ``_Scratch``), allocated at its first group."""
@@ -588,8 +581,8 @@ class SpectralAccumulator:
                 None if self._taps is not None else np.empty(n_in * G * self.nperseg,
                                                              self._dtype),
                 None if self._dtype == np.float32 else np.empty(n_in * G * n_f, np.complex128),
-                np.empty((G, 2 * len(self._refs), 2 * n_f)),
-                np.empty(CHUNK),
+                np.empty((G, 2 * len(self._refs), n_f)),
+                np.empty(max(CHUNK, 2 * n_f)),
             ))
         return self._scratch[worker]
 
@@ -650,26 +643,25 @@ class SpectralAccumulator:
             raise SpectralError(f"block has {arr.shape[0]} channels, expected {self._n_ch}")
         arr = arr.astype(self._dtype, copy=False)
         n_tail, n_new = self._tail.shape[-1], arr.shape[-1]
-        hop = self.group * self.step  # samples between group starts
-        span = self._span(self.group)
+        step, N, G = self.step, self.nperseg, self.group
         avail = n_tail + n_new
-        n_groups = 0 if avail < span else (avail - span) // hop + 1
-        # groups starting in the tail are views of it, once the block's first samples they
-        # need are appended to it (all of the block if no group is complete); the others
-        # are views of the block
-        n_head = min(n_groups, -(-n_tail // hop))
-        if n_groups == 0:
+        n_seg = 0 if avail < N else (avail - N) // step + 1  # every complete segment
+        # segments starting in the tail are views of it, once the block's first samples they
+        # need are appended to it (all of the block if no segment is complete: less than a
+        # segment is copied per block); the others are views of the block
+        n_head = min(n_seg, -(-n_tail // step))
+        if n_seg == 0:
             need = n_new
         else:
-            need = max(0, (n_head - 1) * hop + span - n_tail) if n_head else 0
+            need = max(0, (n_head - 1) * step + N - n_tail) if n_head else 0
         if n_tail + need > self._stores[0].shape[-1]:  # no room: move to the other buffer
             self._reserve(1, n_tail + need)[:, :n_tail] = self._tail
             self._stores.reverse()
             self._tail = self._stores[0][:, :n_tail]
         tail = self._stores[0][:, : n_tail + need]
-        start = n_groups * hop  # first unconsumed sample, counted from the tail's start
+        start = n_seg * step  # first unconsumed sample, counted from the tail's start
         keep: tuple[NDArray[np.floating], ...] = ()
-        if n_groups:  # the samples kept for the next block go to the other buffer
+        if n_seg:  # the samples kept for the next block go to the other buffer
             keep = (tail[:, start:], arr[:, need:]) if start < n_tail else (
                 arr[:, start - n_tail :],)
         n_keep = sum(part.shape[-1] for part in keep)
@@ -677,14 +669,14 @@ class SpectralAccumulator:
         finite = [True] * len(self._rows)
         ready = threading.Barrier(len(self._rows))
 
-        def segments(g: int) -> NDArray[np.floating]:
-            if g < n_head:
-                return self._segments(tail, g * hop, self.group)
-            return self._segments(arr, g * hop - n_tail, self.group)
+        # groups of up to G segments, each a strided view of the tail or of the block
+        groups = [self._segments(tail, i * step, min(G, n_head - i)) for i in range(0, n_head, G)]
+        groups += [self._segments(arr, i * step - n_tail, min(G, n_seg - i))
+                   for i in range(n_head, n_seg, G)]
 
         def job(worker: int) -> None:
             """The worker's channels: checked, appended to the tail; then, once every worker
-            has done so, every group in order, and the samples kept copied."""
+            has done so, every segment in order, and the samples kept copied."""
             rows = self._rows[worker]
             mine = slice(rows.lo, rows.hi)
             try:
@@ -700,8 +692,8 @@ class SpectralAccumulator:
             if not all(finite):
                 return
             scratch = self._workspace(worker)
-            for g in range(n_groups):
-                self._group_accumulate(segments(g), rows, scratch, self._P, self._Q)
+            for seg in groups:
+                self._group_accumulate(seg, rows, scratch, self._P, self._Q)
             i = 0
             for part in keep:
                 dst[mine, i : i + part.shape[-1]] = part[mine]
@@ -711,10 +703,10 @@ class SpectralAccumulator:
         if not all(finite):
             raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
-        if n_groups == 0:
+        if n_seg == 0:
             self._tail = tail
             return
-        self._n_seg += n_groups * self.group
+        self._n_seg += n_seg
         self._stores.reverse()
         self._tail = dst
 
@@ -737,26 +729,17 @@ class SpectralAccumulator:
         SpectralError
             If not one complete segment has been received yet.
         """
-        n_pending = self._pending_segments()
-        if self._n_seg + n_pending == 0 or self._tail is None:
+        if self._n_seg == 0 or self._tail is None:
             raise SpectralError(
                 f"no complete segment yet: {self._n_samples} samples per channel received, "
                 f"{self.nperseg} needed"
             )
-        P, Q = self._P.copy(), self._Q.copy()
-        if n_pending:  # the last, incomplete group, as update() will form it, in the scratch
-            seg = self._segments(self._tail, 0, n_pending)
-
-            def job(worker: int) -> None:
-                self._group_accumulate(seg, self._rows[worker], self._workspace(worker), P, Q)
-
-            _run_workers(job, len(self._rows), self._pool)
-        n = self._n_seg + n_pending
+        n = self._n_seg
         norm = self.fs * np.sum(self.window**2) if self.scaling == "density" else np.sum(
             self.window
         ) ** 2
         scale = _onesided_scale(self.freq.size, self.nperseg, float(norm)) / n
-        Sff, Sfx, Sxx = _spectra_sums(P, Q, self._refs, self._resps)
+        Sff, Sfx, Sxx = _spectra_sums(self._P, self._Q, self._refs, self._resps)
         return CrossSpectra(
             self.freq, Sff * scale, Sfx * scale, Sxx * scale, n, self._refs, self._resps
         )
@@ -826,9 +809,9 @@ def record_spectra(
             ) from None
     Z = np.ascontiguousarray(scipy.fft.rfft(x, axis=-1, overwrite_x=True).swapaxes(0, 1))
     n_f = Z.shape[-1]
-    P, Q = np.zeros((2 * len(refs), n_ch, 2 * n_f)), np.zeros((n_ch, 2 * n_f))
+    P, Q = np.zeros((2 * len(refs), n_ch, n_f)), np.zeros((n_ch, n_f))
     accumulate(_interleaved(Z[list(refs)]), _interleaved(Z), n, _NO_TAPS, False, 0, P, Q,
-               np.empty((n_rec, 2 * len(refs), 2 * n_f)), np.empty(CHUNK))
+               np.empty((n_rec, 2 * len(refs), n_f)), np.empty(max(CHUNK, 2 * n_f)))
     Sff, Sfx, Sxx = _spectra_sums(P, Q, refs, resps)
     freq = np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64)
     scale = _onesided_scale(freq.size, n, fs * n) / n_rec
