@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -32,6 +33,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from rich.console import Console
 from rich.table import Table
 
+from processing._welch_kernel import compile_ahead
 from processing.spectral import SpectralAccumulator, h1
 
 N_RESP = 24
@@ -88,11 +90,12 @@ class Floor:
 
 
 def run_ours(fs: float, duration: float, block_s: float, dtype: str, workers: int):
-    """Ours alone (the memory child)."""
+    """Ours alone (the memory child, and the spectra compared with scipy's)."""
     acc = SpectralAccumulator(fs, NPERSEG, workers=workers)
     for b in blocks(fs, duration, block_s, dtype):
         acc.update(b)
-    return h1(acc.spectra())
+    sp = acc.spectra()
+    return sp, h1(sp)
 
 
 def run_paired(fs: float, duration: float, block_s: float, dtype: str, workers: int):
@@ -152,8 +155,19 @@ def _rss_mb(field: str = "VmRSS") -> float:
 
 
 def child(method: str, fs: float, duration: float, block_s: float, dtype: str,
-          workers: int) -> None:
-    """Run one method in this (fresh) process; print its peak memory above baseline, MB."""
+          workers: int, repeat: int) -> None:
+    """Run one method in this (fresh) process; print its peak memory above baseline, MB,
+    or for ``times`` the floor's and our times of ``repeat`` paired runs, s."""
+    if method == "times":
+        # numba's cache loaded, and one untimed run: on this VM fresh memory costs a page
+        # fault per 4 kB; in a fresh process, with glibc's default thresholds, the floor's
+        # and our freed arrays went back to the system and came back page by page (the
+        # floor measured up to 1.8x slower, ours 1.4x): see in_child for the settings
+        compile_ahead()
+        run_paired(fs, min(duration, 20.0), block_s, dtype, workers)
+        runs = [run_paired(fs, duration, block_s, dtype, workers)[:2] for _ in range(repeat)]
+        print(json.dumps({"floor": [r[0] for r in runs], "ours": [r[1] for r in runs]}))
+        return
     x = None
     if method in ("scipy", "pyfrf"):
         x = whole(fs, duration, block_s, dtype)
@@ -169,14 +183,23 @@ def child(method: str, fs: float, duration: float, block_s: float, dtype: str,
     print(json.dumps({"peak_mb": _rss_mb("VmHWM") - base}))
 
 
-def peak_memory(method: str, fs: float, args: argparse.Namespace, dtype: str) -> float | None:
+def in_child(method: str, fs: float, args: argparse.Namespace, dtype: str) -> dict | None:
+    """What :func:`child` prints, run in a fresh process (None if it failed)."""
     cmd = [sys.executable, __file__, "--child", method, "--rate", str(fs), "--dtype", dtype,
            "--duration", str(args.duration), "--block", str(args.block),
-           "--workers", str(args.workers)]
-    out = subprocess.run(cmd, capture_output=True, text=True, check=False)
+           "--workers", str(args.workers), "--repeat", str(args.repeat)]
+    env = dict(os.environ)
+    if method == "times":  # glibc keeps freed memory (no page faults for the next arrays)
+        env.update(MALLOC_MMAP_THRESHOLD_=str(1 << 26), MALLOC_TRIM_THRESHOLD_=str(1 << 28))
+    out = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env)
     if out.returncode != 0:
         return None
-    return float(json.loads(out.stdout.strip().splitlines()[-1])["peak_mb"])
+    return dict(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def peak_memory(method: str, fs: float, args: argparse.Namespace, dtype: str) -> float | None:
+    out = in_child(method, fs, args, dtype)
+    return None if out is None else float(out["peak_mb"])
 
 
 def rel_err(a: np.ndarray, b: np.ndarray) -> float:
@@ -200,7 +223,8 @@ def main() -> int:
     p.add_argument("--dtype", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
-        child(args.child, args.rate, args.duration, args.block, args.dtype, args.workers)
+        child(args.child, args.rate, args.duration, args.block, args.dtype, args.workers,
+              args.repeat)
         return 0
     try:
         import pyFRF  # noqa: F401
@@ -220,13 +244,13 @@ def main() -> int:
         table.add_column(col, justify="right")
     for fs in args.rates:
         for dtype in args.dtypes:
-            floors, ours = [], []
-            for _ in range(args.repeat):
-                t_f, t_o, sp, H = run_paired(fs, args.duration, args.block, dtype, args.workers)
-                floors.append(t_f)
-                ours.append(t_o)
-            floor, t_ours = min(floors), min(ours)
-            pairs = np.array(ours) / np.array(floors)  # each run against its own floor
+            # timed in a fresh process: the references' gigabytes must not weigh on the next row
+            times = in_child("times", fs, args, dtype)
+            if times is None:
+                raise SystemExit(f"timing {fs:g} Hz {dtype} failed")
+            floor, t_ours = min(times["floor"]), min(times["ours"])
+            pairs = np.array(times["ours"]) / np.array(times["floor"])  # each run, own floor
+            sp, H = run_ours(fs, args.duration, args.block, dtype, args.workers)
             mem_ours = peak_memory("ours", fs, args, dtype)
             t_a = t_b = mem_a = mem_b = None
             diff = "-"

@@ -71,10 +71,13 @@ class _Rows:
 
     @classmethod
     def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Rows]:
-        """``parts`` workers (at most), each transforming about as many rows: the first
-        one's rows hold the first references, the others transform them as well."""
-        each = (n_ch + (parts - 1) * len(refs)) / parts
-        inner = [round(each + k * (each - len(refs))) for k in range(parts - 1)]
+        """``parts`` workers (at most), each with about as much to transform: the first
+        one's rows hold the first references, the others transform them as well, in a call
+        of their own that costs about two rows (measured: 7 ms against 3.7 ms per row for
+        25.6 kHz float32 over 20 s)."""
+        cost = 2 * len(refs)
+        each = (n_ch + (parts - 1) * cost) / parts
+        inner = [round(each + k * (each - cost)) for k in range(parts - 1)]
         bounds = sorted({0, n_ch, *(b for b in inner if 0 < b < n_ch)})
         out = []
         for lo, hi in itertools.pairwise(bounds):
@@ -559,6 +562,10 @@ class SpectralAccumulator:
         self._stores = [np.empty((n_ch, 0), self._dtype) for _ in range(2)]
         self._tail = self._stores[0]
         self._rows = _Rows.split(n_ch, self._refs, self.workers)
+        r0 = self._refs[0]  # the references' rows: a view when they are adjacent, in order
+        self._ref_rows: slice | list[int] = (
+            slice(r0, r0 + len(self._refs))
+            if self._refs == tuple(range(r0, r0 + len(self._refs))) else list(self._refs))
         n_threads = len(self._rows) - 1
         if n_threads > self._pool_size:  # a pool of its own, shut down when the accumulator goes
             if self._pool is not None:
@@ -619,7 +626,7 @@ class SpectralAccumulator:
         if rows.ref_local is not None:
             zref = zown[list(rows.ref_local)]
         else:
-            zref = self._transform(seg[list(self._refs)], scratch, rows.hi - rows.lo)
+            zref = self._transform(seg[self._ref_rows], scratch, rows.hi - rows.lo)
         taps = self._taps if self._taps is not None else _NO_TAPS
         accumulate(_interleaved(zref), _interleaved(zown), self.nperseg, taps,
                    self._taps is not None and self.detrend == "constant", rows.lo, P, Q,

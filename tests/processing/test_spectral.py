@@ -139,9 +139,9 @@ def test_a_rejected_block_changes_nothing(workers):
 
 def test_reset_with_more_channels_gets_enough_threads():
     acc = SpectralAccumulator(FS, 256, workers=5)
-    acc.update(_signals(n=3000, n_resp=1))  # 2 channels: 2 workers
+    acc.update(_signals(n=3000, n_resp=1))  # 2 channels: one worker, no pool
     acc.reset()
-    data = _signals(n=3000, n_resp=5)  # 6 channels: 5 workers, waiting for each other
+    data = _signals(n=3000, n_resp=9)  # 10 channels: 5 workers, waiting for each other
     acc.update(data)
     assert len(acc._rows) == 5
     assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
