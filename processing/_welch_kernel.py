@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["CHUNK", "accumulate", "compile_ahead"]
+__all__ = ["CHUNK", "accumulate", "compile_ahead", "scratch"]
 
 #: interleaved values per chunk (4 kB of float64): a chunk of a channel's windowed
 #: spectrum and of its sums stays in the first-level cache over the segments of a group
@@ -172,10 +172,16 @@ def accumulate(zref: NDArray[np.floating], zown: NDArray[np.floating], n: int,
                         pi[j] += fr[j] * vi - fi[j] * vr
 
 
+def scratch(n_seg: int, n_ref: int, n_f: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The scratch ``fg``, ``x`` of :func:`accumulate` for up to ``n_seg`` segments of
+    ``n_ref`` references and ``n_f`` lines."""
+    return np.empty((n_seg, 2 * n_ref, n_f)), np.empty(max(CHUNK, 2 * n_f))
+
+
 def compile_ahead() -> None:
     """Compile (or load from numba's on-disk cache) the kernel for both sample precisions,
     so that the first live spectrum does not wait for it (``make`` calls this at set-up)."""
     for real in (np.float32, np.float64):
         z = np.zeros((1, 1, 8), real)
         accumulate(z, z, 6, np.ones(1), False, 0, np.zeros((2, 1, 4)), np.zeros((1, 4)),
-                   np.zeros((1, 2, 4)), np.zeros(8))
+                   *scratch(1, 1, 4))

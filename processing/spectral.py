@@ -33,7 +33,7 @@ import scipy.signal
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
-from processing._welch_kernel import CHUNK, accumulate
+from processing._welch_kernel import accumulate, scratch
 
 __all__ = [
     "ESTIMATORS",
@@ -510,8 +510,7 @@ class SpectralAccumulator:
         self.window = win
         self.detrend = detrend
         self.scaling: Scaling = scaling
-        self._group = group
-        self.group = 8 if group is None else int(group)
+        self._group = None if group is None else int(group)
         self.workers = int(workers)
         self._references = tuple(int(r) for r in references)
         self._pool: ThreadPoolExecutor | None = None
@@ -543,6 +542,15 @@ class SpectralAccumulator:
         return self._n_seg
 
     @property
+    def group(self) -> int:
+        """Most segments per FFT call: as given, else the fastest measured
+        (``benchmarks/frf.py``; the sums are read and written once per call): 16 for
+        float32 samples, 4 for anything else."""
+        if self._group is not None:
+            return self._group
+        return 16 if self._dtype == np.float32 else 4
+
+    @property
     def n_samples(self) -> int:
         """Samples per channel received so far."""
         return self._n_samples
@@ -555,8 +563,6 @@ class SpectralAccumulator:
         self._n_ch = n_ch = block.shape[0]
         self._refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
         self._dtype = np.dtype(np.float32 if block.dtype == np.float32 else np.float64)
-        if self._group is None:  # the fastest measured (benchmarks/frf.py): the sums are read
-            self.group = 16 if self._dtype == np.float32 else 4  # and written once per group
         self._win = self.window.astype(self._dtype)
         # two buffers taking turns holding the tail (a prefix of the first)
         self._stores = [np.empty((n_ch, 0), self._dtype) for _ in range(2)]
@@ -573,7 +579,7 @@ class SpectralAccumulator:
             self._pool = ThreadPoolExecutor(n_threads, thread_name_prefix="spectral")
             self._pool_size = n_threads
             weakref.finalize(self, self._pool.shutdown, wait=False)
-        # the sums' terms (see processing._welch_kernel), rows written by one worker each
+        # the sums (see processing._welch_kernel), rows written by one worker each
         n_f = self.freq.size
         self._P = np.zeros((2 * len(self._refs), n_ch, n_f))
         self._Q = np.zeros((n_ch, n_f))
@@ -588,8 +594,7 @@ class SpectralAccumulator:
                 None if self._taps is not None else np.empty(n_in * G * self.nperseg,
                                                              self._dtype),
                 None if self._dtype == np.float32 else np.empty(n_in * G * n_f, np.complex128),
-                np.empty((G, 2 * len(self._refs), n_f)),
-                np.empty(max(CHUNK, 2 * n_f)),
+                *scratch(G, len(self._refs), n_f),
             ))
         return self._scratch[worker]
 
@@ -818,7 +823,7 @@ def record_spectra(
     n_f = Z.shape[-1]
     P, Q = np.zeros((2 * len(refs), n_ch, n_f)), np.zeros((n_ch, n_f))
     accumulate(_interleaved(Z[list(refs)]), _interleaved(Z), n, _NO_TAPS, False, 0, P, Q,
-               np.empty((n_rec, 2 * len(refs), n_f)), np.empty(max(CHUNK, 2 * n_f)))
+               *scratch(n_rec, len(refs), n_f))
     Sff, Sfx, Sxx = _spectra_sums(P, Q, refs, resps)
     freq = np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64)
     scale = _onesided_scale(freq.size, n, fs * n) / n_rec
