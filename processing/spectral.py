@@ -30,10 +30,10 @@ from typing import Literal
 import numpy as np
 import scipy.fft
 import scipy.signal
-from numpy.lib.stride_tricks import sliding_window_view
+from numpy.lib.stride_tricks import as_strided
 from numpy.typing import ArrayLike, NDArray
 
-from processing._welch_kernel import accumulate, scratch
+from processing._welch_kernel import accumulate, all_finite, scratch
 
 __all__ = [
     "ESTIMATORS",
@@ -366,6 +366,12 @@ def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
     return taps
 
 
+def _index(rows: tuple[int, ...]) -> slice | list[int]:
+    """Index of ``rows``: a slice (a view, no copy) when they are adjacent and in order."""
+    r0 = rows[0]
+    return slice(r0, r0 + len(rows)) if rows == tuple(range(r0, r0 + len(rows))) else list(rows)
+
+
 def _interleaved(Z: NDArray[np.complexfloating]) -> NDArray[np.floating]:
     """Real view ``(re, im, re, im, ...)`` of spectra contiguous along their last axis."""
     return Z.view(Z.real.dtype)
@@ -379,21 +385,25 @@ def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
     return scale
 
 
-def _run_workers(fn: Callable[[int], None], workers: int,
+def _run_workers(first: Callable[[], None], fn: Callable[[int], None], workers: int,
                  pool: ThreadPoolExecutor | None) -> None:
-    """``fn(k)`` for ``k`` in ``range(workers)``: 0 on this thread, the others on ``pool``'s.
+    """``first()`` then ``fn(0)`` on this thread, ``fn(k)`` for ``k`` in ``1:workers`` on
+    ``pool``'s, started before ``first`` so that it runs while they wake (a tenth of a
+    millisecond on a virtual machine: the length of a check of a whole block).
 
-    The only threads of ``processing``: numpy and pocketfft release the GIL, so the
-    workers, each on its own channels, run on all cores. Nothing is handed between
-    threads but the call and its completion. ``pool`` (``workers - 1`` threads) belongs
-    to one accumulator: the workers wait for each other (a barrier), which tasks queued
-    behind another accumulator's could not.
+    The only threads of ``processing``: numpy, pocketfft and the kernels release the
+    GIL, so the workers, each on its own channels, run on all cores. Nothing is handed
+    between threads but the call and its completion. ``pool`` (``workers - 1``
+    threads) belongs to one accumulator: the workers may wait for ``first`` (an event),
+    which tasks queued behind another accumulator's could not.
     """
     if workers <= 1 or pool is None:
+        first()
         fn(0)
         return
     others = [pool.submit(fn, k) for k in range(1, workers)]
     try:
+        first()
         fn(0)
     finally:
         wait(others)  # never return while another thread still writes
@@ -568,10 +578,7 @@ class SpectralAccumulator:
         self._stores = [np.empty((n_ch, 0), self._dtype) for _ in range(2)]
         self._tail = self._stores[0]
         self._rows = _Rows.split(n_ch, self._refs, self.workers)
-        r0 = self._refs[0]  # the references' rows: a view when they are adjacent, in order
-        self._ref_rows: slice | list[int] = (
-            slice(r0, r0 + len(self._refs))
-            if self._refs == tuple(range(r0, r0 + len(self._refs))) else list(self._refs))
+        self._ref_rows = _index(self._refs)
         n_threads = len(self._rows) - 1
         if n_threads > self._pool_size:  # a pool of its own, shut down when the accumulator goes
             if self._pool is not None:
@@ -585,7 +592,8 @@ class SpectralAccumulator:
         self._Q = np.zeros((n_ch, n_f))
 
     def _workspace(self, worker: int) -> _Scratch:
-        """Worker ``worker``'s scratch (see ``_Scratch``), allocated at its first group."""
+        """Worker ``worker``'s scratch (see ``_Scratch``), allocated (with those of the
+        workers before it) on the calling thread before the first group."""
         assert self._dtype is not None
         while len(self._scratch) <= worker:
             n_in = self._rows[len(self._scratch)].n_in(len(self._refs))
@@ -629,7 +637,7 @@ class SpectralAccumulator:
         n_seg, nperseg) strided view of all channels' samples."""
         zown = self._transform(seg[rows.lo : rows.hi], scratch, 0)
         if rows.ref_local is not None:
-            zref = zown[list(rows.ref_local)]
+            zref = zown[_index(rows.ref_local)]
         else:
             zref = self._transform(seg[self._ref_rows], scratch, rows.hi - rows.lo)
         taps = self._taps if self._taps is not None else _NO_TAPS
@@ -638,8 +646,13 @@ class SpectralAccumulator:
                    scratch.fg, scratch.x)
 
     def _segments(self, data: NDArray[np.floating], start: int, n_seg: int) -> NDArray[np.floating]:
-        view = data[:, start : start + self._span(n_seg)]
-        return sliding_window_view(view, self.nperseg, axis=-1)[:, :: self.step]
+        """Segments ``(n_ch, n_seg, nperseg)`` of ``data`` from sample ``start`` on: a
+        read-only strided view (built directly: ``sliding_window_view`` costs 40 us)."""
+        if not 0 <= start and start + self._span(n_seg) <= data.shape[-1]:
+            raise AssertionError(f"segments {start}+{self._span(n_seg)} beyond {data.shape}")
+        s_ch, s_t = data.strides
+        return as_strided(data[:, start:], (data.shape[0], n_seg, self.nperseg),
+                          (s_ch, self.step * s_t, s_t), writeable=False)
 
     def update(self, block: ArrayLike) -> None:
         """Add a block of samples (n_ch, n); any n, including 0. Float32 stays float32."""
@@ -678,31 +691,31 @@ class SpectralAccumulator:
                 arr[:, start - n_tail :],)
         n_keep = sum(part.shape[-1] for part in keep)
         dst = self._reserve(1, n_keep)[:, :n_keep]
-        finite = [True] * len(self._rows)
-        ready = threading.Barrier(len(self._rows))
+        finite = [False]
+        appended = threading.Event()
 
         # groups of up to G segments, each a strided view of the tail or of the block
         groups = [self._segments(tail, i * step, min(G, n_head - i)) for i in range(0, n_head, G)]
         groups += [self._segments(arr, i * step - n_tail, min(G, n_seg - i))
                    for i in range(n_head, n_seg, G)]
 
+        def start() -> None:
+            """On the calling thread, first: the block checked and appended to the tail."""
+            try:
+                finite[0] = all_finite(arr)
+                if finite[0]:
+                    tail[:, n_tail:] = arr[:, :need]
+            finally:
+                appended.set()
+
         def job(worker: int) -> None:
-            """The worker's channels: checked, appended to the tail; then, once every worker
-            has done so, every segment in order, and the samples kept copied."""
+            """The worker's channels, once the block is checked and appended: every
+            segment in order, then the samples kept copied."""
+            appended.wait()  # set already on the calling thread (worker 0)
+            if not finite[0]:
+                return
             rows = self._rows[worker]
             mine = slice(rows.lo, rows.hi)
-            try:
-                # one cheap pass; a huge but finite block may overflow the sum: look closer
-                x = arr[mine]
-                finite[worker] = bool(np.isfinite(np.add.reduce(x, axis=None))
-                                      or np.isfinite(x).all())
-                tail[mine, n_tail:] = x[:, :need]
-            except BaseException:
-                ready.abort()
-                raise
-            ready.wait()  # the other workers read the references' rows of the tail
-            if not all(finite):
-                return
             scratch = self._workspace(worker)
             for seg in groups:
                 self._group_accumulate(seg, rows, scratch, self._P, self._Q)
@@ -711,8 +724,10 @@ class SpectralAccumulator:
                 dst[mine, i : i + part.shape[-1]] = part[mine]
                 i += part.shape[-1]
 
-        _run_workers(job, len(self._rows), self._pool)
-        if not all(finite):
+        if n_seg:
+            self._workspace(len(self._rows) - 1)  # allocated here, not by racing workers
+        _run_workers(start, job, len(self._rows), self._pool)
+        if not finite[0]:
             raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
         if n_seg == 0:
