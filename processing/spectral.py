@@ -60,34 +60,34 @@ _Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64
 
 
 @dataclass(frozen=True)
-class _Rows:
-    """The channels one worker thread handles: ``lo:hi`` (the rows of the sums it writes);
-    ``ref_local``: where the references are among them, or None when they are not all
-    there (the worker then transforms the references too)."""
+class _Share:
+    """The channels one worker thread transforms and sums: ``runs`` of adjacent rows
+    ``(lo, hi)``, none of them a reference; the first worker also transforms the
+    references, once for all workers, before its runs."""
 
-    lo: int
-    hi: int
-    ref_local: tuple[int, ...] | None
+    runs: tuple[tuple[int, int], ...]
 
     @classmethod
-    def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Rows]:
-        """``parts`` workers (at most), each with about as much to transform: the first
-        one's rows hold the first references, the others transform them as well, in a call
-        of their own that costs about two rows (measured: 7 ms against 3.7 ms per row for
-        25.6 kHz float32 over 20 s)."""
-        cost = 2 * len(refs)
-        each = (n_ch + (parts - 1) * cost) / parts
-        inner = [round(each + k * (each - cost)) for k in range(parts - 1)]
-        bounds = sorted({0, n_ch, *(b for b in inner if 0 < b < n_ch)})
+    def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Share]:
+        """At most ``parts`` workers with about as many rows each (the first one counting
+        the references); workers left without a row are dropped (not the first)."""
+        others = [r for r in range(n_ch) if r not in set(refs)]
+        bounds = [0, *(min(len(others), max(0, round((k + 1) * n_ch / parts) - len(refs)))
+                       for k in range(parts - 1)), len(others)]
         out = []
-        for lo, hi in itertools.pairwise(bounds):
-            inside = all(lo <= r < hi for r in refs)
-            out.append(cls(lo, hi, tuple(r - lo for r in refs) if inside else None))
+        for k, (a, b) in enumerate(itertools.pairwise(bounds)):
+            rows = others[a:b]
+            if not rows and k:
+                continue
+            cuts = [i for i in range(1, len(rows)) if rows[i] != rows[i - 1] + 1]
+            out.append(cls(tuple((rows[i], rows[j - 1] + 1)
+                                 for i, j in itertools.pairwise([0, *cuts, len(rows)])
+                                 if j > i)))
         return out
 
-    def n_in(self, n_ref: int) -> int:
-        """Rows transformed: its own, and the references if they are elsewhere."""
-        return self.hi - self.lo + (0 if self.ref_local is not None else n_ref)
+    def n_max(self, n_ref: int, first: bool) -> int:
+        """Most rows in one of its FFT calls."""
+        return max([hi - lo for lo, hi in self.runs] + [n_ref if first else 0])
 
 
 @dataclass(frozen=True)
@@ -541,7 +541,7 @@ class SpectralAccumulator:
         self._n_ch = 0
         self._refs: tuple[int, ...] = ()
         self._resps: tuple[int, ...] = ()
-        self._rows: list[_Rows] = []
+        self._shares: list[_Share] = []
         self._n_seg = 0
         self._n_samples = 0
         self._scratch: list[_Scratch] = []
@@ -577,9 +577,9 @@ class SpectralAccumulator:
         # two buffers taking turns holding the tail (a prefix of the first)
         self._stores = [np.empty((n_ch, 0), self._dtype) for _ in range(2)]
         self._tail = self._stores[0]
-        self._rows = _Rows.split(n_ch, self._refs, self.workers)
+        self._shares = _Share.split(n_ch, self._refs, self.workers)
         self._ref_rows = _index(self._refs)
-        n_threads = len(self._rows) - 1
+        n_threads = len(self._shares) - 1
         if n_threads > self._pool_size:  # a pool of its own, shut down when the accumulator goes
             if self._pool is not None:
                 self._pool.shutdown(wait=False)
@@ -596,7 +596,8 @@ class SpectralAccumulator:
         workers before it) on the calling thread before the first group."""
         assert self._dtype is not None
         while len(self._scratch) <= worker:
-            n_in = self._rows[len(self._scratch)].n_in(len(self._refs))
+            k = len(self._scratch)
+            n_in = self._shares[k].n_max(len(self._refs), k == 0)
             G, n_f = self.group, self.freq.size
             self._scratch.append(_Scratch(
                 None if self._taps is not None else np.empty(n_in * G * self.nperseg,
@@ -607,43 +608,38 @@ class SpectralAccumulator:
         return self._scratch[worker]
 
     def _transform(self, seg: NDArray[np.floating], scratch: _Scratch,
-                   first: int) -> NDArray[np.complexfloating]:
-        """Spectra (k, n_seg, n_f) of the segments ``seg`` (k, n_seg, nperseg), in the
-        scratch from row ``first`` on; windowed and detrended here only when the window
-        is not applied in frequency by the kernel."""
+                   kept: bool = False) -> NDArray[np.complexfloating]:
+        """Spectra (k, n_seg, n_f) of the segments ``seg`` (k, n_seg, nperseg): in the
+        scratch (used before the next call), or in an array of their own if ``kept``;
+        windowed and detrended here only when the window is not applied in frequency
+        by the kernel."""
         k, n_seg, N = seg.shape
-        n_f = self.freq.size
-        lo, hi = first * n_seg, (first + k) * n_seg
         x = seg
         if scratch.buf is not None:  # a window applied in time
-            x = scratch.buf[lo * N : hi * N].reshape(k, n_seg, N)
+            x = scratch.buf[: k * n_seg * N].reshape(k, n_seg, N)
             np.multiply(seg, self._win, out=x)
         # one FFT per precision whatever the buffers, so that results never depend on how
         # the samples were cut into blocks or channels
         Z: NDArray[np.complexfloating]
-        if scratch.spec is not None:  # numpy's pocketfft writes to `out`
-            Z = np.fft.rfft(x, axis=-1, out=scratch.spec[lo * n_f : hi * n_f].reshape(k, n_seg,
-                                                                                        n_f))
-        else:  # scipy's is twice as fast as numpy's in single precision
+        if scratch.spec is None:  # scipy's is twice as fast as numpy's in single precision
             Z = scipy.fft.rfft(x, axis=-1, workers=1, overwrite_x=x is not seg)
+        else:  # numpy's pocketfft writes to `out`
+            n_f = self.freq.size
+            out = None if kept else scratch.spec[: k * n_seg * n_f].reshape(k, n_seg, n_f)
+            Z = np.fft.rfft(x, axis=-1, out=out)
         if scratch.buf is not None and self.detrend == "constant":
             mean = np.add.reduce(seg, axis=-1) / N  # in the samples' precision, like scipy
             Z[..., self._dc_bins] -= (mean[..., None] * self._dc_values).astype(Z.dtype)
         return Z
 
-    def _group_accumulate(self, seg: NDArray[np.floating], rows: _Rows, scratch: _Scratch,
-                          P: NDArray[np.float64], Q: NDArray[np.float64]) -> None:
-        """Add one group to the sums ``P``, ``Q`` (rows ``rows.lo:rows.hi``): ``seg`` (n_ch,
-        n_seg, nperseg) strided view of all channels' samples."""
-        zown = self._transform(seg[rows.lo : rows.hi], scratch, 0)
-        if rows.ref_local is not None:
-            zref = zown[_index(rows.ref_local)]
-        else:
-            zref = self._transform(seg[self._ref_rows], scratch, rows.hi - rows.lo)
+    def _add(self, zref: NDArray[np.complexfloating], zown: NDArray[np.complexfloating],
+             row0: int, scratch: _Scratch) -> None:
+        """Add the products of spectra ``zown`` (rows ``row0`` on) with the references'
+        ``zref`` (same segments) to the sums."""
         taps = self._taps if self._taps is not None else _NO_TAPS
         accumulate(_interleaved(zref), _interleaved(zown), self.nperseg, taps,
-                   self._taps is not None and self.detrend == "constant", rows.lo, P, Q,
-                   scratch.fg, scratch.x)
+                   self._taps is not None and self.detrend == "constant", row0, self._P,
+                   self._Q, scratch.fg, scratch.x)
 
     def _segments(self, data: NDArray[np.floating], start: int, n_seg: int) -> NDArray[np.floating]:
         """Segments ``(n_ch, n_seg, nperseg)`` of ``data`` from sample ``start`` on: a
@@ -708,25 +704,50 @@ class SpectralAccumulator:
             finally:
                 appended.set()
 
+        zrefs: list[NDArray[np.complexfloating]] = []
+        refs_done = threading.Event()
+
         def job(worker: int) -> None:
             """The worker's channels, once the block is checked and appended: every
-            segment in order, then the samples kept copied."""
+            segment in order, then the samples kept copied. The first worker transforms
+            the references first and adds their own sums; the others wait for their
+            spectra (already there, usually) before their first sums."""
             appended.wait()  # set already on the calling thread (worker 0)
             if not finite[0]:
                 return
-            rows = self._rows[worker]
-            mine = slice(rows.lo, rows.hi)
-            scratch = self._workspace(worker)
-            for seg in groups:
-                self._group_accumulate(seg, rows, scratch, self._P, self._Q)
+            scratch = self._scratch[worker] if n_seg else None
+            rows = [slice(lo, hi) for lo, hi in self._shares[worker].runs]
+            if worker == 0:
+                rows.append(self._ref_rows)
+                if scratch is not None:
+                    try:
+                        zrefs.extend(self._transform(seg[self._ref_rows], scratch, kept=True)
+                                     for seg in groups)
+                    finally:
+                        refs_done.set()
+                    for z in zrefs:  # the references' own rows
+                        if isinstance(self._ref_rows, slice):
+                            self._add(z, z, self._refs[0], scratch)
+                        else:
+                            for a, r in enumerate(self._refs):
+                                self._add(z, z[a : a + 1], r, scratch)
+            if scratch is not None:
+                for g, seg in enumerate(groups):
+                    for lo, hi in self._shares[worker].runs:
+                        zown = self._transform(seg[lo:hi], scratch)
+                        refs_done.wait()
+                        if len(zrefs) != len(groups):  # the first worker failed: it raises
+                            return
+                        self._add(zrefs[g], zown, lo, scratch)
             i = 0
             for part in keep:
-                dst[mine, i : i + part.shape[-1]] = part[mine]
+                for r in rows:
+                    dst[r, i : i + part.shape[-1]] = part[r]
                 i += part.shape[-1]
 
         if n_seg:
-            self._workspace(len(self._rows) - 1)  # allocated here, not by racing workers
-        _run_workers(start, job, len(self._rows), self._pool)
+            self._workspace(len(self._shares) - 1)  # allocated here, not by racing workers
+        _run_workers(start, job, len(self._shares), self._pool)
         if not finite[0]:
             raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new

@@ -143,7 +143,7 @@ def test_reset_with_more_channels_gets_enough_threads():
     acc.reset()
     data = _signals(n=3000, n_resp=9)  # 10 channels: 5 workers, waiting for each other
     acc.update(data)
-    assert len(acc._rows) == 5
+    assert len(acc._shares) == 5
     assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
 
 
