@@ -69,10 +69,11 @@ class _Share:
 
     @classmethod
     def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Share]:
-        """At most ``parts`` workers with about as many rows each (the first one counting
-        the references); workers left without a row are dropped (not the first)."""
+        """At most ``parts`` workers with about as many rows each (the first one, the
+        calling thread, counting the references, and taking a half row more: the others
+        wake later); workers left without a row are dropped (not the first)."""
         others = [r for r in range(n_ch) if r not in set(refs)]
-        bounds = [0, *(min(len(others), max(0, round((k + 1) * n_ch / parts) - len(refs)))
+        bounds = [0, *(min(len(others), max(0, int((k + 1) * n_ch / parts + 0.5) - len(refs)))
                        for k in range(parts - 1)), len(others)]
         out = []
         for k, (a, b) in enumerate(itertools.pairwise(bounds)):
@@ -385,25 +386,21 @@ def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
     return scale
 
 
-def _run_workers(first: Callable[[], None], fn: Callable[[int], None], workers: int,
+def _run_workers(fn: Callable[[int], None], workers: int,
                  pool: ThreadPoolExecutor | None) -> None:
-    """``first()`` then ``fn(0)`` on this thread, ``fn(k)`` for ``k`` in ``1:workers`` on
-    ``pool``'s, started before ``first`` so that it runs while they wake (a tenth of a
-    millisecond on a virtual machine: the length of a check of a whole block).
+    """``fn(0)`` on this thread, ``fn(k)`` for ``k`` in ``1:workers`` on ``pool``'s.
 
     The only threads of ``processing``: numpy, pocketfft and the kernels release the
-    GIL, so the workers, each on its own channels, run on all cores. Nothing is handed
-    between threads but the call and its completion. ``pool`` (``workers - 1``
-    threads) belongs to one accumulator: the workers may wait for ``first`` (an event),
-    which tasks queued behind another accumulator's could not.
+    GIL, so the workers, each on its own channels, run on all cores. ``pool``
+    (``workers - 1`` threads) belongs to one accumulator: the workers wait for each
+    other (a barrier, an event), which tasks queued behind another accumulator's could
+    not.
     """
     if workers <= 1 or pool is None:
-        first()
         fn(0)
         return
     others = [pool.submit(fn, k) for k in range(1, workers)]
     try:
-        first()
         fn(0)
     finally:
         wait(others)  # never return while another thread still writes
@@ -456,9 +453,10 @@ class SpectralAccumulator:
     other window is applied to the samples. Each value is summed over the segments
     in order: the same bits whatever the block boundaries and the number of workers.
 
-    Memory: two buffers taking turns holding the unconsumed tail (less than
-    ``nperseg`` samples per channel, plus the start of the next block when no
-    segment is complete; about two segments' samples are copied per block), the
+    Memory: two buffers of ``2 nperseg`` samples per channel taking turns holding
+    the unconsumed tail (less than ``nperseg`` samples per channel, plus the start of
+    the next block, less than ``nperseg``: about two segments' samples are copied per
+    block), the
     sums (``3 * n_ch * nperseg`` values for one reference), and per worker its
     scratch: spectra of one group (``group * nperseg`` values per channel it
     transforms, plus as many windowed samples for a window applied in time) and the
@@ -574,9 +572,10 @@ class SpectralAccumulator:
         self._refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
         self._dtype = np.dtype(np.float32 if block.dtype == np.float32 else np.float64)
         self._win = self.window.astype(self._dtype)
-        # two buffers taking turns holding the tail (a prefix of the first)
-        self._stores = [np.empty((n_ch, 0), self._dtype) for _ in range(2)]
-        self._tail = self._stores[0]
+        # two buffers taking turns holding the tail (a prefix of the first): fewer than
+        # nperseg samples, and fewer than nperseg appended to it (see update)
+        self._stores = [np.empty((n_ch, 2 * self.nperseg), self._dtype) for _ in range(2)]
+        self._tail = self._stores[0][:, :0]
         self._shares = _Share.split(n_ch, self._refs, self.workers)
         self._ref_rows = _index(self._refs)
         n_threads = len(self._shares) - 1
@@ -675,80 +674,86 @@ class SpectralAccumulator:
             need = n_new
         else:
             need = max(0, (n_head - 1) * step + N - n_tail) if n_head else 0
-        if n_tail + need > self._stores[0].shape[-1]:  # no room: move to the other buffer
-            self._reserve(1, n_tail + need)[:, :n_tail] = self._tail
-            self._stores.reverse()
-            self._tail = self._stores[0][:, :n_tail]
         tail = self._stores[0][:, : n_tail + need]
         start = n_seg * step  # first unconsumed sample, counted from the tail's start
         keep: tuple[NDArray[np.floating], ...] = ()
         if n_seg:  # the samples kept for the next block go to the other buffer
             keep = (tail[:, start:], arr[:, need:]) if start < n_tail else (
                 arr[:, start - n_tail :],)
-        n_keep = sum(part.shape[-1] for part in keep)
-        dst = self._reserve(1, n_keep)[:, :n_keep]
-        finite = [False]
-        appended = threading.Event()
+        dst = self._stores[1][:, : sum(part.shape[-1] for part in keep)]
 
         # groups of up to G segments, each a strided view of the tail or of the block
         groups = [self._segments(tail, i * step, min(G, n_head - i)) for i in range(0, n_head, G)]
         groups += [self._segments(arr, i * step - n_tail, min(G, n_seg - i))
                    for i in range(n_head, n_seg, G)]
-
-        def start() -> None:
-            """On the calling thread, first: the block checked and appended to the tail."""
-            try:
-                finite[0] = all_finite(arr)
-                if finite[0]:
-                    tail[:, n_tail:] = arr[:, :need]
-            finally:
-                appended.set()
-
+        if n_seg:
+            self._workspace(len(self._shares) - 1)  # allocated here, not by racing workers
+        finite = [False] * len(self._shares)
+        checked = threading.Barrier(len(self._shares))
         zrefs: list[NDArray[np.complexfloating]] = []
         refs_done = threading.Event()
 
         def job(worker: int) -> None:
-            """The worker's channels, once the block is checked and appended: every
-            segment in order, then the samples kept copied. The first worker transforms
-            the references first and adds their own sums; the others wait for their
-            spectra (already there, usually) before their first sums."""
-            appended.wait()  # set already on the calling thread (worker 0)
-            if not finite[0]:
-                return
-            scratch = self._scratch[worker] if n_seg else None
-            rows = [slice(lo, hi) for lo, hi in self._shares[worker].runs]
+            """The worker's channels (the first one's include the references): checked
+            and appended to the tail; their segments transformed; once every worker has
+            checked its channels (a barrier, met after the first transform as a rule),
+            summed in order; then the samples kept copied. The first worker transforms
+            the references first (and adds their own sums last), and the others wait
+            for their spectra (there already, as a rule) before their first sums."""
+            runs = self._shares[worker].runs
+            rows = [slice(lo, hi) for lo, hi in runs]
             if worker == 0:
                 rows.append(self._ref_rows)
-                if scratch is not None:
+            agreed = False
+
+            def all_finite_everywhere() -> bool:
+                nonlocal agreed
+                if not agreed:
+                    agreed = True
+                    checked.wait()
+                return all(finite)
+
+            try:
+                finite[worker] = all(all_finite(arr[r]) for r in rows)
+                if finite[worker]:
+                    for r in rows:
+                        tail[r, n_tail:] = arr[r, :need]
+                scratch = self._scratch[worker] if n_seg else None
+                if worker == 0 and scratch is not None:
                     try:
-                        zrefs.extend(self._transform(seg[self._ref_rows], scratch, kept=True)
-                                     for seg in groups)
+                        if finite[0]:
+                            zrefs.extend(self._transform(seg[self._ref_rows], scratch, kept=True)
+                                         for seg in groups)
                     finally:
                         refs_done.set()
-                    for z in zrefs:  # the references' own rows
+                if scratch is not None and finite[worker]:
+                    for g, seg in enumerate(groups):
+                        for lo, hi in runs:
+                            zown = self._transform(seg[lo:hi], scratch)
+                            refs_done.wait()
+                            if not all_finite_everywhere() or len(zrefs) != len(groups):
+                                return  # a non-finite block, or the first worker failed
+                            self._add(zrefs[g], zown, lo, scratch)
+                if not all_finite_everywhere():
+                    return
+                if worker == 0 and scratch is not None:  # the references' own rows
+                    for z in zrefs:
                         if isinstance(self._ref_rows, slice):
                             self._add(z, z, self._refs[0], scratch)
                         else:
                             for a, r in enumerate(self._refs):
                                 self._add(z, z[a : a + 1], r, scratch)
-            if scratch is not None:
-                for g, seg in enumerate(groups):
-                    for lo, hi in self._shares[worker].runs:
-                        zown = self._transform(seg[lo:hi], scratch)
-                        refs_done.wait()
-                        if len(zrefs) != len(groups):  # the first worker failed: it raises
-                            return
-                        self._add(zrefs[g], zown, lo, scratch)
+            except BaseException:
+                checked.abort()
+                raise
             i = 0
             for part in keep:
                 for r in rows:
                     dst[r, i : i + part.shape[-1]] = part[r]
                 i += part.shape[-1]
 
-        if n_seg:
-            self._workspace(len(self._shares) - 1)  # allocated here, not by racing workers
-        _run_workers(start, job, len(self._shares), self._pool)
-        if not finite[0]:
+        _run_workers(job, len(self._shares), self._pool)
+        if not all(finite):
             raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
         if n_seg == 0:
@@ -757,17 +762,6 @@ class SpectralAccumulator:
         self._n_seg += n_seg
         self._stores.reverse()
         self._tail = dst
-
-    def _reserve(self, i: int, n: int) -> NDArray[np.floating]:
-        """Buffer ``i`` (0: the tail's, 1: the other) with room for ``n`` samples per channel.
-
-        Grown when needed, never given back: fresh memory costs a page fault per 4 kB on
-        first touch, more than the copies into it.
-        """
-        if self._stores[i].shape[-1] < n:
-            self._stores[i] = np.empty((self._n_ch, max(n, self._stores[i].shape[-1] * 5 // 4)),
-                                       self._dtype)
-        return self._stores[i]
 
     def spectra(self) -> CrossSpectra:
         """The current averaged spectra (the accumulator goes on accepting blocks).
