@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import gc
+import threading
+
 import numpy as np
 import pytest
 import scipy.signal
@@ -344,3 +347,19 @@ def test_two_shakers_multi_reference_h1_and_multiple_coherence(engine):
     assert np.median(coherence(clean)[:, band]) > 0.9999
     # each force alone explains only part of each response
     assert ordinary_coherence(clean)[:, :, band].mean() < 0.95
+
+
+def test_worker_threads_end_with_their_accumulator():
+    def crew() -> set[threading.Thread]:
+        return {t for t in threading.enumerate() if t.name.startswith("spectral-")}
+
+    before = crew()
+    acc = SpectralAccumulator(FS, 256, workers=3)
+    acc.update(_signals(n=3000, n_resp=5))
+    mine = crew() - before
+    assert len(mine) == 2
+    del acc
+    gc.collect()
+    for t in mine:
+        t.join(timeout=5)
+    assert not any(t.is_alive() for t in mine)
