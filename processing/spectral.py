@@ -468,9 +468,9 @@ class SpectralAccumulator:
         (the fastest on the benchmark). Results are independent of
         it (the FFT of a segment does not depend on the others in its call; tested).
     workers : int
-        Threads sharing the channels (1, or 2 on a 2-core machine): each one transforms
-        and multiplies every segment of its own channels, and transforms the references
-        too when they are not among them.
+        Threads sharing the channels (1, or 2 on a 2-core machine): each one checks,
+        transforms and multiplies every segment of its own channels; the calling thread
+        also transforms the references, once for all.
 
     Notes
     -----
