@@ -62,10 +62,14 @@ _Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64
 @dataclass(frozen=True)
 class _Share:
     """The channels one worker thread transforms and sums: ``runs`` of adjacent rows
-    ``(lo, hi)``, none of them a reference; the first worker also transforms the
-    references, once for all workers, before its runs."""
+    ``(lo, hi)``, none of them a reference. The first worker also transforms the
+    references, once for all workers: ``lead`` is then the rows of its first FFT call,
+    the references and the run just after them (``(lo, hi)``, one call: pocketfft is
+    twice as slow per segment with a row or two as with a dozen), or None when the
+    references are not adjacent (a call of their own)."""
 
     runs: tuple[tuple[int, int], ...]
+    lead: tuple[int, int] | None = None
 
     @classmethod
     def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Share]:
@@ -84,11 +88,16 @@ class _Share:
             out.append(cls(tuple((rows[i], rows[j - 1] + 1)
                                  for i, j in itertools.pairwise([0, *cuts, len(rows)])
                                  if j > i)))
+        if refs == tuple(range(refs[0], refs[0] + len(refs))):
+            after = refs[-1] + 1
+            hi = next((h for lo, h in out[0].runs if lo == after), after)
+            out[0] = cls(tuple(run for run in out[0].runs if run[0] != after), (refs[0], hi))
         return out
 
     def n_max(self, n_ref: int, first: bool) -> int:
         """Most rows in one of its FFT calls."""
-        return max([hi - lo for lo, hi in self.runs] + [n_ref if first else 0])
+        lead = (self.lead[1] - self.lead[0] if self.lead else n_ref) if first else 0
+        return max([hi - lo for lo, hi in self.runs] + [lead])
 
 
 @dataclass(frozen=True)
@@ -722,19 +731,21 @@ class SpectralAccumulator:
         finite = [False] * len(self._shares)
         checked = threading.Barrier(len(self._shares))
         zrefs: list[NDArray[np.complexfloating]] = []
-        refs_done = threading.Event()
+        refs_in = [threading.Event() for _ in groups]
+        n_ref = len(self._refs)
 
         def job(worker: int) -> None:
             """The worker's channels (the first one's include the references): checked
             and appended to the tail; their segments transformed; once every worker has
             checked its channels (a barrier, met after the first transform as a rule),
             summed in order; then the samples kept copied. The first worker transforms
-            the references first (and adds their own sums last), and the others wait
-            for their spectra (there already, as a rule) before their first sums."""
-            runs = self._shares[worker].runs
-            rows: list[slice | list[int]] = [slice(lo, hi) for lo, hi in runs]
+            the references first in each group and hands their spectra to the others (an
+            event per group; there already, as a rule, when they need them)."""
+            share = self._shares[worker]
+            rows: list[slice | list[int]] = [slice(lo, hi) for lo, hi in share.runs]
+            lead = self._ref_rows if share.lead is None else slice(*share.lead)
             if worker == 0:
-                rows.append(self._ref_rows)
+                rows.insert(0, lead)
             agreed = False
 
             def all_finite_everywhere() -> bool:
@@ -744,36 +755,48 @@ class SpectralAccumulator:
                     checked.wait()
                 return all(finite)
 
+            def lead_group(g: int, seg: NDArray[np.floating], scratch: _Scratch) -> bool:
+                """The first worker's first call of group ``g``: the references (and the
+                run after them), their spectra handed over, then summed."""
+                try:
+                    z = self._transform(seg[lead], scratch)
+                    zref = z[:n_ref] if scratch.spec is None else z[:n_ref].copy()
+                    zrefs.append(zref)  # the scratch's spectra are overwritten next call
+                finally:
+                    refs_in[g].set()
+                if not all_finite_everywhere():
+                    return False
+                if isinstance(lead, slice):
+                    self._add(zref, z, lead.start, scratch)
+                else:
+                    for a, ref in enumerate(self._refs):
+                        self._add(zref, z[a : a + 1], ref, scratch)
+                return True
+
             try:
                 finite[worker] = all(all_finite(arr[r]) for r in rows)
                 if finite[worker]:
                     for r in rows:
                         tail[r, n_tail:] = arr[r, :need]
                 scratch = self._scratch[worker] if n_seg else None
-                if worker == 0 and scratch is not None:
-                    try:
-                        if finite[0]:
-                            zrefs.extend(self._transform(seg[self._ref_rows], scratch, kept=True)
-                                         for seg in groups)
-                    finally:
-                        refs_done.set()
-                if scratch is not None and finite[worker]:
-                    for g, seg in enumerate(groups):
-                        for lo, hi in runs:
+                try:
+                    for g, seg in enumerate(groups if scratch is not None and finite[worker]
+                                            else ()):
+                        assert scratch is not None
+                        if worker == 0 and not lead_group(g, seg, scratch):
+                            return
+                        for lo, hi in share.runs:
                             zown = self._transform(seg[lo:hi], scratch)
-                            refs_done.wait()
-                            if not all_finite_everywhere() or len(zrefs) != len(groups):
+                            refs_in[g].wait()
+                            if not all_finite_everywhere() or len(zrefs) <= g:
                                 return  # a non-finite block, or the first worker failed
                             self._add(zrefs[g], zown, lo, scratch)
+                finally:
+                    if worker == 0:  # never leave another worker waiting
+                        for event in refs_in:
+                            event.set()
                 if not all_finite_everywhere():
                     return
-                if worker == 0 and scratch is not None:  # the references' own rows
-                    for z in zrefs:
-                        if isinstance(self._ref_rows, slice):
-                            self._add(z, z, self._refs[0], scratch)
-                        else:
-                            for a, ref in enumerate(self._refs):
-                                self._add(z, z[a : a + 1], ref, scratch)
             except BaseException:
                 checked.abort()
                 raise
