@@ -363,3 +363,31 @@ def test_worker_threads_end_with_their_accumulator():
     for t in mine:
         t.join(timeout=5)
     assert not any(t.is_alive() for t in mine)
+
+
+@pytest.mark.parametrize("failing", ["feeder", "spectral-1"])  # calling thread, other
+def test_an_error_in_any_worker_is_raised_and_nothing_waits_forever(failing):
+    acc = SpectralAccumulator(FS, 256, workers=2)
+    data = _signals(n=4000, n_resp=5)
+    acc.update(data[:, :1000])
+    transform = acc._transform
+
+    def broken(*args, **kwargs):
+        if threading.current_thread().name == failing:
+            raise RuntimeError("transform failed")
+        return transform(*args, **kwargs)
+
+    acc._transform = broken  # type: ignore[method-assign]
+    raised: list[BaseException] = []
+
+    def feed() -> None:
+        try:
+            acc.update(data[:, 1000:])
+        except BaseException as exc:
+            raised.append(exc)
+
+    t = threading.Thread(target=feed, name="feeder")
+    t.start()
+    t.join(timeout=10)
+    assert not t.is_alive()
+    assert len(raised) == 1 and "transform failed" in str(raised[0])
