@@ -470,7 +470,6 @@ class _Crew:
         (``workers - 1 <= size``); returns once all are done, raising the first error."""
         for k in range(1, workers):
             self._tasks[k - 1].put((fn, k))
-        errors: list[BaseException] = []
         try:
             fn(0)
         finally:  # never return while another thread still writes
@@ -663,28 +662,26 @@ class SpectralAccumulator:
         self._P = np.zeros((2 * len(self._refs), n_ch, n_f))
         self._Q = np.zeros((n_ch, n_f))
 
-    def _workspace(self, worker: int) -> _Scratch:
-        """Worker ``worker``'s scratch (see ``_Scratch``), allocated (with those of the
-        workers before it) on the calling thread before the first group."""
-        assert self._dtype is not None
-        while len(self._scratch) <= worker:
-            k = len(self._scratch)
-            n_in = self._shares[k].n_max(len(self._refs), k == 0)
-            G, n_f = self.group, self.freq.size
+    def _allocate_scratch(self) -> None:
+        """Every worker's scratch (see ``_Scratch``), allocated once, on the calling thread,
+        at the first block with a complete segment."""
+        if self._scratch:
+            return
+        G, n_f = self.group, self.freq.size
+        for k, share in enumerate(self._shares):
+            n_in = share.n_max(len(self._refs), k == 0)
             self._scratch.append(_Scratch(
                 None if self._taps is not None else np.empty(n_in * G * self.nperseg,
                                                              self._dtype),
                 None if self._dtype == np.float32 else np.empty(n_in * G * n_f, np.complex128),
                 *scratch(G, len(self._refs), n_f),
             ))
-        return self._scratch[worker]
 
-    def _transform(self, seg: NDArray[np.floating], scratch: _Scratch,
-                   kept: bool = False) -> NDArray[np.complexfloating]:
-        """Spectra (k, n_seg, n_f) of the segments ``seg`` (k, n_seg, nperseg): in the
-        scratch (used before the next call), or in an array of their own if ``kept``;
-        windowed and detrended here only when the window is not applied in frequency
-        by the kernel."""
+    def _transform(self, seg: NDArray[np.floating],
+                   scratch: _Scratch) -> NDArray[np.complexfloating]:
+        """Spectra (k, n_seg, n_f) of the segments ``seg`` (k, n_seg, nperseg), in the
+        scratch in double precision (overwritten by the next call); windowed and
+        detrended here only when the window is not applied in frequency by the kernel."""
         k, n_seg, N = seg.shape
         x = seg
         if scratch.buf is not None:  # a window applied in time
@@ -697,8 +694,8 @@ class SpectralAccumulator:
             Z = scipy.fft.rfft(x, axis=-1, workers=1, overwrite_x=x is not seg)
         else:  # numpy's pocketfft writes to `out`
             n_f = self.freq.size
-            out = None if kept else scratch.spec[: k * n_seg * n_f].reshape(k, n_seg, n_f)
-            Z = np.fft.rfft(x, axis=-1, out=out)
+            Z = np.fft.rfft(x, axis=-1,
+                            out=scratch.spec[: k * n_seg * n_f].reshape(k, n_seg, n_f))
         if scratch.buf is not None and self.detrend == "constant":
             mean = np.add.reduce(seg, axis=-1) / N  # in the samples' precision, like scipy
             Z[..., self._dc_bins] -= (mean[..., None] * self._dc_values).astype(Z.dtype)
@@ -760,7 +757,7 @@ class SpectralAccumulator:
         groups += [self._segments(arr, i * step - n_tail, min(G, n_seg - i))
                    for i in range(n_head, n_seg, G)]
         if n_seg:
-            self._workspace(len(self._shares) - 1)  # allocated here, not by racing workers
+            self._allocate_scratch()  # here, not by racing workers
         verdict = _Verdict(len(self._shares))
         zrefs: list[NDArray[np.complexfloating]] = []
         refs_in = [threading.Event() for _ in groups]
@@ -783,12 +780,10 @@ class SpectralAccumulator:
             def lead_group(g: int, seg: NDArray[np.floating], scratch: _Scratch) -> bool:
                 """The first worker's first call of group ``g``: the references (and the
                 run after them), their spectra handed over, then summed."""
-                try:
-                    z = self._transform(seg[lead], scratch)
-                    zref = z[:n_ref] if scratch.spec is None else z[:n_ref].copy()
-                    zrefs.append(zref)  # the scratch's spectra are overwritten next call
-                finally:
-                    refs_in[g].set()
+                z = self._transform(seg[lead], scratch)
+                zref = z[:n_ref] if scratch.spec is None else z[:n_ref].copy()
+                zrefs.append(zref)  # the scratch's spectra are overwritten next call
+                refs_in[g].set()
                 if not verdict.all_finite():
                     return False
                 if isinstance(lead, slice):
@@ -804,29 +799,25 @@ class SpectralAccumulator:
                     for r in rows:
                         tail[r, n_tail:] = arr[r, :need]
                 verdict.arrive(finite)
-                scratch = self._scratch[worker] if n_seg else None
-                try:
-                    for g, seg in enumerate(groups if scratch is not None and finite else ()):
-                        assert scratch is not None
-                        if worker == 0 and not lead_group(g, seg, scratch):
+                for g, seg in enumerate(groups if finite else ()):
+                    scratch = self._scratch[worker]
+                    if worker == 0 and not lead_group(g, seg, scratch):
+                        return
+                    for lo, hi in share.runs:
+                        zown = self._transform(seg[lo:hi], scratch)
+                        refs_in[g].wait()
+                        if not verdict.all_finite():  # a NaN elsewhere, or a worker failed
                             return
-                        for lo, hi in share.runs:
-                            zown = self._transform(seg[lo:hi], scratch)
-                            refs_in[g].wait()
-                            if not verdict.all_finite() or len(zrefs) <= g:
-                                return  # a non-finite block, or the first worker failed
-                            self._add(zrefs[g], zown, lo, scratch)
-                finally:
-                    if worker == 0:  # never leave another worker waiting
-                        for event in refs_in:
-                            event.set()
+                        self._add(zrefs[g], zown, lo, scratch)
                 if not verdict.all_finite():
                     return
             except BaseException:
-                verdict.abort()
-                for event in refs_in if worker == 0 else ():
-                    event.set()
+                verdict.abort()  # before the events below: the others then add nothing
                 raise
+            finally:
+                if worker == 0:  # never leave another worker waiting for the references
+                    for event in refs_in:
+                        event.set()
             i = 0
             for part in keep:
                 for r in rows:
