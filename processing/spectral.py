@@ -25,15 +25,21 @@ import threading
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import scipy.fft
 import scipy.signal
-from numpy.lib.stride_tricks import as_strided
 from numpy.typing import ArrayLike, NDArray
 
-from processing._welch_kernel import accumulate, all_finite, scratch
+from processing._welch_kernel import (
+    DONE,
+    FINITE,
+    TIMED_OUT,
+    accumulate,
+    scratch,
+    work_block,
+)
 
 __all__ = [
     "ESTIMATORS",
@@ -57,6 +63,9 @@ ESTIMATORS = ("H1", "H2", "Hv")
 Scaling = Literal["density", "spectrum"]
 #: summed (Sff, Sfx, Sxx) of some segments
 _Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64]]
+#: a block as :func:`processing._welch_kernel.work_block` takes it: the samples, the tail's
+#: store and the other store, n_tail, need, n_seg, n_head, nperseg, step, group
+_Block = tuple[NDArray[Any], NDArray[Any], NDArray[Any], int, int, int, int, int, int, int]
 
 
 @dataclass(frozen=True)
@@ -103,15 +112,35 @@ class _Share:
 
 
 @dataclass(frozen=True)
-class _Scratch:
-    """One worker's buffers for a group, allocated once and reused (fresh memory costs a
-    page fault per 4 kB on first touch): windowed samples (windows applied in time only)
-    and spectra (double precision only: scipy's single-precision FFT has no ``out``),
-    both flat so that any number of segments gives contiguous views; then the kernel's
-    scratch (see :func:`processing._welch_kernel.accumulate`)."""
+class _Plan:
+    """A share as :func:`processing._welch_kernel.work_block` takes it (int64 arrays):
+    ``own``, the runs of rows ``(lo, hi)`` it checks and whose samples it keeps; ``runs``,
+    those it transforms in calls of their own; ``lead``, the first worker's call with the
+    references, ``(-1, -1)`` if none."""
 
-    buf: NDArray[np.floating] | None
-    spec: NDArray[np.complex128] | None
+    own: NDArray[np.int64]
+    runs: NDArray[np.int64]
+    lead: NDArray[np.int64]
+
+    @classmethod
+    def of(cls, share: _Share, refs: tuple[int, ...], first: bool) -> _Plan:
+        def runs(pairs: Sequence[tuple[int, int]]) -> NDArray[np.int64]:
+            return np.array(pairs, np.int64).reshape(-1, 2)
+
+        head: list[tuple[int, int]] = []
+        if first:
+            head = [share.lead] if share.lead else [(r, r + 1) for r in refs]
+        return cls(runs(head + list(share.runs)), runs(share.runs),
+                   np.array(share.lead if first and share.lead else (-1, -1), np.int64))
+
+
+@dataclass(frozen=True)
+class _Scratch:
+    """One worker's buffers, allocated once and reused (fresh memory costs a page fault per
+    4 kB on first touch): windowed samples (a window applied in time only: else empty)
+    and the kernel's scratch (see :func:`processing._welch_kernel.accumulate`)."""
+
+    buf: NDArray[np.floating]
     fg: NDArray[np.float64]
     x: NDArray[np.float64]
 
@@ -378,12 +407,6 @@ def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
     return taps
 
 
-def _index(rows: tuple[int, ...]) -> slice | list[int]:
-    """Index of ``rows``: a slice (a view, no copy) when they are adjacent and in order."""
-    r0 = rows[0]
-    return slice(r0, r0 + len(rows)) if rows == tuple(range(r0, r0 + len(rows))) else list(rows)
-
-
 def _interleaved(Z: NDArray[np.complexfloating]) -> NDArray[np.floating]:
     """Real view ``(re, im, re, im, ...)`` of spectra contiguous along their last axis."""
     return Z.view(Z.real.dtype)
@@ -395,37 +418,6 @@ def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
     if nfft % 2 == 0:
         scale[-1] = 1.0 / norm
     return scale
-
-
-class _Verdict:
-    """Whether every worker found its channels of a block finite: a split barrier. Each
-    worker reports once (:meth:`arrive`, right after its check) and waits for all the
-    reports only when it needs the answer (:meth:`all_finite`, before its first sum):
-    with a plain barrier after its first transform, the calling thread waited 0.2-0.4
-    ms per block for the other to wake, check and transform."""
-
-    def __init__(self, n_workers: int) -> None:
-        self._left = n_workers
-        self._ok = True
-        self._lock = threading.Lock()
-        self._all_in = threading.Event()
-
-    def arrive(self, finite: bool) -> None:
-        with self._lock:
-            self._ok = self._ok and finite
-            self._left -= 1
-            if self._left == 0:
-                self._all_in.set()
-
-    def abort(self) -> None:
-        """A worker failed: the others add nothing and stop waiting."""
-        with self._lock:
-            self._ok = False
-        self._all_in.set()
-
-    def all_finite(self) -> bool:
-        self._all_in.wait()
-        return self._ok
 
 
 class _Crew:
@@ -643,81 +635,51 @@ class SpectralAccumulator:
     def _first_block(self, block: NDArray[np.generic]) -> None:
         self._n_ch = n_ch = block.shape[0]
         self._refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
-        self._dtype = np.dtype(np.float32 if block.dtype == np.float32 else np.float64)
-        self._win = self.window.astype(self._dtype)
+        dtype: np.dtype[np.floating] = np.dtype(np.float32 if block.dtype == np.float32
+                                                 else np.float64)
+        self._dtype = dtype
         # two buffers taking turns holding the tail (a prefix of the first): fewer than
         # nperseg samples, and fewer than nperseg appended to it (see update)
-        self._stores = [np.empty((n_ch, 2 * self.nperseg), self._dtype) for _ in range(2)]
+        self._stores = [np.empty((n_ch, 2 * self.nperseg), dtype) for _ in range(2)]
         self._tail = self._stores[0][:, :0]
         self._shares = _Share.split(n_ch, self._refs, self.workers)
-        self._ref_rows = _index(self._refs)
+        self._plans = [_Plan.of(share, self._refs, k == 0) for k, share in enumerate(self._shares)]
+        self._whole = _Plan.of(_Share(((0, n_ch),)), (), False)  # checks a block, one worker
         n_threads = len(self._shares) - 1
         if n_threads and (self._crew is None or n_threads > self._crew.size):
             if self._crew is not None:  # threads of its own, ended when the accumulator goes
                 self._crew.close()
             self._crew = _Crew(n_threads)
             weakref.finalize(self, self._crew.close)
-        # the sums (see processing._welch_kernel), rows written by one worker each
-        n_f = self.freq.size
+        # what the workers take: the window in frequency (taps) or in time (win, with the
+        # mean removal on the window's lines dc_bins), the sums (see processing._welch_kernel,
+        # rows written by one worker each), and each worker's scratch
+        self._ref_array = np.array(self._refs, np.int64)
+        in_freq = self._taps is not None
+        self._taps_k = self._taps if self._taps is not None else _NO_TAPS
+        self._zero_dc = in_freq and self.detrend == "constant"
+        self._win_t = np.empty(0, dtype) if in_freq else self.window.astype(dtype)
+        time_dc = not in_freq and self.detrend == "constant"
+        self._dc_k = np.asarray(self._dc_bins if time_dc else [], np.int64)
+        self._dc_v = np.asarray(self._dc_values if time_dc else [], np.complex128)
+        n_f, G, N = self.freq.size, self.group, self.nperseg
         self._P = np.zeros((2 * len(self._refs), n_ch, n_f))
         self._Q = np.zeros((n_ch, n_f))
+        self._scratch = [
+            _Scratch(np.empty(0 if in_freq else share.n_max(len(self._refs), k == 0) * G * N,
+                              dtype), *scratch(G, len(self._refs), n_f))
+            for k, share in enumerate(self._shares)]
+        self._zref = np.empty((0, len(self._refs) * G * n_f), np.result_type(dtype, np.complex64))
 
-    def _allocate_scratch(self) -> None:
-        """Every worker's scratch (see ``_Scratch``), allocated once, on the calling thread,
-        at the first block with a complete segment."""
-        if self._scratch:
-            return
-        G, n_f = self.group, self.freq.size
-        for k, share in enumerate(self._shares):
-            n_in = share.n_max(len(self._refs), k == 0)
-            self._scratch.append(_Scratch(
-                None if self._taps is not None else np.empty(n_in * G * self.nperseg,
-                                                             self._dtype),
-                None if self._dtype == np.float32 else np.empty(n_in * G * n_f, np.complex128),
-                *scratch(G, len(self._refs), n_f),
-            ))
-
-    def _transform(self, seg: NDArray[np.floating],
-                   scratch: _Scratch) -> NDArray[np.complexfloating]:
-        """Spectra (k, n_seg, n_f) of the segments ``seg`` (k, n_seg, nperseg), in the
-        scratch in double precision (overwritten by the next call); windowed and
-        detrended here only when the window is not applied in frequency by the kernel."""
-        k, n_seg, N = seg.shape
-        x = seg
-        if scratch.buf is not None:  # a window applied in time
-            x = scratch.buf[: k * n_seg * N].reshape(k, n_seg, N)
-            np.multiply(seg, self._win, out=x)
-        # one FFT per precision whatever the buffers, so that results never depend on how
-        # the samples were cut into blocks or channels
-        Z: NDArray[np.complexfloating]
-        if scratch.spec is None:  # scipy's is twice as fast as numpy's in single precision
-            Z = scipy.fft.rfft(x, axis=-1, workers=1, overwrite_x=x is not seg)
-        else:  # numpy's pocketfft writes to `out`
-            n_f = self.freq.size
-            Z = np.fft.rfft(x, axis=-1,
-                            out=scratch.spec[: k * n_seg * n_f].reshape(k, n_seg, n_f))
-        if scratch.buf is not None and self.detrend == "constant":
-            mean = np.add.reduce(seg, axis=-1) / N  # in the samples' precision, like scipy
-            Z[..., self._dc_bins] -= (mean[..., None] * self._dc_values).astype(Z.dtype)
-        return Z
-
-    def _add(self, zref: NDArray[np.complexfloating], zown: NDArray[np.complexfloating],
-             row0: int, scratch: _Scratch) -> None:
-        """Add the products of spectra ``zown`` (rows ``row0`` on) with the references'
-        ``zref`` (same segments) to the sums."""
-        taps = self._taps if self._taps is not None else _NO_TAPS
-        accumulate(_interleaved(zref), _interleaved(zown), self.nperseg, taps,
-                   self._taps is not None and self.detrend == "constant", row0, self._P,
-                   self._Q, scratch.fg, scratch.x)
-
-    def _segments(self, data: NDArray[np.floating], start: int, n_seg: int) -> NDArray[np.floating]:
-        """Segments ``(n_ch, n_seg, nperseg)`` of ``data`` from sample ``start`` on: a
-        read-only strided view (built directly: ``sliding_window_view`` costs 40 us)."""
-        if not 0 <= start and start + self._span(n_seg) <= data.shape[-1]:
-            raise AssertionError(f"segments {start}+{self._span(n_seg)} beyond {data.shape}")
-        s_ch, s_t = data.strides
-        return as_strided(data[:, start:], (data.shape[0], n_seg, self.nperseg),
-                          (s_ch, self.step * s_t, s_t), writeable=False)
+    def _work(self, worker: int, plans: list[_Plan], block: _Block,
+              flags: NDArray[np.int64]) -> int:
+        """Worker ``worker``'s share of a block (``plans[worker]``), in one compiled call
+        that holds no GIL (:func:`processing._welch_kernel.work_block`)."""
+        plan, sc = plans[worker], self._scratch[worker]
+        return int(work_block(*block, plan.own, plan.runs, plan.lead, self._ref_array,
+                              self._taps_k, self._zero_dc, self._win_t, self._dc_k, self._dc_v,
+                              self._P, self._Q, sc.fg, sc.x, sc.buf, self._zref, flags, worker,
+                              len(plans)))
 
     def update(self, block: ArrayLike) -> None:
         """Add a block of samples (n_ch, n); any n, including 0. Float32 stays float32."""
@@ -732,6 +694,8 @@ class SpectralAccumulator:
         if arr.shape[0] != self._n_ch:
             raise SpectralError(f"block has {arr.shape[0]} channels, expected {self._n_ch}")
         arr = arr.astype(self._dtype, copy=False)
+        if not arr.flags.writeable:  # compiled for writeable samples only (read, never written)
+            arr = arr.copy()
         n_tail, n_new = self._tail.shape[-1], arr.shape[-1]
         step, N, G = self.step, self.nperseg, self.group
         avail = n_tail + n_new
@@ -744,99 +708,39 @@ class SpectralAccumulator:
             need = n_new
         else:
             need = max(0, (n_head - 1) * step + N - n_tail) if n_head else 0
-        tail = self._stores[0][:, : n_tail + need]
-        start = n_seg * step  # first unconsumed sample, counted from the tail's start
-        keep: tuple[NDArray[np.floating], ...] = ()
-        if n_seg:  # the samples kept for the next block go to the other buffer
-            keep = (tail[:, start:], arr[:, need:]) if start < n_tail else (
-                arr[:, start - n_tail :],)
-        dst = self._stores[1][:, : sum(part.shape[-1] for part in keep)]
-
-        # groups of up to G segments, each a strided view of the tail or of the block
-        groups = [self._segments(tail, i * step, min(G, n_head - i)) for i in range(0, n_head, G)]
-        groups += [self._segments(arr, i * step - n_tail, min(G, n_seg - i))
-                   for i in range(n_head, n_seg, G)]
-        if n_seg:
-            self._allocate_scratch()  # here, not by racing workers
-        verdict = _Verdict(len(self._shares))
-        zrefs: list[NDArray[np.complexfloating]] = []
-        refs_in = [threading.Event() for _ in groups]
-        n_ref = len(self._refs)
+        n_groups = -(-n_head // G) + -(-(n_seg - n_head) // G)
+        if n_groups > self._zref.shape[0]:  # the references' spectra handed over, per group
+            self._zref = np.empty((n_groups, self._zref.shape[1]), self._zref.dtype)
+        # one worker, on this thread, for a block that completes no segment (a check and a copy)
+        plans = self._plans if n_seg else [self._whole]
+        flags = np.zeros(len(plans) + 1 + n_groups, np.int64)  # see work_block
+        work: _Block = (arr, self._stores[0], self._stores[1], n_tail, need, n_seg, n_head, N,
+                        step, G)
+        codes = [DONE] * len(plans)
 
         def job(worker: int) -> None:
-            """The worker's channels (the first one's include the references): checked
-            and appended to the tail; their segments transformed; once every worker has
-            reported its channels finite (a split barrier: each reports after its check
-            and waits only before its first sum, by when the others have reported),
-            summed in order; then the samples kept copied. The first worker transforms
-            the references first in each group and hands their spectra to the others (an
-            event per group; there already, as a rule, when they need them)."""
-            share = self._shares[worker]
-            rows: list[slice | list[int]] = [slice(lo, hi) for lo, hi in share.runs]
-            lead = self._ref_rows if share.lead is None else slice(*share.lead)
-            if worker == 0:
-                rows.insert(0, lead)
-
-            def lead_group(g: int, seg: NDArray[np.floating], scratch: _Scratch) -> bool:
-                """The first worker's first call of group ``g``: the references (and the
-                run after them), their spectra handed over, then summed."""
-                z = self._transform(seg[lead], scratch)
-                zref = z[:n_ref] if scratch.spec is None else z[:n_ref].copy()
-                zrefs.append(zref)  # the scratch's spectra are overwritten next call
-                refs_in[g].set()
-                if not verdict.all_finite():
-                    return False
-                if isinstance(lead, slice):
-                    self._add(zref, z, lead.start, scratch)
-                else:
-                    for a, ref in enumerate(self._refs):
-                        self._add(zref, z[a : a + 1], ref, scratch)
-                return True
-
             try:
-                finite = all(all_finite(arr[r]) for r in rows)
-                if finite:
-                    for r in rows:
-                        tail[r, n_tail:] = arr[r, :need]
-                verdict.arrive(finite)
-                for g, seg in enumerate(groups if finite else ()):
-                    scratch = self._scratch[worker]
-                    if worker == 0 and not lead_group(g, seg, scratch):
-                        return
-                    for lo, hi in share.runs:
-                        zown = self._transform(seg[lo:hi], scratch)
-                        refs_in[g].wait()
-                        if not verdict.all_finite():  # a NaN elsewhere, or a worker failed
-                            return
-                        self._add(zrefs[g], zown, lo, scratch)
-                if not verdict.all_finite():
-                    return
+                codes[worker] = self._work(worker, plans, work, flags)
             except BaseException:
-                verdict.abort()  # before the events below: the others then add nothing
+                flags[len(plans)] = 1  # the others stop waiting and add nothing more
                 raise
-            finally:
-                if worker == 0:  # never leave another worker waiting for the references
-                    for event in refs_in:
-                        event.set()
-            i = 0
-            for part in keep:
-                for r in rows:
-                    dst[r, i : i + part.shape[-1]] = part[r]
-                i += part.shape[-1]
 
-        if len(self._shares) == 1 or self._crew is None:
+        if len(plans) == 1 or self._crew is None:
             job(0)
         else:
-            self._crew.run(job, len(self._shares))
-        if not verdict.all_finite():
+            self._crew.run(job, len(plans))
+        if TIMED_OUT in codes:
+            raise SpectralError("a spectral worker thread stopped answering; the sums may be "
+                                "incomplete: reset() and feed the samples again")
+        if not np.all(flags[: len(plans)] == FINITE):
             raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
         if n_seg == 0:
-            self._tail = tail
+            self._tail = self._stores[0][:, : n_tail + n_new]
             return
         self._n_seg += n_seg
         self._stores.reverse()
-        self._tail = dst
+        self._tail = self._stores[0][:, : avail - n_seg * step]
 
     def spectra(self) -> CrossSpectra:
         """The current averaged spectra (the accumulator goes on accepting blocks).

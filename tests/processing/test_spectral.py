@@ -370,14 +370,14 @@ def test_an_error_in_any_worker_is_raised_and_nothing_waits_forever(failing):
     acc = SpectralAccumulator(FS, 256, workers=2)
     data = _signals(n=4000, n_resp=5)
     acc.update(data[:, :1000])
-    transform = acc._transform
+    work = acc._work
 
-    def broken(*args, **kwargs):
+    def broken(*args, **kwargs):  # the other worker is then waiting inside compiled code
         if threading.current_thread().name == failing:
             raise RuntimeError("transform failed")
-        return transform(*args, **kwargs)
+        return work(*args, **kwargs)
 
-    acc._transform = broken  # type: ignore[method-assign]
+    acc._work = broken  # type: ignore[method-assign]
     raised: list[BaseException] = []
 
     def feed() -> None:
