@@ -8,7 +8,8 @@ For each sample rate and sample type, on the same samples (120 s by default):
   estimator can be faster than this. Timed twice, with ``scipy.fft.rfft`` and with the
   same pocketfft compiled into numba (rocket-fft, what ours calls: about 30 % faster
   here, same bits); the faster of the two is the floor. Ours and the floors take turns
-  on each block as it is generated, so that the host's slower spells hit them alike;
+  in going first, second and third on each block as it is generated, so that the
+  host's slower spells, and a block already read by another, hit them alike;
 - (a) scipy: a per-channel loop of ``scipy.signal.csd`` / ``welch`` on the whole recording;
 - (b) pyFRF (if installed): ``pyFRF.FRF(..., window='hann').get_H1()`` on the whole recording.
 
@@ -82,31 +83,30 @@ def _rfft_groups(segs: np.ndarray, group: int) -> None:
 
 class Floor:
     """Bare rfft of every segment, GROUP segments of all channels per call, one worker:
-    with scipy's rfft and with the same pocketfft compiled in (rocket-fft)."""
+    with scipy's rfft (``engine`` 0) and with the same pocketfft compiled in (rocket-fft, 1)."""
 
     def __init__(self, dtype: str) -> None:
         self.tail = np.empty((N_RESP + 1, 0), dtype=dtype)
-        self.turn = 0
+        self.segs = self.tail[:, :0, None]
 
-    def update(self, block: np.ndarray) -> tuple[float, float]:
-        """Transform the block's complete segments; the seconds the transforms took, with
-        scipy's rfft and with rocket-fft's (the two taking turns in going first)."""
+    def next_block(self, block: np.ndarray) -> None:
+        """The block's complete segments, to transform next (untimed)."""
         step = NPERSEG // 2
         data = np.concatenate([self.tail, block], axis=-1)
         n_seg = 0 if data.shape[-1] < NPERSEG else (data.shape[-1] - NPERSEG) // step + 1
-        segs = sliding_window_view(data, NPERSEG, axis=-1)[:, ::step][:, :n_seg]
-        times = [0.0, 0.0]
-        self.turn ^= 1
-        for which in (self.turn, 1 - self.turn):
-            t0 = time.perf_counter()
-            if which == 0:
-                for g in range(0, n_seg, GROUP):
-                    scipy.fft.rfft(segs[:, g:g + GROUP], axis=-1, workers=1)
-            else:
-                _rfft_groups(segs, GROUP)
-            times[which] = time.perf_counter() - t0
+        self.segs = sliding_window_view(data, NPERSEG, axis=-1)[:, ::step][:, :n_seg]
         self.tail = data[:, n_seg * step:]
-        return times[0], times[1]
+
+    def transform(self, engine: int) -> float:
+        """Transform the block's segments with one engine; the seconds it took."""
+        segs = self.segs
+        t0 = time.perf_counter()
+        if engine == 0:
+            for g in range(0, segs.shape[1], GROUP):
+                scipy.fft.rfft(segs[:, g:g + GROUP], axis=-1, workers=1)
+        else:
+            _rfft_groups(segs, GROUP)
+        return time.perf_counter() - t0
 
 
 def run_ours(fs: float, duration: float, block_s: float, dtype: str, workers: int):
@@ -119,30 +119,30 @@ def run_ours(fs: float, duration: float, block_s: float, dtype: str, workers: in
 
 
 def run_paired(fs: float, duration: float, block_s: float, dtype: str, workers: int):
-    """Ours and the floors on each block as it is generated, taking turns block by block, so
-    that a slower spell of the shared host (seconds long on this VM) hits them alike.
+    """Ours and the floors on each block as it is generated, taking turns in going first,
+    second and third, so that a slower spell of the shared host (seconds long on this VM)
+    and a block already read hit them alike.
 
     Returns (floor with scipy's rfft s, floor with rocket-fft's s, ours s, spectra, H1);
     ours includes reading the spectra and H1.
     """
     acc = SpectralAccumulator(fs, NPERSEG, workers=workers)
     floor = Floor(dtype)
-    t_scipy = t_rocket = t_ours = 0.0
+    t = [0.0, 0.0, 0.0]  # floor scipy, floor rocket, ours
     for i, b in enumerate(blocks(fs, duration, block_s, dtype)):
-        if i % 2:
-            ts, tr = floor.update(b)
-            t_scipy, t_rocket = t_scipy + ts, t_rocket + tr
-        t0 = time.perf_counter()
-        acc.update(b)
-        t_ours += time.perf_counter() - t0
-        if not i % 2:
-            ts, tr = floor.update(b)
-            t_scipy, t_rocket = t_scipy + ts, t_rocket + tr
+        floor.next_block(b)
+        for which in ((0, 1, 2), (1, 2, 0), (2, 0, 1))[i % 3]:
+            if which < 2:
+                t[which] += floor.transform(which)
+            else:
+                t0 = time.perf_counter()
+                acc.update(b)
+                t[2] += time.perf_counter() - t0
     t0 = time.perf_counter()
     sp = acc.spectra()
     H = h1(sp)
-    t_ours += time.perf_counter() - t0
-    return t_scipy, t_rocket, t_ours, sp, H
+    t[2] += time.perf_counter() - t0
+    return t[0], t[1], t[2], sp, H
 
 
 def run_scipy(x: np.ndarray, fs: float):

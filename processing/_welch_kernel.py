@@ -326,8 +326,8 @@ def _group(src: Any, start: int, n_seg: int, gi: int, worker: int, n_workers: in
            flags: Any) -> bool:
     """One group: ``n_seg`` segments of ``src`` from sample ``start`` on, transformed and
     summed for the worker's rows. The first worker transforms the references and hands
-    their spectra to the others in ``zref`` (``flags[n_workers + 1 + gi]`` set once they are
-    in); nobody adds anything before every worker has reported its channels finite."""
+    their spectra to the others in ``zref`` (``flags[2 n_workers + 1 + gi]`` set once they
+    are in); nobody adds anything before every worker has reported its channels finite."""
     if start < 0 or start + (n_seg - 1) * step + n > src.shape[1]:
         raise ValueError("segments beyond the samples")
     s0, s1 = src.strides
@@ -339,7 +339,7 @@ def _group(src: Any, start: int, n_seg: int, gi: int, worker: int, n_workers: in
         if lead[0] >= 0:  # the references and the rows after them, one call
             z = _transform(seg[lead[0] : lead[1]], buf, win, dc_bins, dc_values)
             zr[:] = z[:n_ref]
-            _store_release(flags, n_workers + 1 + gi, 1)
+            _store_release(flags, 2 * n_workers + 1 + gi, 1)
             if not _verdict(flags, n_workers):
                 return False
             zv = z.view(real)
@@ -347,7 +347,7 @@ def _group(src: Any, start: int, n_seg: int, gi: int, worker: int, n_workers: in
         else:  # references apart: a call each
             for a in range(n_ref):
                 zr[a] = _transform(seg[refs[a] : refs[a] + 1], buf, win, dc_bins, dc_values)[0]
-            _store_release(flags, n_workers + 1 + gi, 1)
+            _store_release(flags, 2 * n_workers + 1 + gi, 1)
             if not _verdict(flags, n_workers):
                 return False
             zrv = zr.view(real)
@@ -356,7 +356,7 @@ def _group(src: Any, start: int, n_seg: int, gi: int, worker: int, n_workers: in
     for i in range(runs.shape[0]):
         lo, hi = runs[i, 0], runs[i, 1]
         z = _transform(seg[lo:hi], buf, win, dc_bins, dc_values)
-        if not _verdict(flags, n_workers) or not _wait(flags, n_workers + 1 + gi, n_workers):
+        if not _verdict(flags, n_workers) or not _wait(flags, 2 * n_workers + 1 + gi, n_workers):
             return False
         accumulate(zr.view(real), z.view(real), n, taps, zero_dc, lo, P, Q, fg, x)
     return True
@@ -367,6 +367,30 @@ def work_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: in
                n: int, step: int, G: int, own: Any, runs: Any, lead: Any, refs: Any, taps: Any,
                zero_dc: bool, win: Any, dc_bins: Any, dc_values: Any, P: Any, Q: Any, fg: Any,
                x: Any, buf: Any, zref: Any, flags: Any, worker: int, n_workers: int) -> int:
+    """One worker's share of a block (see :func:`_share`), then its code + 1 in
+    ``flags[n_workers + 1 + worker]``; the first worker (the calling thread) returns only
+    once every worker has (or one failed): it waits here, without a wake-up through the
+    system, rather than in Python for the others to return.
+
+    ``flags``: each worker's report on its channels (FINITE, NOT_FINITE), the abort flag,
+    each worker's code + 1, then each group's "references ready".
+    """
+    code = _share(arr, store, dst, n_tail, need, n_seg, n_head, n, step, G, own, runs, lead,
+                  refs, taps, zero_dc, win, dc_bins, dc_values, P, Q, fg, x, buf, zref, flags,
+                  worker, n_workers)
+    _store_release(flags, n_workers + 1 + worker, code + 1)
+    if worker == 0:
+        for k in range(1, n_workers):
+            if not _wait(flags, n_workers + 1 + k, n_workers):
+                return TIMED_OUT if _load_acquire(flags, n_workers) == TIMED_OUT else STOPPED
+    return code
+
+
+@_jit
+def _share(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: int, n_head: int,
+           n: int, step: int, G: int, own: Any, runs: Any, lead: Any, refs: Any, taps: Any,
+           zero_dc: bool, win: Any, dc_bins: Any, dc_values: Any, P: Any, Q: Any, fg: Any,
+           x: Any, buf: Any, zref: Any, flags: Any, worker: int, n_workers: int) -> int:
     """One worker's share of a block ``arr`` (n_ch, n_new), start to end without the GIL.
 
     Its rows ``own`` (runs ``(lo, hi)``) of the block are checked (``flags[worker]``: FINITE
@@ -446,4 +470,4 @@ def compile_ahead() -> None:
                            False, win, np.array([0], np.int64), np.ones(1, np.complex128),
                            np.zeros((2, 3, n_f)), np.zeros((3, n_f)), *scratch(4, 1, n_f),
                            np.empty(3 * 4 * n, real), np.empty((2, 4 * n_f), cplx),
-                           np.zeros(4, np.int64), 0, 1)
+                           np.zeros(5, np.int64), 0, 1)

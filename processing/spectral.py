@@ -33,7 +33,6 @@ import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from processing._welch_kernel import (
-    DONE,
     FINITE,
     TIMED_OUT,
     accumulate,
@@ -68,6 +67,12 @@ _Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64
 _Block = tuple[NDArray[Any], NDArray[Any], NDArray[Any], int, int, int, int, int, int, int]
 
 
+#: pocketfft transforms this many segments at once (SIMD lanes: 4 in single precision, 2 in
+#: double); a call's transforms beyond a multiple of it are done one by one, about three
+#: times slower each: rows per call are kept to multiples of it where they can be
+_LANES = 4
+
+
 @dataclass(frozen=True)
 class _Share:
     """The channels one worker thread transforms and sums: ``runs`` of adjacent rows
@@ -83,13 +88,16 @@ class _Share:
     @classmethod
     def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Share]:
         """At most ``parts`` workers with about as many rows each, the first one counting
-        the references; it is the calling thread, which starts 0.1-0.2 ms earlier and
-        has the block in its cache, and takes a row more (rounded up: 14 of 25 rows for
-        two workers; 4 % faster than 13 on this VM, 15 no better). Workers left without
-        a row are dropped (not the first)."""
+        the references; it is the calling thread. The others take multiples of
+        ``_LANES`` rows (12 and 13 of 25 rows for two workers: no transform outside the
+        lanes but in the first worker's last call). Workers left without a row are
+        dropped (not the first)."""
         others = [r for r in range(n_ch) if r not in set(refs)]
-        bounds = [0, *(min(len(others), max(0, int((k + 1) * n_ch / parts + 1.5) - len(refs)))
-                       for k in range(parts - 1)), len(others)]
+        each = round(n_ch / parts / _LANES) * _LANES
+        if each == 0 or each * (parts - 1) > len(others):  # few rows: as many each
+            each = n_ch // parts
+        bounds = [0, *(max(0, len(others) - (parts - 1 - k) * each) for k in range(parts - 1)),
+                  len(others)]
         out = []
         for k, (a, b) in enumerate(itertools.pairwise(bounds)):
             rows = others[a:b]
@@ -100,9 +108,13 @@ class _Share:
                                  for i, j in itertools.pairwise([0, *cuts, len(rows)])
                                  if j > i)))
         if refs == tuple(range(refs[0], refs[0] + len(refs))):
+            # the first call: the references and a few rows after them, a multiple of the
+            # lanes, so that the other workers have the references' spectra early
             after = refs[-1] + 1
             hi = next((h for lo, h in out[0].runs if lo == after), after)
-            out[0] = cls(tuple(run for run in out[0].runs if run[0] != after), (refs[0], hi))
+            cut = min(hi, after + (-len(refs)) % _LANES)
+            runs = tuple(run for run in out[0].runs if run[0] != after)
+            out[0] = cls(((cut, hi), *runs) if cut < hi else runs, (refs[0], cut))
         return out
 
     def n_max(self, n_ref: int, first: bool) -> int:
@@ -436,6 +448,7 @@ class _Crew:
 
     def __init__(self, n_threads: int) -> None:
         self.size = n_threads
+        self._pending = 0
         self._tasks: list[queue.SimpleQueue[tuple[Callable[[int], None], int] | None]] = [
             queue.SimpleQueue() for _ in range(n_threads)]
         self._done: queue.SimpleQueue[BaseException | None] = queue.SimpleQueue()
@@ -457,15 +470,29 @@ class _Crew:
                 done.put(None)
             del fn
 
-    def run(self, fn: Callable[[int], None], workers: int) -> None:
+    def run(self, fn: Callable[[int], None], workers: int, settled: Callable[[], bool]) -> None:
         """``fn(0)`` on this thread, ``fn(k)`` for ``k`` in ``1:workers`` on the crew's
-        (``workers - 1 <= size``); returns once all are done, raising the first error."""
+        (``workers - 1 <= size``). Returns when ``fn(0)`` has, if ``settled()`` then says
+        that every worker is done with what they share (``fn(0)`` waits for that itself,
+        without a wake-up through the system); their own returns are collected at the
+        next run. Otherwise, or if ``fn(0)`` raised, waits for them all and raises the
+        first error."""
+        self._collect()
         for k in range(1, workers):
             self._tasks[k - 1].put((fn, k))
+        self._pending = workers - 1
         try:
             fn(0)
-        finally:  # never return while another thread still writes
-            errors = [e for e in (self._done.get() for _ in range(1, workers)) if e is not None]
+        except BaseException:
+            self._collect()  # never return while another thread may still write
+            raise
+        if not settled():
+            self._collect()
+
+    def _collect(self) -> None:
+        """Wait for the workers' returns still pending; raise the first error."""
+        errors = [e for e in (self._done.get() for _ in range(self._pending)) if e is not None]
+        self._pending = 0
         if errors:
             raise errors[0]
 
@@ -713,26 +740,26 @@ class SpectralAccumulator:
             self._zref = np.empty((n_groups, self._zref.shape[1]), self._zref.dtype)
         # one worker, on this thread, for a block that completes no segment (a check and a copy)
         plans = self._plans if n_seg else [self._whole]
-        flags = np.zeros(len(plans) + 1 + n_groups, np.int64)  # see work_block
+        n_w = len(plans)
+        flags = np.zeros(2 * n_w + 1 + n_groups, np.int64)  # see work_block
         work: _Block = (arr, self._stores[0], self._stores[1], n_tail, need, n_seg, n_head, N,
                         step, G)
-        codes = [DONE] * len(plans)
 
         def job(worker: int) -> None:
             try:
-                codes[worker] = self._work(worker, plans, work, flags)
+                self._work(worker, plans, work, flags)
             except BaseException:
-                flags[len(plans)] = 1  # the others stop waiting and add nothing more
+                flags[n_w] = 1  # the others stop waiting and add nothing more
                 raise
 
-        if len(plans) == 1 or self._crew is None:
+        if n_w == 1 or self._crew is None:
             job(0)
         else:
-            self._crew.run(job, len(plans))
-        if TIMED_OUT in codes:
+            self._crew.run(job, n_w, lambda: flags[n_w] == 0)
+        if flags[n_w] == TIMED_OUT or np.any(flags[n_w + 1 : 2 * n_w + 1] == TIMED_OUT + 1):
             raise SpectralError("a spectral worker thread stopped answering; the sums may be "
                                 "incomplete: reset() and feed the samples again")
-        if not np.all(flags[: len(plans)] == FINITE):
+        if not np.all(flags[:n_w] == FINITE):
             raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
         if n_seg == 0:

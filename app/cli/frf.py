@@ -21,6 +21,7 @@ runs are still written, and the exit status is then 2.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -125,7 +126,10 @@ def _random_spectra(r: TimeRun, args: argparse.Namespace) -> CrossSpectra:
         raise InputError(f"load case {r.load_case}: {r.n_samples} samples, fewer than "
                          f"--nperseg {nperseg}: lower --nperseg or record longer")
     noverlap = round(args.overlap * nperseg)
-    acc = SpectralAccumulator(r.fs, nperseg, noverlap, window=args.window)
+    # a whole recording in one block: both cores of a bench PC (more gain little, see
+    # docs/processing.md)
+    acc = SpectralAccumulator(r.fs, nperseg, noverlap, window=args.window,
+                              workers=min(2, os.cpu_count() or 1))
     n = r.n_samples
     if args.averages is not None:  # the samples of the first N segments
         n = min(n, (args.averages - 1) * (nperseg - noverlap) + nperseg)
