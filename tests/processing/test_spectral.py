@@ -140,6 +140,18 @@ def test_a_rejected_block_changes_nothing(workers):
     assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
 
 
+def test_each_fft_call_fills_the_simd_lanes_where_the_rows_allow():
+    # pocketfft transforms 4 single-precision segments at once: the other worker takes a
+    # multiple of 4 rows, the first call has the force and 3 rows, the odd row is last
+    acc = SpectralAccumulator(FS, 256, workers=2)
+    data = _signals(n=3000, n_resp=24).astype(np.float32)
+    acc.update(data)
+    first, other = acc._shares
+    assert first.lead == (0, 4) and first.runs == ((4, 13),)
+    assert other.lead is None and other.runs == ((13, 25),)
+    assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
+
+
 def test_reset_with_more_channels_gets_enough_threads():
     acc = SpectralAccumulator(FS, 256, workers=5)
     acc.update(_signals(n=3000, n_resp=1))  # 2 channels: one worker, no pool
