@@ -1,4 +1,5 @@
-"""Compiled (numba) kernel of the Welch accumulation: window in frequency, products, sums.
+"""Compiled (numba) kernel of the Welch accumulation: window in frequency, products, sums;
+and :func:`work_block`, a worker thread's whole share of a block (check, tail, FFT, sums).
 
 After the FFT, every step of the cross-spectral sums is a pass over the spectra that
 numpy cannot fuse: the window (a short convolution in frequency when the window is a
@@ -290,6 +291,12 @@ def _wait(flags: NDArray[np.int64], i: int, abort: int) -> bool:
 
 
 @_jit
+def _stopped(flags: NDArray[np.int64], abort: int) -> int:
+    """What a worker that stopped returns: TIMED_OUT if one gave up waiting, else STOPPED."""
+    return TIMED_OUT if _load_acquire(flags, abort) == TIMED_OUT else STOPPED
+
+
+@_jit
 def _verdict(flags: NDArray[np.int64], n_workers: int) -> bool:
     """True once every worker has reported its channels finite; False as soon as one has
     not (or a worker failed)."""
@@ -394,7 +401,7 @@ def work_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: in
     if worker == 0:
         for k in range(1, n_workers):
             if not _wait(flags, n_workers + 1 + k, n_workers):
-                return TIMED_OUT if _load_acquire(flags, n_workers) == TIMED_OUT else STOPPED
+                return _stopped(flags, n_workers)
     return code
 
 
@@ -434,16 +441,16 @@ def _share(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: int, n
         if not _group(tail, i * step, min(G, n_head - i), gi, worker, n_workers, n, step, runs,
                       lead, refs, taps, zero_dc, win, dc_bins, dc_values, P, Q, fg, x, buf,
                       zref, flags):
-            return TIMED_OUT if _load_acquire(flags, abort) == TIMED_OUT else STOPPED
+            return _stopped(flags, abort)
         gi += 1
     for i in range(n_head, n_seg, G):
         if not _group(arr, i * step - n_tail, min(G, n_seg - i), gi, worker, n_workers, n, step,
                       runs, lead, refs, taps, zero_dc, win, dc_bins, dc_values, P, Q, fg, x,
                       buf, zref, flags):
-            return TIMED_OUT if _load_acquire(flags, abort) == TIMED_OUT else STOPPED
+            return _stopped(flags, abort)
         gi += 1
     if not _verdict(flags, n_workers):
-        return TIMED_OUT if _load_acquire(flags, abort) == TIMED_OUT else STOPPED
+        return _stopped(flags, abort)
     if n_seg:  # the samples from the first unconsumed one on, for the next block
         start = n_seg * step
         n_new = arr.shape[1]

@@ -78,9 +78,9 @@ class _Share:
     """The channels one worker thread transforms and sums: ``runs`` of adjacent rows
     ``(lo, hi)``, none of them a reference. The first worker also transforms the
     references, once for all workers: ``lead`` is then the rows of its first FFT call,
-    the references and the run just after them (``(lo, hi)``, one call: pocketfft is
-    twice as slow per segment with a row or two as with a dozen), or None when the
-    references are not adjacent (a call of their own)."""
+    the references and a few rows after them (``(lo, hi)``, a multiple of ``_LANES`` rows
+    where there are enough: the others get the references' spectra early), or None when
+    the references are not adjacent (a call each)."""
 
     runs: tuple[tuple[int, int], ...]
     lead: tuple[int, int] | None = None
@@ -436,8 +436,9 @@ class _Crew:
     """Threads that run ``fn(k)`` beside the calling thread's ``fn(0)``: the only threads
     of ``processing``. numpy, pocketfft and the kernels release the GIL, so the
     workers, each on its own channels, run on all cores. A crew belongs to one
-    accumulator: its workers wait for each other (a barrier, an event), which tasks
-    queued behind another accumulator's could not.
+    accumulator: its workers wait for each other (flags in
+    :func:`processing._welch_kernel.work_block`), which tasks queued behind another
+    accumulator's could not.
 
     Each thread takes its tasks from a queue of its own and reports to a common one
     (``queue.SimpleQueue``, in C: a round trip costs half a ``ThreadPoolExecutor``'s,
@@ -550,12 +551,14 @@ class SpectralAccumulator:
     the unconsumed tail (less than ``nperseg`` samples per channel, plus the start of
     the next block, less than ``nperseg``: about two segments' samples are copied per
     block), the
-    sums (``3 * n_ch * nperseg`` values for one reference), and per worker its
-    scratch: spectra of one group (``group * nperseg`` values per channel it
-    transforms, plus as many windowed samples for a window applied in time) and the
-    windowed references, all allocated once and reused (fresh memory costs a page
-    fault per 4 kB on first touch). Measured with 25 channels, nperseg 8192, 1 s
-    blocks at 51.2 kHz, two workers: under 100 MB (``benchmarks/frf.py``).
+    sums (``3 * n_ch * nperseg`` values for one reference), the references' spectra
+    handed between workers (``group * nperseg`` values per reference and group of the
+    largest block), and per worker its scratch (the windowed references; windowed
+    samples for a window applied in time), all allocated once and reused (fresh memory
+    costs a page fault per 4 kB on first touch); the spectra of each FFT call
+    (``group * nperseg`` values per channel of the call) come and go. Measured with 25
+    channels, nperseg 8192, 1 s blocks at 51.2 kHz, two workers: under 100 MB
+    (``benchmarks/frf.py``).
 
     Examples
     --------
@@ -654,9 +657,6 @@ class SpectralAccumulator:
     def n_samples(self) -> int:
         """Samples per channel received so far."""
         return self._n_samples
-
-    def _span(self, n_seg: int) -> int:
-        return (n_seg - 1) * self.step + self.nperseg
 
     # -- work ----------------------------------------------------------------------------------
     def _first_block(self, block: NDArray[np.generic]) -> None:
