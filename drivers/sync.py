@@ -4,8 +4,9 @@ Each streaming driver records, per frame, when it arrived on the host clock
 (``time.monotonic()``) and how many samples it had by then. A frame cannot
 arrive before its last sample was taken, so the lower envelope of these pairs
 is the device clock plus the smallest transport latency. :func:`fit_clock`
-fits that envelope: the device's true rate (its drift against the host, ppm)
-and the host time of its sample 0 (its start offset).
+fits that envelope (a linear programme, so late frames do not pull it): the
+device's true rate (its drift against the host, ppm) and the host time of its
+sample 0 (its start offset).
 
 :func:`align` then resamples a stream onto the sample instants of a reference
 stream (anti-aliased rate change, then cubic interpolation at the drifted
@@ -38,6 +39,7 @@ from fractions import Fraction
 import numpy as np
 import scipy.fft
 import scipy.interpolate
+import scipy.optimize
 import scipy.signal
 
 from drivers.base import TimeBlock
@@ -59,7 +61,8 @@ class ClockFit:
     nominal : float
         The rate the device was set to, Hz.
     residual : float
-        RMS scatter of the envelope points about the fit, s.
+        Lateness of the promptest frames after the fitted line, s (see
+        :func:`fit_clock`).
     n_pairs : int
         Timing pairs used.
     span : float
@@ -84,27 +87,50 @@ class ClockFit:
 
 
 def fit_clock(pairs: Sequence[tuple[float, int]], nominal_fs: float,
-              envelope: float = 0.25) -> ClockFit:
+              windows: int = 16, quantile: float = 0.75) -> ClockFit:
     """Fit a device clock to ``(host arrival time, samples received)`` pairs.
 
-    A first least-squares line is refined on the ``envelope`` fraction of the
-    pairs that arrived earliest relative to it (the least delayed frames).
-    Raises :class:`SyncError` with fewer than 10 pairs.
+    The clock is the lower envelope of the pairs: the line below every pair
+    with the least total lateness above it, a linear programme (the clock-skew
+    estimator of Moon, Skelly and Towsley, 1999). A late frame only raises its
+    pair above the line, so host load, a stall or a burst of queued frames
+    leaves the line where it is as long as some frames in the run arrive
+    promptly; a least-squares line follows them.
+
+    ``residual`` is how late the promptest frame of each of ``windows`` equal
+    stretches of the run arrives after the line, at the ``quantile`` over the
+    stretches: near the host's timing resolution for a steady clock, large when
+    the device's timing bends (samples lost unmarked, a rate that wanders),
+    whatever the host did in a few stretches. Raises :class:`SyncError` with
+    fewer than 10 pairs or pairs that cover no samples.
     """
     if len(pairs) < 10:
         raise SyncError(f"only {len(pairs)} timing pairs: stream too short to measure its clock")
-    t = np.array([p[0] for p in pairs], dtype=float)
-    k = np.array([p[1] for p in pairs], dtype=float) - 1.0  # index of the frame's last sample
-    slope, icpt = np.polyfit(k, t, 1)
-    res = t - (icpt + slope * k)
-    keep = res <= np.quantile(res, envelope)
-    if keep.sum() >= 4:
-        # envelope points spread over the run: refit on them
-        slope, icpt = np.polyfit(k[keep], t[keep], 1)
-    res = t[keep] - (icpt + slope * k[keep])
+    p = np.asarray(pairs, dtype=float)
+    t, k = p[:, 0], p[:, 1] - 1.0  # host time, index of the frame's last sample
+    if not (np.all(np.isfinite(p)) and np.ptp(k) > 0):
+        raise SyncError(f"{len(pairs)} timing pairs cover no samples or are not finite: "
+                        "cannot measure the clock")
+    # scaled for the solver: lateness about a first line in ms, samples in [-1, 1]
+    slope0, icpt0 = np.polyfit(k, t, 1)
+    kc, ks = 0.5 * (k.max() + k.min()), 0.5 * np.ptp(k)
+    u, y = (k - kc) / ks, (t - icpt0 - slope0 * k) * 1e3
+    # the height a + b u at the pairs' mean u, as high as every pair allows
+    lp = scipy.optimize.linprog(c=[-1.0, -u.mean()], A_ub=np.column_stack([np.ones_like(u), u]),
+                                b_ub=y, bounds=[(None, None), (None, None)], method="highs")
+    if lp.status != 0:
+        raise SyncError(f"clock fit failed ({lp.message}): timing pairs unusable")
+    a, b = lp.x
+    slope = slope0 + b * 1e-3 / ks
+    icpt = icpt0 + (a - b * kc / ks) * 1e-3
+    late = t - (icpt + slope * k)
+    edges = np.linspace(k.min(), k.max(), windows + 1)
+    stretch = np.clip(np.searchsorted(edges, k, side="right") - 1, 0, windows - 1)
+    prompt = np.full(windows, np.inf)
+    np.minimum.at(prompt, stretch, late)
     return ClockFit(rate=1.0 / slope, t0=float(icpt), nominal=float(nominal_fs),
-                    residual=float(np.sqrt(np.mean(res**2))), n_pairs=len(pairs),
-                    span=float(t[-1] - t[0]))
+                    residual=float(np.quantile(prompt[np.isfinite(prompt)], quantile)),
+                    n_pairs=len(pairs), span=float(t[-1] - t[0]))
 
 
 def check_alignment(fits: Mapping[str, ClockFit], *, max_ppm: float = 10000.0,
