@@ -389,7 +389,8 @@ def work_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: in
     """One worker's share of a block (see :func:`_share`), then its code + 1 in
     ``flags[n_workers + 1 + worker]``; the first worker (the calling thread) returns only
     once every worker has (or one failed): it waits here, without a wake-up through the
-    system, rather than in Python for the others to return.
+    system, rather than in Python for the others to return. It returns the block's code:
+    DONE if every worker's is, else the highest (STOPPED, TIMED_OUT).
 
     ``flags``: each worker's report on its channels (FINITE, NOT_FINITE), the abort flag,
     each worker's code + 1, then each group's "references ready".
@@ -402,6 +403,8 @@ def work_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: in
         for k in range(1, n_workers):
             if not _wait(flags, n_workers + 1 + k, n_workers):
                 return _stopped(flags, n_workers)
+        for k in range(n_workers):  # the block's outcome: DONE only if every worker's is
+            code = max(code, _load_acquire(flags, n_workers + 1 + k) - 1)
     return code
 
 

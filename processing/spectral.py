@@ -33,6 +33,7 @@ import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from processing._welch_kernel import (
+    DONE,
     FINITE,
     TIMED_OUT,
     accumulate,
@@ -450,7 +451,7 @@ class _Crew:
     def __init__(self, n_threads: int) -> None:
         self.size = n_threads
         self._pending = 0
-        self._tasks: list[queue.SimpleQueue[tuple[Callable[[int], None], int] | None]] = [
+        self._tasks: list[queue.SimpleQueue[tuple[Callable[[int], int], int] | None]] = [
             queue.SimpleQueue() for _ in range(n_threads)]
         self._done: queue.SimpleQueue[BaseException | None] = queue.SimpleQueue()
         for k, tasks in enumerate(self._tasks):
@@ -458,7 +459,7 @@ class _Crew:
                              name=f"spectral-{k + 1}").start()
 
     @staticmethod
-    def _serve(tasks: queue.SimpleQueue[tuple[Callable[[int], None], int] | None],
+    def _serve(tasks: queue.SimpleQueue[tuple[Callable[[int], int], int] | None],
                done: queue.SimpleQueue[BaseException | None]) -> None:
         while (task := tasks.get()) is not None:
             fn, k = task
@@ -471,11 +472,11 @@ class _Crew:
                 done.put(None)
             del fn
 
-    def run(self, fn: Callable[[int], None], workers: int, settled: Callable[[], bool]) -> None:
+    def run(self, fn: Callable[[int], int], workers: int) -> int:
         """``fn(0)`` on this thread, ``fn(k)`` for ``k`` in ``1:workers`` on the crew's
-        (``workers - 1 <= size``). Returns when ``fn(0)`` has, if ``settled()`` then says
-        that every worker is done with what they share (``fn(0)`` waits for that itself,
-        without a wake-up through the system); their own returns are collected at the
+        (``workers - 1 <= size``); returns what ``fn(0)`` returns. When that is DONE,
+        every worker is done with what they share (``fn(0)`` waits for that itself,
+        without a wake-up through the system) and their own returns are collected at the
         next run. Otherwise, or if ``fn(0)`` raised, waits for them all and raises the
         first error."""
         self._collect()
@@ -483,12 +484,13 @@ class _Crew:
             self._tasks[k - 1].put((fn, k))
         self._pending = workers - 1
         try:
-            fn(0)
+            code = fn(0)
         except BaseException:
             self._collect()  # never return while another thread may still write
             raise
-        if not settled():
+        if code != DONE:
             self._collect()
+        return code
 
     def _collect(self) -> None:
         """Wait for the workers' returns still pending; raise the first error."""
@@ -708,8 +710,9 @@ class SpectralAccumulator:
                               self._P, self._Q, sc.fg, sc.x, sc.buf, self._zref, flags, worker,
                               len(plans)))
 
-    def update(self, block: ArrayLike) -> None:
-        """Add a block of samples (n_ch, n); any n, including 0. Float32 stays float32."""
+    def _admit(self, block: ArrayLike) -> NDArray[np.floating]:
+        """``block`` as the workers take it (checked; converted to the accumulator's sample
+        type, and copied if read-only: compiled for writeable samples, never written)."""
         arr = np.asarray(block)
         if arr.ndim != 2:
             raise SpectralError(f"a block must have shape (n_channels, n_samples), got {arr.shape}")
@@ -717,12 +720,20 @@ class SpectralAccumulator:
             raise SpectralError(f"samples must be real numbers, got dtype {arr.dtype}")
         if self._tail is None:
             self._first_block(arr)
-        assert self._tail is not None
         if arr.shape[0] != self._n_ch:
             raise SpectralError(f"block has {arr.shape[0]} channels, expected {self._n_ch}")
         arr = arr.astype(self._dtype, copy=False)
-        if not arr.flags.writeable:  # compiled for writeable samples only (read, never written)
-            arr = arr.copy()
+        return arr if arr.flags.writeable else arr.copy()
+
+    def update(self, block: ArrayLike) -> None:
+        """Add a block of samples (n_ch, n); any n, including 0. Float32 stays float32."""
+        # a block as the last one (the usual case) is taken as it is: every Python step here
+        # is paid at each block, several times its usual cost after the transforms
+        arr = block
+        if not (type(arr) is np.ndarray and self._tail is not None and arr.dtype == self._dtype
+                and arr.ndim == 2 and arr.shape[0] == self._n_ch and arr.flags.writeable):
+            arr = self._admit(block)
+        assert self._tail is not None
         n_tail, n_new = self._tail.shape[-1], arr.shape[-1]
         step, N, G = self.step, self.nperseg, self.group
         avail = n_tail + n_new
@@ -745,22 +756,23 @@ class SpectralAccumulator:
         work: _Block = (arr, self._stores[0], self._stores[1], n_tail, need, n_seg, n_head, N,
                         step, G)
 
-        def job(worker: int) -> None:
+        def job(worker: int) -> int:
             try:
-                self._work(worker, plans, work, flags)
+                return self._work(worker, plans, work, flags)
             except BaseException:
                 flags[n_w] = 1  # the others stop waiting and add nothing more
                 raise
 
         if n_w == 1 or self._crew is None:
-            job(0)
+            code = job(0)
         else:
-            self._crew.run(job, n_w, lambda: flags[n_w] == 0)
-        if flags[n_w] == TIMED_OUT or np.any(flags[n_w + 1 : 2 * n_w + 1] == TIMED_OUT + 1):
-            raise SpectralError("a spectral worker thread stopped answering; the sums may be "
-                                "incomplete: reset() and feed the samples again")
-        if not np.all(flags[:n_w] == FINITE):
-            raise SpectralError("block contains NaN or infinite samples; nothing was added")
+            code = self._crew.run(job, n_w)
+        if code != DONE:
+            if code == TIMED_OUT or np.any(flags[n_w + 1 : 2 * n_w + 1] == TIMED_OUT + 1):
+                raise SpectralError("a spectral worker thread stopped answering; the sums may "
+                                    "be incomplete: reset() and feed the samples again")
+            if not np.all(flags[:n_w] == FINITE):
+                raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
         if n_seg == 0:
             self._tail = self._stores[0][:, : n_tail + n_new]
