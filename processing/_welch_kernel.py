@@ -208,9 +208,10 @@ def all_finite(x: NDArray[np.floating]) -> bool:
 FINITE, NOT_FINITE = 1, 2
 #: what :func:`work_block` returns
 DONE, STOPPED, TIMED_OUT = 0, 1, 2
-#: spins before a worker gives up waiting for another (each yields the CPU, about 1 us:
-#: tens of seconds; a worker never waits that long unless another is gone)
-_PATIENCE = 20_000_000
+#: spins before a worker gives up waiting for another, the last element of ``flags`` (each
+#: yields the CPU, about 1 us on an idle machine: tens of seconds; a worker never waits that
+#: long unless another is gone)
+PATIENCE = 20_000_000
 _TIGHT_SPINS = 2000
 
 
@@ -276,15 +277,16 @@ _yield_cpu: Any = intrinsic(_yield_cpu_ir)
 @_jit
 def _wait(flags: NDArray[np.int64], i: int, abort: int) -> bool:
     """Wait until ``flags[i]`` is set; False if ``flags[abort]`` is set first (a worker
-    failed) or after ``_PATIENCE`` spins (then ``flags[abort]`` is set for the others)."""
+    failed) or after ``flags[-1]`` spins (then ``flags[abort]`` is set for the others)."""
     n = 0
+    patience = flags[flags.shape[0] - 1]
     while _load_acquire(flags, i) == 0:
         if _load_acquire(flags, abort) != 0:
             return False
         n += 1
         if n > _TIGHT_SPINS:
             _yield_cpu()
-            if n > _PATIENCE:
+            if n > patience:
                 _store_release(flags, abort, TIMED_OUT)
                 return False
     return _load_acquire(flags, abort) == 0
@@ -393,7 +395,8 @@ def work_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: in
     DONE if every worker's is, else the highest (STOPPED, TIMED_OUT).
 
     ``flags``: each worker's report on its channels (FINITE, NOT_FINITE), the abort flag,
-    each worker's code + 1, then each group's "references ready".
+    each worker's code + 1, each group's "references ready", then the spins a worker waits
+    for another before it gives up (PATIENCE).
     """
     code = _share(arr, store, dst, n_tail, need, n_seg, n_head, n, step, G, own, runs, lead,
                   refs, taps, zero_dc, win, dc_bins, dc_values, P, Q, fg, x, buf, zref, flags,
@@ -492,4 +495,4 @@ def compile_ahead() -> None:
                            False, win, np.array([0], np.int64), np.ones(1, np.complex128),
                            np.zeros((2, 3, n_f)), np.zeros((3, n_f)), *scratch(4, 1, n_f),
                            np.empty(3 * 4 * n, real), np.empty((2, 4 * n_f), cplx),
-                           np.zeros(5, np.int64), 0, 1)
+                           np.array([0, 0, 0, 0, PATIENCE], np.int64), 0, 1)

@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from processing._welch_kernel import (
     DONE,
     FINITE,
+    PATIENCE,
     TIMED_OUT,
     accumulate,
     scratch,
@@ -451,6 +452,7 @@ class _Crew:
     def __init__(self, n_threads: int) -> None:
         self.size = n_threads
         self._pending = 0
+        self.lost = False
         self._tasks: list[queue.SimpleQueue[tuple[Callable[[int], int], int] | None]] = [
             queue.SimpleQueue() for _ in range(n_threads)]
         self._done: queue.SimpleQueue[BaseException | None] = queue.SimpleQueue()
@@ -472,13 +474,15 @@ class _Crew:
                 done.put(None)
             del fn
 
-    def run(self, fn: Callable[[int], int], workers: int) -> int:
+    def run(self, fn: Callable[[int], int], workers: int, grace: float) -> int:
         """``fn(0)`` on this thread, ``fn(k)`` for ``k`` in ``1:workers`` on the crew's
         (``workers - 1 <= size``); returns what ``fn(0)`` returns. When that is DONE,
         every worker is done with what they share (``fn(0)`` waits for that itself,
         without a wake-up through the system) and their own returns are collected at the
         next run. Otherwise, or if ``fn(0)`` raised, waits for them all and raises the
-        first error."""
+        first error; after TIMED_OUT (a worker did not come), for ``grace`` seconds only:
+        a worker still out then is left behind, with the arrays it holds, and the crew
+        is ``lost`` (closed; make another)."""
         self._collect()
         for k in range(1, workers):
             self._tasks[k - 1].put((fn, k))
@@ -489,13 +493,21 @@ class _Crew:
             self._collect()  # never return while another thread may still write
             raise
         if code != DONE:
-            self._collect()
+            self._collect(grace if code == TIMED_OUT else None)
         return code
 
-    def _collect(self) -> None:
-        """Wait for the workers' returns still pending; raise the first error."""
-        errors = [e for e in (self._done.get() for _ in range(self._pending)) if e is not None]
-        self._pending = 0
+    def _collect(self, timeout: float | None = None) -> None:
+        """Wait for the workers' returns still pending (at most ``timeout`` s: then the
+        crew is lost); raise the first error."""
+        errors = []
+        try:
+            while self._pending:
+                if (err := self._done.get(timeout=timeout)) is not None:
+                    errors.append(err)
+                self._pending -= 1
+        except queue.Empty:
+            self.lost = True
+            self.close()
         if errors:
             raise errors[0]
 
@@ -620,6 +632,8 @@ class SpectralAccumulator:
         self.workers = int(workers)
         self._references = tuple(int(r) for r in references)
         self._crew: _Crew | None = None
+        self._patience = PATIENCE  # spins before a thread gives up waiting for another
+        self._grace = 5.0  # s the calling thread then waits for it to come back
         self._responses = None if responses is None else tuple(int(r) for r in responses)
         self._taps = _cosine_taps(win)
         W = np.fft.rfft(win)
@@ -631,6 +645,7 @@ class SpectralAccumulator:
     # -- state ---------------------------------------------------------------------------------
     def reset(self) -> None:
         """Forget every sample and average (keeps the parameters)."""
+        self._broken = ""  # why blocks are refused until the next reset, if they are
         self._tail: NDArray[np.floating] | None = None
         self._dtype: np.dtype[np.floating] | None = None
         self._n_ch = 0
@@ -729,6 +744,8 @@ class SpectralAccumulator:
         """Add a block of samples (n_ch, n); any n, including 0. Float32 stays float32."""
         # a block as the last one (the usual case) is taken as it is: every Python step here
         # is paid at each block, several times its usual cost after the transforms
+        if self._broken:
+            raise SpectralError(self._broken)
         arr = block
         if not (type(arr) is np.ndarray and self._tail is not None and arr.dtype == self._dtype
                 and arr.ndim == 2 and arr.shape[0] == self._n_ch and arr.flags.writeable):
@@ -752,7 +769,8 @@ class SpectralAccumulator:
         # one worker, on this thread, for a block that completes no segment (a check and a copy)
         plans = self._plans if n_seg else [self._whole]
         n_w = len(plans)
-        flags = np.zeros(2 * n_w + 1 + n_groups, np.int64)  # see work_block
+        flags = np.zeros(2 * n_w + 2 + n_groups, np.int64)  # see work_block
+        flags[-1] = self._patience
         work: _Block = (arr, self._stores[0], self._stores[1], n_tail, need, n_seg, n_head, N,
                         step, G)
 
@@ -766,11 +784,14 @@ class SpectralAccumulator:
         if n_w == 1 or self._crew is None:
             code = job(0)
         else:
-            code = self._crew.run(job, n_w)
+            code = self._crew.run(job, n_w, self._grace)
         if code != DONE:
             if code == TIMED_OUT or np.any(flags[n_w + 1 : 2 * n_w + 1] == TIMED_OUT + 1):
-                raise SpectralError("a spectral worker thread stopped answering; the sums may "
-                                    "be incomplete: reset() and feed the samples again")
+                if self._crew is not None and self._crew.lost:
+                    self._crew = None  # another is made at the next first block
+                self._broken = ("a spectral worker thread stopped answering; the sums may be "
+                                "incomplete: reset() and feed the samples again")
+                raise SpectralError(self._broken)
             if not np.all(flags[:n_w] == FINITE):
                 raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new

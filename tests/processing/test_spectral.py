@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -375,6 +376,41 @@ def test_worker_threads_end_with_their_accumulator():
     for t in mine:
         t.join(timeout=5)
     assert not any(t.is_alive() for t in mine)
+
+
+@pytest.mark.parametrize("held", [0.5, 30.0])  # back within the grace, or left behind
+def test_a_worker_that_does_not_come_is_given_up_with_a_clear_error(held):
+    # the other thread is held up longer than the calling thread waits for it: the block
+    # is refused with one line, so is the next until reset(), and then all is whole again
+    data = _signals(n=4000, n_resp=5)
+    ref = SpectralAccumulator(FS, 256, workers=1)
+    ref.update(data)
+    acc = SpectralAccumulator(FS, 256, workers=2)
+    acc.update(data[:, :1000])
+    acc._patience = 20_000  # spins (a few ms) instead of tens of seconds
+    acc._grace = 1.0
+    work = acc._work
+    stuck = threading.Event()
+
+    def late(*args, **kwargs):
+        if threading.current_thread().name == "spectral-1":
+            stuck.wait(held)
+        return work(*args, **kwargs)
+
+    acc._work = late  # type: ignore[method-assign]
+    t0 = time.monotonic()
+    msg = "a spectral worker thread stopped answering.* reset"
+    with pytest.raises(SpectralError, match=msg):
+        acc.update(data[:, 1000:])
+    assert time.monotonic() - t0 < 5
+    with pytest.raises(SpectralError, match=msg):
+        acc.update(data[:, 1000:])
+    acc._work = work  # type: ignore[method-assign]
+    acc.reset()
+    acc.update(data)
+    stuck.set()  # the one left behind comes back to arrays no longer used
+    assert_array_equal(acc.spectra().Sfx, ref.spectra().Sfx)
+    assert_array_equal(acc.spectra().Sxx, ref.spectra().Sxx)
 
 
 @pytest.mark.parametrize("failing", ["feeder", "spectral-1"])  # calling thread, other
