@@ -1,10 +1,13 @@
 """The whole test on the mock bench through the GUI's own controls: station, plan, start,
 hits with accept/reject overrides, next points, identification, exports, settings; and a
-screenshot of every main view for docs/screenshots."""
+screenshot of every main view (into docs/screenshots with ``INSITU_SCREENSHOTS=1``, to
+refresh the docs; else into the test's temporary folder, so a test run leaves the tree as
+it was)."""
 
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,7 +23,7 @@ from app.gui.main_window import MainWindow
 from app.io.runfile import read_run
 from hardware_mocks.benches import get_bench
 
-SCREENSHOTS = Path(__file__).resolve().parents[3] / "docs" / "screenshots"
+DOC_SHOTS = Path(__file__).resolve().parents[3] / "docs" / "screenshots"
 #: six excitations at six points that span the six rigid-body DOFs (cond T about 11)
 POINTS = [0, 4, 8, 9, 13, 17]
 
@@ -49,11 +52,12 @@ def _write_plan(path: Path) -> None:
     path.write_text("\n".join(out) + "\n")
 
 
-def _screenshot(window: MainWindow, view: QtWidgets.QWidget, name: str) -> None:
+def _screenshot(window: MainWindow, view: QtWidgets.QWidget, name: str, tmp: Path) -> None:
     window.tabs.setCurrentWidget(view)
     QtWidgets.QApplication.processEvents()
-    SCREENSHOTS.mkdir(parents=True, exist_ok=True)
-    assert window.grab().save(str(SCREENSHOTS / f"{name}.png"))
+    folder = DOC_SHOTS if os.environ.get("INSITU_SCREENSHOTS") == "1" else tmp / "screenshots"
+    folder.mkdir(parents=True, exist_ok=True)
+    assert window.grab().save(str(folder / f"{name}.png"))
 
 
 def _text(table: QtWidgets.QTableWidget, row: int, col: int) -> str:
@@ -89,7 +93,7 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     force = list(station.stream.source.names).index("F")  # the hammer
     qtbot.waitUntil(lambda: station.levels.peak_percent()[force] > 1.0, timeout=10000)
     qtbot.wait(300)  # let the response ring in the traces (the bars: the last 0.5 s)
-    _screenshot(window, station, "station")
+    _screenshot(window, station, "station", tmp_path)
 
     # Test plan: imported from TOML; the geometry check passes before any hit
     plan_file = tmp_path / "engine-6.toml"
@@ -98,7 +102,7 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     window.plan_view.import_plan_button.click()
     assert window.plan_view.plan is not None and len(window.plan_view.plan.excitations) == 6
     assert window.plan_view.geometry_text().startswith("Geometry OK")
-    _screenshot(window, window.plan_view, "plan")
+    _screenshot(window, window.plan_view, "plan", tmp_path)
 
     # Acquisition: the simulated operator double-hits on the second hit
     assert station.mock is not None
@@ -140,7 +144,7 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     # the simulated operator took none of the re-reported (overridden) hits for new ones
     assert station.mock.operator.hits_made == n_hits
     assert acq.next_label.text().startswith("Finished")
-    _screenshot(window, acq, "acquisition")
+    _screenshot(window, acq, "acquisition", tmp_path)
 
     # the run file holds every hit and the overrides
     stored = read_run(run, with_data=False)
@@ -157,8 +161,8 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     np.testing.assert_allclose(p.cog, model.cog, atol=2e-3)
     np.testing.assert_allclose(np.diag(r.K), np.diag(model.K), rtol=0.02)
     assert abs(float(_text(window.results_view.inertia, 0, 2)) - model.mass) < 1.1
-    _screenshot(window, window.checks_view, "checks")
-    _screenshot(window, window.results_view, "results")
+    _screenshot(window, window.checks_view, "checks", tmp_path)
+    _screenshot(window, window.results_view, "results", tmp_path)
 
     # exports: the run file, the result JSON, the report
     export = window.export_view
@@ -170,7 +174,7 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     assert read_run(tmp_path / "copy.h5", with_data=False).state == "finished"
     assert json.loads((tmp_path / "r.json").read_text())["mass"] == pytest.approx(p.mass)
     assert "data:image/png;base64," in (tmp_path / "r.html").read_text()
-    _screenshot(window, export, "export")
+    _screenshot(window, export, "export", tmp_path)
 
     # settings: the next session comes back with this station, plan and tab
     window.tabs.setCurrentWidget(window.results_view)
