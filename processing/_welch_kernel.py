@@ -495,4 +495,5 @@ def compile_ahead() -> None:
                            False, win, np.array([0], np.int64), np.ones(1, np.complex128),
                            np.zeros((2, 3, n_f)), np.zeros((3, n_f)), *scratch(4, 1, n_f),
                            np.empty(3 * 4 * n, real), np.empty((2, 4 * n_f), cplx),
-                           np.array([0, 0, 0, 0, PATIENCE], np.int64), 0, 1)
+                           # flags of one worker, two groups (see work_block)
+                           np.array([0, 0, 0, 0, 0, PATIENCE], np.int64), 0, 1)

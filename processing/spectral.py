@@ -741,7 +741,12 @@ class SpectralAccumulator:
         return arr if arr.flags.writeable else arr.copy()
 
     def update(self, block: ArrayLike) -> None:
-        """Add a block of samples (n_ch, n); any n, including 0. Float32 stays float32."""
+        """Add a block of samples (n_ch, n); any n, including 0. Float32 stays float32.
+
+        Raises :class:`SpectralError` for a block of another shape or type, or with a NaN
+        or infinite sample (nothing of it is added); and, once a worker thread stopped
+        answering, for this block and every block until :meth:`reset`.
+        """
         # a block as the last one (the usual case) is taken as it is: every Python step here
         # is paid at each block, several times its usual cost after the transforms
         if self._broken:
