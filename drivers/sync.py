@@ -95,7 +95,7 @@ def fit_clock(pairs: Sequence[tuple[float, int]], nominal_fs: float,
     estimator of Moon, Skelly and Towsley, 1999). A late frame only raises its
     pair above the line, so host load, a stall or a burst of queued frames
     leaves the line where it is as long as some frames in the run arrive
-    promptly; a least-squares line follows them.
+    promptly (a least-squares line is pulled up by them).
 
     ``residual`` is how late the promptest frame of each of ``windows`` equal
     stretches of the run arrives after the line, at the ``quantile`` over the
@@ -110,7 +110,7 @@ def fit_clock(pairs: Sequence[tuple[float, int]], nominal_fs: float,
     t, k = p[:, 0], p[:, 1] - 1.0  # host time, index of the frame's last sample
     if not (np.all(np.isfinite(p)) and np.ptp(k) > 0):
         raise SyncError(f"{len(pairs)} timing pairs cover no samples or are not finite: "
-                        "cannot measure the clock")
+                        "cannot measure the clock; check the device's stream and restart it")
     # scaled for the solver: lateness about a first line in ms, samples in [-1, 1]
     slope0, icpt0 = np.polyfit(k, t, 1)
     kc, ks = 0.5 * (k.max() + k.min()), 0.5 * np.ptp(k)
@@ -119,7 +119,8 @@ def fit_clock(pairs: Sequence[tuple[float, int]], nominal_fs: float,
     lp = scipy.optimize.linprog(c=[-1.0, -u.mean()], A_ub=np.column_stack([np.ones_like(u), u]),
                                 b_ub=y, bounds=[(None, None), (None, None)], method="highs")
     if lp.status != 0:
-        raise SyncError(f"clock fit failed ({lp.message}): timing pairs unusable")
+        raise SyncError(f"clock fit failed ({lp.message}): timing pairs unusable; check the "
+                        "device's stream and restart it")
     a, b = lp.x
     slope = slope0 + b * 1e-3 / ks
     icpt = icpt0 + (a - b * kc / ks) * 1e-3
