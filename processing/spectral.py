@@ -34,7 +34,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing._welch_kernel import (
     DONE,
-    FINITE,
     PATIENCE,
     TIMED_OUT,
     accumulate,
@@ -790,15 +789,16 @@ class SpectralAccumulator:
             code = job(0)
         else:
             code = self._crew.run(job, n_w, self._grace)
+        # the block's code is the highest of every worker's (work_block); a worker's error
+        # was raised above, so STOPPED here means a non-finite sample
+        if code == TIMED_OUT:
+            if self._crew is not None and self._crew.lost:
+                self._crew = None  # another is made at the next first block
+            self._broken = ("a spectral worker thread stopped answering; the sums may be "
+                            "incomplete: reset() and feed the samples again")
+            raise SpectralError(self._broken)
         if code != DONE:
-            if code == TIMED_OUT or np.any(flags[n_w + 1 : 2 * n_w + 1] == TIMED_OUT + 1):
-                if self._crew is not None and self._crew.lost:
-                    self._crew = None  # another is made at the next first block
-                self._broken = ("a spectral worker thread stopped answering; the sums may be "
-                                "incomplete: reset() and feed the samples again")
-                raise SpectralError(self._broken)
-            if not np.all(flags[:n_w] == FINITE):
-                raise SpectralError("block contains NaN or infinite samples; nothing was added")
+            raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
         if n_seg == 0:
             self._tail = self._stores[0][:, : n_tail + n_new]
