@@ -3,9 +3,10 @@
 A mount joins a body node at ``position`` to the ground. In its local frame (axes u, v, w,
 the rows of ``axes`` in the global frame) its complex stiffness is
 ``diag(k_u (1 + j eta_u), k_v (1 + j eta_v), k_w (1 + j eta_w))`` (hysteretic damping), so in
-the global frame ``k = A^T diag(...) A`` with ``A = axes``. A rigid motion ``q`` at O moves the
-mount's body end by ``G(p) q`` (``G`` of :mod:`.kinematics`), hence its 6 x 6 stiffness at O
-is ``G(p)^T k G(p)``.
+the global frame ``k = A^T diag(...) A`` with ``A = axes``. As viscous dampers instead
+(:meth:`Mount.damping_3`), ``c_i = eta_i k_i / w_ref``: the same loss at ``f_ref``. A rigid
+motion ``q`` at O moves the mount's body end by ``G(p) q`` (``G`` of :mod:`.kinematics`), hence
+its 6 x 6 stiffness at O is ``G(p)^T k G(p)``.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from numpy.typing import NDArray
 
 from hardware_mocks.reference.kinematics import rigid_map
 
-__all__ = ["Mount", "mounts_at_origin"]
+__all__ = ["Mount", "damping_at_origin", "mounts_at_origin"]
 
 
 @dataclass(frozen=True)
@@ -54,11 +55,24 @@ class Mount:
         k = self.rates * (1 + 1j * self.loss_factors)
         return np.asarray(self.axes.T @ (k[:, None] * self.axes), dtype=np.complex128)
 
+    def damping_3(self, reference_hz: float) -> NDArray[np.float64]:
+        """Viscous 3 x 3 damping in the global frame, ``c_i = eta_i k_i / w_ref``, N s/m."""
+        c = self.loss_factors * self.rates / (2 * np.pi * reference_hz)
+        return np.asarray(self.axes.T @ (c[:, None] * self.axes), dtype=np.float64)
+
     def stiffness_at_origin(self) -> NDArray[np.complex128]:
         """Complex 6 x 6 stiffness at O, ``G(p)^T k G(p)`` (DOFs x, y, z, rx, ry, rz)."""
         G = rigid_map(self.position)
         out: NDArray[np.complex128] = G.T @ self.stiffness_3() @ G
         return out
+
+
+def damping_at_origin(mounts: tuple[Mount, ...], reference_hz: float) -> NDArray[np.float64]:
+    """Sum of the mounts' viscous 6 x 6 dampings at O, ``G(p)^T c G(p)`` (N s/m, ...)."""
+    G = [rigid_map(m.position) for m in mounts]
+    return np.asarray(np.sum([g.T @ m.damping_3(reference_hz) @ g for g, m in zip(G, mounts,
+                                                                             strict=True)],
+                             axis=0), dtype=np.float64)
 
 
 def mounts_at_origin(mounts: tuple[Mount, ...]) -> NDArray[np.complex128]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,7 +47,7 @@ class ScenarioSpec:
     mode (``None``: an infinitely stiff body). ``band_ratio`` is the measured span over the
     first elastic mode (the span is then snapped to :data:`SPANS` and kept at least 3 times
     the highest rigid-body mode). ``noise`` is relative to each record's RMS
-    (:mod:`.measurement`).
+    (:mod:`.measurement`). ``damping`` is the mounts' model (:mod:`.system`).
     """
 
     seed: int
@@ -63,6 +64,7 @@ class ScenarioSpec:
     elastic_ratio: float | None = 8.0
     band_ratio: float = 1.5
     n_lines: int = 1600
+    damping: Literal["hysteretic", "viscous"] = "hysteretic"
 
     @property
     def family(self) -> str:
@@ -198,7 +200,7 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     centre = 0.5 * (body.xyz.min(axis=0) + body.xyz.max(axis=0))
     body = body.moved(-centre + rng.uniform(-0.15, 0.15, 3))
     mounts = _mounts(body.xyz, body.mass, spec.n_mounts, rng)
-    rigid_sys = ReferenceSystem(body, mounts, rigid=True)
+    rigid_sys = ReferenceSystem(body, mounts, rigid=True, damping=spec.damping)
     f_rigid = float(rigid_sys.truth.rigid_modes()[0][-1])
     if spec.elastic_ratio is None:
         system = rigid_sys
@@ -207,7 +209,8 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     else:
         f_free = float(body.free_modes_hz(7)[6])
         f_elastic = spec.elastic_ratio * f_rigid
-        system = ReferenceSystem(body.scaled((f_elastic / f_free) ** 2), mounts)
+        system = ReferenceSystem(body.scaled((f_elastic / f_free) ** 2), mounts,
+                                 damping=spec.damping)
         want = max(spec.band_ratio * f_elastic, 3 * f_rigid)
         span = min((s for s in SPANS if s >= want), default=SPANS[-1])
     df = span / spec.n_lines
@@ -241,7 +244,8 @@ def suite(n: int = 200, seed: int = 2026) -> list[ScenarioSpec]:
     first elastic mode at 20x the highest rigid mode; the others draw 3-6 triaxial sensors,
     6-24 forces, 3-4 mounts, noise 0-3 %, location errors 0-3 mm, misalignment 0-2 deg,
     elastic ratio 1.5-20 (log-uniform), span 0.3-3x the first elastic mode; one in three has
-    sensor gain (+-2 %) and transverse sensitivity (3 %) errors.
+    sensor gain (+-2 %) and transverse sensitivity (3 %) errors; one in three flexible ones
+    has viscous mounts (the rigid-clean ones all have: the methods' own damping model).
     """
     out = []
     for i in range(n):
@@ -254,12 +258,14 @@ def suite(n: int = 200, seed: int = 2026) -> list[ScenarioSpec]:
             misalignment_deg=float(rng.uniform(0, 2.0)),
             elastic_ratio=float(np.exp(rng.uniform(np.log(1.5), np.log(20.0)))),
             band_ratio=float(np.exp(rng.uniform(np.log(0.3), np.log(3.0)))),
-            n_lines=int(rng.choice([800, 1600])))
+            n_lines=int(rng.choice([800, 1600])),
+            damping="viscous" if rng.uniform() < 1 / 3 else "hysteretic")
         if rng.uniform() < 1 / 3:
             spec = replace(spec, gain_error=0.02, transverse=0.03)
         if i % 10 == 0:
             spec = replace(spec, noise=0.0, location_error=0.0, misalignment_deg=0.0,
-                           gain_error=0.0, transverse=0.0, elastic_ratio=None)
+                           gain_error=0.0, transverse=0.0, elastic_ratio=None,
+                           damping="viscous")
         elif i % 10 == 5:
             spec = replace(spec, noise=0.0, location_error=0.0, misalignment_deg=0.0,
                            gain_error=0.0, transverse=0.0, elastic_ratio=20.0)

@@ -112,6 +112,21 @@ def test_modal_frfs_equal_the_direct_solve(engine):
     assert_allclose(H, Hd, rtol=1e-8, atol=1e-10 * np.abs(Hd).max())
 
 
+def test_viscous_modal_frfs_equal_the_direct_solve(engine):
+    sys = ReferenceSystem(engine.system.body, engine.mounts, damping="viscous", reference_hz=12.0)
+    s, f = engine.sensors, engine.forces
+    lines = engine.freq[::37]
+    H = sys.accelerance(lines, s.nodes, s.vectors, f.nodes, f.vectors)
+    Hd = sys.accelerance_direct(lines, s.nodes, s.vectors, f.nodes, f.vectors)
+    assert_allclose(H, Hd, rtol=1e-8, atol=1e-10 * np.abs(Hd).max())
+    # the truth's viscous C: each mount's eta k / w_ref along its axes, at O
+    assert_allclose(sys.truth.K_loss, 0.0)
+    assert_allclose(sys.truth.C * 2 * np.pi * 12.0, engine.truth.K_loss, rtol=1e-12,
+                    atol=1e-12 * np.abs(engine.truth.K_loss).max())
+    assert_allclose(sys.natural_frequencies_hz()[:6], engine.natural_frequencies_hz[:6],
+                    rtol=0.05)
+
+
 def test_truth_symmetry_and_positivity(engine):
     t = engine.truth
     for A in (t.M, t.K, t.K_loss, t.inertia_cog, t.inertia_origin):
