@@ -16,7 +16,8 @@ from collections.abc import Sequence
 from app.cli.common import UserError
 
 #: verb -> module under app.cli
-VERBS = ("identify", "simulate", "demo", "frf", "mock-bench", "acquire", "replay", "gui", "report")
+VERBS = ("identify", "simulate", "demo", "frf", "mock-bench", "acquire", "replay", "repair",
+         "gui", "report")
 
 
 def build_parser() -> argparse.ArgumentParser:
