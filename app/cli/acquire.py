@@ -57,6 +57,10 @@ class _Bars(Listener):
 
     def on_next_point(self, point: Any) -> None:
         self.progress.update(self.hits, description=f"hits at {point.label}", completed=0)
+        if not self.console.is_terminal:  # no live bars in a log file: one line a point
+            done = self.progress.tasks[self.points].completed
+            self.console.print(f"{point.label} ({done:g} of "
+                               f"{self.progress.tasks[self.points].total:g} done)")
 
     def on_hit(self, hit: HitRecord) -> None:
         if not hit.accepted:

@@ -18,6 +18,9 @@ from pathlib import Path
 
 from app.cli.common import UserError
 
+#: terminal width (characters) assumed when the output is a file or a pipe
+PIPE_COLUMNS = 200
+
 #: verb -> module under app.cli
 VERBS = ("identify", "simulate", "demo", "frf", "mock-bench", "acquire", "replay", "repair",
          "gui", "report")
@@ -105,6 +108,10 @@ def _configure_logging(verbose: bool) -> tuple[_Errors, Path | None]:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if not sys.stdout.isatty():
+        # rich sizes tables to COLUMNS, 80 when output goes to a file or a pipe: a log of
+        # `insitu demo > run.log` would cut the K and C cells
+        os.environ.setdefault("COLUMNS", str(PIPE_COLUMNS))
     errors, path = _configure_logging(args.verbose)
     try:
         return int(args.run(args) or 0)

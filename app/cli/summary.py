@@ -61,7 +61,7 @@ def matrix_table(title: str, A: NDArray[np.float64], truth: NDArray[np.float64] 
     t = Table(title=title)
     t.add_column("")
     for d in _DOF:
-        t.add_column(d, justify="right")
+        t.add_column(d, justify="right", overflow="fold")  # a narrow screen wraps, never cuts
     scale = np.sqrt(np.abs(np.outer(np.diag(truth if truth is not None else A),
                                     np.diag(truth if truth is not None else A))))
     for i, d in enumerate(_DOF):
@@ -79,7 +79,7 @@ def checks_table(result: IdentificationResult) -> Table:
     t = Table(title="Checks")
     t.add_column("check")
     t.add_column("verdict")
-    t.add_column("figures")
+    t.add_column("figures", overflow="fold")
     for name, c in result.checks().items():
         figs = ", ".join(
             f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"

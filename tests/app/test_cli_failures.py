@@ -106,3 +106,22 @@ def test_a_bug_is_one_line_naming_the_log_file(monkeypatch: pytest.MonkeyPatch,
                            "foresee (details in ")
     log = Path(line.split("details in ")[1].split(";")[0])
     assert "Traceback" in log.read_text() and "second line" in log.read_text()
+
+
+def test_piped_output_keeps_every_digit_and_shows_progress(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("COLUMNS", raising=False)
+    uff = tmp_path / "engine.uff"
+    assert main(["simulate", "engine-rigid", "--out", str(uff)]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(uff)]) == 0  # stdout is captured: not a terminal
+    out = capsys.readouterr().out
+    assert "Stiffness" in out and "…" not in out  # no cell cut at 80 columns
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "demo-run.h5").write_bytes(b"")  # the default name is taken: the next one
+    assert main(["demo", "--bench", "engine-rigid", "--length", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("of 18 done)") == 18  # one line per point in a log, not silence
+    assert "run file demo-run-2.h5 kept" in out and "…" not in out
+    assert len(read_run(tmp_path / "demo-run-2.h5", with_data=False).records) == 18
