@@ -23,6 +23,7 @@ import json
 import os
 import threading
 import time
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -431,13 +432,33 @@ def read_run(path: str | Path, with_data: bool = True) -> RunData:
         if version != SCHEMA_VERSION:
             raise RunFileError(f"{p}: run-file schema version {version}; this insitu reads "
                                f"version {SCHEMA_VERSION}")
-        return _read(p, f, version, with_data)
-    except (KeyError, OSError, ValueError, TypeError) as err:
+        with warnings.catch_warnings():
+            # never drop an imaginary part, never cast NaN to a node number
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            warnings.simplefilter("error", RuntimeWarning)
+            return _read(p, f, version, with_data)
+    except (KeyError, OSError, ValueError, TypeError, IndexError, AttributeError,
+            RuntimeWarning) as err:
+        # an object missing, or of another type or shape than the schema's
         if isinstance(err, RunFileError):
             raise
-        raise RunFileError(f"{p}: damaged run file: {str(err).splitlines()[0]}") from err
+        first = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise RunFileError(f"{p}: damaged run file: {first}") from err
     finally:
         f.close()
+
+
+def _check_shapes(p: Path, rec: h5py.Group, n_channels: int) -> None:
+    """Each record column one value a record, of its kind; ``data`` (records, channels, samples)."""
+    for name, (dtype, _) in _COLUMNS.items():
+        ds = rec[name]
+        if ds.ndim != 1 or ds.dtype.kind != np.dtype(dtype).kind:
+            raise RunFileError(f"{p}: damaged run file: /records/{name} is {ds.dtype} of shape "
+                               f"{ds.shape}, expected {np.dtype(dtype)} of shape (records,)")
+    data = rec["data"]
+    if data.ndim != 3 or data.shape[1] != n_channels or data.dtype.kind != "f":
+        raise RunFileError(f"{p}: damaged run file: /records/data is {data.dtype} of shape "
+                           f"{data.shape}, expected float (records, {n_channels}, samples)")
 
 
 def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
@@ -450,6 +471,7 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
             names, ch["device"][()], ch["quantity"][()], ch["unit"][()], ch["sensitivity"][()],
             ch["range"][()], ch["iepe"][()], ch["node"][()], ch["direction"][()], strict=True))
     rec = f["records"]
+    _check_shapes(p, rec, len(names))
     n = min(rec[c].shape[0] for c in _COLUMNS)  # rows complete in every column
     n = min(n, rec["data"].shape[0])
     data = rec["data"][:n] if with_data else np.zeros((0, *rec["data"].shape[1:]))

@@ -17,6 +17,8 @@ EXAMPLES = int(os.environ.get("INSITU_FUZZ_EXAMPLES", "200"))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                        HealthCheck.function_scoped_fixture])
+#: for examples that write and read whole files with pyuff (about 0.2 s each)
+FUZZ_SLOW = settings(FUZZ, max_examples=max(10, EXAMPLES // 5))
 
 
 @contextlib.contextmanager

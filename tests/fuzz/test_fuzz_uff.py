@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import pyuff
-from _fuzz import FUZZ, no_hang
+from _fuzz import FUZZ, FUZZ_SLOW, no_hang
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -73,7 +73,7 @@ def test_damaged_bytes(files: dict[str, bytes], tmp_path_factory: pytest.TempPat
     _read(path)
 
 
-@FUZZ
+@FUZZ_SLOW
 @given(kind=st.sampled_from(["ascii", "binary"]), seed=st.integers(0, 2**32 - 1),
        drop=st.integers(0, 3), dup=st.integers(0, 3))
 def test_datasets_reordered_dropped_duplicated(files: dict[str, bytes],
