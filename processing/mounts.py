@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 import scipy.optimize
+import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
 from processing.geometry import skew
@@ -171,6 +172,18 @@ class MountFit:
     null_space: NDArray[np.float64]
     residual: float
     dof: int
+    #: the std come from given standard deviations of K (normal quantiles), not the residual
+    known_variance: bool = False
+
+    def ci95(self) -> NDArray[np.float64]:
+        """(n, 3, 2) 95 % intervals ``rate -+ t(0.975, dof) std`` (Student's t: the residual
+        gives few degrees of freedom), clipped at 0; nan where the std is nan."""
+        if self.known_variance:
+            q = float(scipy.stats.norm.ppf(0.975))
+        else:
+            q = float(scipy.stats.t.ppf(0.975, self.dof)) if self.dof > 0 else float("nan")
+        half = q * self.std
+        return np.stack([np.maximum(self.rates - half, 0.0), self.rates + half], axis=-1)
 
     def undetermined(self) -> list[str]:
         """One sentence per null-space direction naming the rates it combines."""
@@ -211,7 +224,7 @@ def fit_mount_rates(
     Examples
     --------
     >>> m = [MountGeometry(f"m{i}", p, np.eye(3)) for i, p in
-    ...      enumerate([(0, 0, 0), (1, 0, 0.3), (0, 1, 0)])]
+    ...      enumerate([(0, 0, 0), (1, 0, 0.3), (0.2, 1, 0)])]
     >>> fit = fit_mount_rates(m, mount_stiffness(m, np.full((3, 3), 1e5)))
     >>> bool(np.allclose(fit.rates, 1e5)), bool(fit.identifiable.all())
     (True, True)
@@ -273,6 +286,7 @@ def fit_mount_rates(
         null_space=null,
         residual=float(rnorm / ynorm) if ynorm > 0 else 0.0,
         dof=dof,
+        known_variance=K_std is not None,
     )
 
 
@@ -304,6 +318,7 @@ class MountRates:
         def vals(a: NDArray[np.float64]) -> list[float | None]:
             return [float(v) if np.isfinite(v) else None for v in a]
 
+        ci = k.ci95()
         out = []
         for i, name in enumerate(k.names):
             out.append({
@@ -312,6 +327,8 @@ class MountRates:
                 "loss_factors": vals(self.loss_factors[i]),
                 "std": {"rates": vals(k.std[i]),
                         "loss_factors": vals(self.loss_factors_std[i])},
+                "ci95": {"rates": [vals(iv) if np.all(np.isfinite(iv)) else None
+                                   for iv in ci[i]]},
                 "identifiable": [bool(v) for v in k.identifiable[i]],
                 "damping_rates": None if c is None else vals(c.rates[i]),
                 "loss_factor_hz": self.loss_factor_hz,
