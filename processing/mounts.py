@@ -54,6 +54,7 @@ __all__ = [
     "MountGeometry",
     "MountGeometryError",
     "MountRates",
+    "check_mounts",
     "fit_mount_rates",
     "identify_mount_rates",
     "mount_design",
@@ -199,6 +200,35 @@ class MountFit:
         return out
 
 
+def _svd(Dn: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], int,
+                                          NDArray[np.float64], NDArray[np.bool_]]:
+    """Singular values, right vectors, rank, null space and identifiable flags of the
+    column-normalised design; refuses when no rate is determined."""
+    n_r = Dn.shape[1]
+    _, sv, Vt = np.linalg.svd(Dn, full_matrices=True)
+    rank = int(np.sum(sv > RANK_TOL * sv[0])) if sv.size and sv[0] > 0 else 0
+    null = Vt[rank:].T  # (3n, 3n - rank)
+    ident = (np.linalg.norm(null, axis=1) < IDENTIFIABLE_TOL if null.size
+             else np.ones(n_r, dtype=bool))
+    if not np.any(ident):
+        raise MountGeometryError(
+            f"the mount geometry determines no rate: the 21 x {n_r} problem has rank {rank} "
+            "and every rate lies in its null space; place the mounts so their springs' lines "
+            "of action differ, or give fewer mounts")
+    return sv, Vt, rank, null, ident
+
+
+def check_mounts(mounts: Sequence[MountGeometry]) -> tuple[int, NDArray[np.bool_]]:
+    """Rank of the design and which rates (n, 3) K can determine, from the geometry alone
+    (weights do not change either); raises :class:`MountGeometryError` when none."""
+    if len(mounts) == 0:
+        raise MountGeometryError("no mount given: the mounts file needs at least one [[mount]]")
+    W = _centroid_scaling(mounts)
+    D = (vech(np.einsum("ki,jkl,lm->jim", W, mount_design(mounts), W)) * _OFF).T
+    _, _, rank, _, ident = _svd(D / np.linalg.norm(D, axis=0))
+    return rank, ident.reshape(-1, 3)
+
+
 def fit_mount_rates(
     mounts: Sequence[MountGeometry],
     K: ArrayLike,
@@ -251,16 +281,7 @@ def fit_mount_rates(
     scale = np.linalg.norm(D, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     Dn = D / scale
-    _, sv, Vt = np.linalg.svd(Dn, full_matrices=True)
-    rank = int(np.sum(sv > RANK_TOL * sv[0])) if sv.size and sv[0] > 0 else 0
-    null = Vt[rank:].T  # (3n, 3n - rank)
-    ident = (np.linalg.norm(null, axis=1) < IDENTIFIABLE_TOL if null.size
-             else np.ones(n_r, dtype=bool))
-    if not np.any(ident):
-        raise MountGeometryError(
-            f"the mount geometry determines no rate: the 21 x {n_r} problem has rank {rank} "
-            "and every rate lies in its null space; place the mounts so their springs' lines "
-            "of action differ, or give fewer mounts")
+    sv, Vt, rank, null, ident = _svd(Dn)
     cond = float(sv[0] / sv[rank - 1]) if rank == n_r else float("inf")
     xn, rnorm = scipy.optimize.nnls(Dn, y, maxiter=50 * n_r)
     rates = xn / scale
