@@ -110,6 +110,11 @@ def run(args: argparse.Namespace) -> int:
         if len(data.records) == 0:
             raise UserError(f"{args.file}: the run holds no hit yet")
         frf, result, _ = analyse_run(data, options_from(args))
+        if args.mounts_file is None and data.mounts is not None:
+            print(f"{args.file}: using the run file's mounts table ({len(data.mounts.mounts)} "
+                  "mounts)")
+            check_mounts(data.mounts.mounts)
+            args.mounts_file = data.mounts
         return _report(args, frf, result)
     if uff_holds_time_data(args.file):
         print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")

@@ -73,6 +73,8 @@ class Session(QtCore.QObject):
 
     def set_mounts(self, mounts: MountsFile | None) -> None:
         """The mounts the results view analyses (rates, torque roll axis); None clears."""
+        if mounts is self.mounts:
+            return
         self.mounts = mounts
         self.mounts_changed.emit(mounts)
 
@@ -94,6 +96,8 @@ class Session(QtCore.QObject):
             assert isinstance(result, tuple)
             path, frf = result
             self.message.emit("info", f"opened {path.name}")
+            if isinstance(frf.meta.get("mounts"), MountsFile):  # a run file's mounts table
+                self.set_mounts(frf.meta["mounts"])
             self.set_frf(frf, path.name, path)
         elif key == "session.analysis":
             assert isinstance(result, tuple)

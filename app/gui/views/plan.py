@@ -247,6 +247,8 @@ class PlanView(QtWidgets.QWidget):
 
     def set_mounts(self, mounts: MountsFile | None) -> None:
         """Show ``mounts`` in the table and the projections and pass them on."""
+        if mounts is self.mounts:
+            return
         self.mounts = mounts
         if mounts is None:
             fill_table(self.mounts_table, _MOUNT_COLUMNS, [])
