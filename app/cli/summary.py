@@ -148,7 +148,11 @@ def print_mount_system(ms: MountSystem, console: Console | None = None) -> None:
                           "approximation)", ms.mode_head(), ms.mode_rows()))
     con.print(_rich_table("Kinetic-energy decoupling (% of each mode's energy, at the CoG)",
                           ["mode", *_DOF], ms.energy_rows()))
-    for w in ms.modes.warnings:
+    if ms.modes is not None:
+        con.print(f"Mode shapes at O (mass-normalised) are in the result JSON; largest "
+                  f"off-diagonal modal damping coupling {ms.modes.damping_coupling:.3f} "
+                  "(small: the modal damping approximation holds)")
+    for w in ms.problems:
         con.print(f"[yellow]warning:[/yellow] {w}")
     if ms.rates is not None:
         rows = ms.mount_rows()

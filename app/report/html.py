@@ -70,7 +70,8 @@ def _mount_system(a: Analysis, mounts: MountsFile | None, excitation_hz: float |
         ms = mount_system(a.result, mounts, excitation_hz)
     except ValueError as err:
         return f"<h2>Mount system</h2><p class=\"warn\">{html.escape(str(err))}</p>"
-    parts = [
+    parts = [f"<p class=\"warn\">{html.escape(w)}</p>" for w in ms.problems]
+    parts += [
         "<h2>Rigid-body modes</h2><p>Of the identified M, K, C; damping ratios by the modal "
         "approximation. Mode shapes at O (mass-normalised) are in the result JSON.</p>",
         _table(ms.mode_head(), ms.mode_rows()),

@@ -9,10 +9,11 @@ text rows of their tables. Pure computation, no Qt.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.io.mounts import MountsFile
 from processing.identify import IdentificationResult
@@ -29,26 +30,39 @@ from processing.mounts import MountRates, identify_mount_rates
 __all__ = ["MountSystem", "default_loss_factor_hz", "mount_system"]
 
 
-def default_loss_factor_hz(modes: ModeSet) -> float:
-    """Geometric mean of the positive rigid-body mode frequencies, Hz (1 Hz if none):
-    where the mounts' damping acts on the body."""
-    f = modes.frequency_hz[modes.frequency_hz > 0]
-    return float(np.exp(np.mean(np.log(f)))) if f.size else 1.0
+def default_loss_factor_hz(modes: ModeSet | None, stiffness_band: tuple[float, float]) -> float:
+    """Geometric mean of the positive rigid-body mode frequencies, Hz (where the mounts'
+    damping acts on the body); the stiffness band's centre without modes."""
+    f = modes.frequency_hz[modes.frequency_hz > 0] if modes is not None else np.zeros(0)
+    if f.size:
+        return float(np.exp(np.mean(np.log(f))))
+    return max(0.5 * (stiffness_band[0] + stiffness_band[1]), 1e-3)
 
 
 @dataclass(frozen=True)
 class MountSystem:
-    """Modes, isolation, mount rates and torque roll axis of one identification."""
+    """Modes, isolation, mount rates and torque roll axis of one identification.
 
-    modes: ModeSet
+    ``modes`` (and ``tra``) are None when the identified inertia is not positive definite;
+    ``problems`` then says so in one line each.
+    """
+
+    modes: ModeSet | None
     isolation: Isolation | None
     mounts: MountsFile | None
     rates: MountRates | None
     tra: TorqueRollAxis | None
+    problems: tuple[str, ...] = ()
+    #: the identified centre of gravity, m
+    cog: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
 
     def to_json(self) -> dict[str, Any]:
-        """``modes`` always; ``mounts``, ``torque_roll_axis`` and ``mount_fit`` with mounts."""
-        out: dict[str, Any] = {"modes": self.modes.to_json(self.isolation)}
+        """``modes`` always (empty without a positive-definite M); ``mounts``,
+        ``torque_roll_axis`` and ``mount_fit`` with mounts."""
+        out: dict[str, Any] = {
+            "modes": self.modes.to_json(self.isolation) if self.modes is not None else []}
+        if self.problems:
+            out["mount_system_problems"] = list(self.problems)
         if self.isolation is not None:
             out["excitation_hz"] = self.isolation.excitation_hz
         if self.rates is not None:
@@ -68,6 +82,8 @@ class MountSystem:
     def mode_rows(self) -> list[list[str]]:
         """Mode, frequency (Hz), damping (%), dominant DOF [, ratio, margin, transmissibility]."""
         m, iso = self.modes, self.isolation
+        if m is None:
+            return []
         rows = []
         for r in range(6):
             row = [str(r + 1), f"{m.frequency_hz[r]:.2f}", f"{m.damping_ratio[r] * 100:.2f}",
@@ -88,12 +104,16 @@ class MountSystem:
 
     def energy_rows(self) -> list[list[str]]:
         """Mode, then the percentage of its kinetic energy in x, y, z, rx, ry, rz."""
+        if self.modes is None:
+            return []
         E = self.modes.energy
         return [[f"{r + 1} ({self.modes.frequency_hz[r]:.2f} Hz)",
                  *(f"{E[k, r] * 100:.1f}" for k in range(6))] for r in range(6)]
 
     def shape_rows(self) -> list[list[str]]:
         """Mode, then its mass-normalised shape at O (m, rad per sqrt(kg) m)."""
+        if self.modes is None:
+            return []
         V = self.modes.shapes
         return [[str(r + 1), *(f"{V[k, r]:+.4f}" for k in range(6))] for r in range(6)]
 
@@ -177,11 +197,23 @@ def mount_system(
     ValueError
         (:class:`~processing.mounts.MountGeometryError`) when the mounts determine no rate.
     """
-    modes = rigid_body_modes(result.M, result.K, result.C)
-    iso = isolation(modes, excitation_hz) if excitation_hz is not None else None
+    problems: list[str] = []
+    modes: ModeSet | None = None
+    try:
+        modes = rigid_body_modes(result.M, result.K, result.C)
+        problems += modes.warnings
+    except ValueError as err:
+        problems.append(f"no modes: {err}")
+    iso = isolation(modes, excitation_hz) if excitation_hz is not None and modes else None
     if mounts is None:
-        return MountSystem(modes, iso, None, None, None)
-    f_eta = loss_factor_hz if loss_factor_hz is not None else default_loss_factor_hz(modes)
+        return MountSystem(modes, iso, None, None, None, tuple(problems),
+                           result.properties.cog)
+    f_eta = (loss_factor_hz if loss_factor_hz is not None
+             else default_loss_factor_hz(modes, result.stiffness_band))
     rates = identify_mount_rates(mounts.mounts, result.K, result.C, f_eta)
-    tra = torque_roll_axis(result.M, result.K, mounts.crank_axis)
-    return MountSystem(modes, iso, mounts, rates, tra)
+    tra: TorqueRollAxis | None = None
+    try:
+        tra = torque_roll_axis(result.M, result.K, mounts.crank_axis)
+    except ValueError as err:
+        problems.append(f"no torque roll axis: {err}")
+    return MountSystem(modes, iso, mounts, rates, tra, tuple(problems), result.properties.cog)

@@ -4,6 +4,7 @@ axis with a mounts file, one-line refusals for bad files and undetermined geomet
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +12,10 @@ import pytest
 
 from app.cli.main import main
 from app.io.mounts import MountsFileError, load_mounts, mounts_from_dict
-from app.io.uff import write_frf_uff
+from app.io.uff import read_frf_uff, write_frf_uff
+from app.report.mount_system import mount_system
 from hardware_mocks.benches import get_bench
+from processing.identify import identify
 
 
 def _toml(mounts: list[tuple[str, np.ndarray, np.ndarray]], crank: str = "[1.0, 0.0, 0.0]"
@@ -139,3 +142,19 @@ def test_reader_round_trip(engine: tuple[Path, Path]) -> None:
     with pytest.raises(MountsFileError, match="used twice"):
         mounts_from_dict({"crank_axis": [1, 0, 0], "mount": [
             {"name": "a", "position": [0, 0, 0]}, {"name": "a", "position": [1, 0, 0]}]})
+
+
+def test_mount_system_without_a_positive_definite_inertia(engine: tuple[Path, Path]) -> None:
+    """An identified M that is not positive definite has no modes and no torque roll axis:
+    said in one line each, the mount rates (from K alone) still given."""
+    uff, toml = engine
+    r = identify(read_frf_uff(uff))
+    M = r.M.copy()
+    M[3:, 3:] *= -1.0  # inertia tensor negative definite
+    bad = replace(r, M=M)
+    ms = mount_system(bad, load_mounts(toml))
+    assert ms.modes is None and ms.tra is None and ms.rates is not None
+    assert any("no modes" in p for p in ms.problems)
+    js = ms.to_json()
+    assert js["modes"] == [] and len(js["mounts"]) == 3 and "torque_roll_axis" not in js
+    assert bad.to_json()["modes"] == []

@@ -76,6 +76,8 @@ def test_modes_of_the_identified_model_match_the_true_ones() -> None:
     truth = rigid_body_modes(Mt, Kt, bench.model.C)
     assert_allclose(m.energy, truth.energy, atol=1e-3)
     assert_allclose(m.damping_ratio, truth.damping_ratio, rtol=1e-3)
+    js = r.to_json()["modes"]  # every result JSON carries the modes
+    assert_allclose([d["frequency_hz"] for d in js], m.frequency_hz, rtol=1e-12)
 
 
 def test_torque_roll_axis_of_a_principal_crank_axis_is_that_axis_through_the_cog() -> None:

@@ -7,6 +7,8 @@ import pytest
 from mount_truth import ETA_HZ, Spring, Truth, engine_on_four_mounts, rotation
 from numpy.testing import assert_allclose
 
+from hardware_mocks.benches import get_bench
+from processing.identify import identify
 from processing.mounts import (
     MountGeometry,
     MountGeometryError,
@@ -158,3 +160,23 @@ def test_bad_inputs() -> None:
         fit_mount_rates(geometry(t), np.eye(5))
     with pytest.raises(MountGeometryError, match="> 0 Hz"):
         identify_mount_rates(geometry(t), t.K, t.C, 0.0)
+
+
+@pytest.mark.parametrize("noise", [0.01, 0.02])
+def test_rates_from_noisy_frfs_of_the_simulated_engine(noise: float) -> None:
+    """FRF noise (1 or 2 % of |H|, 12 seeds) -> identify -> rates of its three mounts:
+    within 1 % of the bench's; the residual-based 95 % intervals cover at least 80 % of the
+    truths (the identification's K errors are correlated across entries, which the residual
+    of the 9-rate fit sees only in part: measured 86-87 %)."""
+    bench = get_bench("engine-rigid")
+    g = [MountGeometry(f"m{i}", m.position, m.axes.T) for i, m in enumerate(bench.model.mounts)]
+    k = np.array([m.stiffness for m in bench.model.mounts])
+    hits, errs = [], []
+    for seed in range(12):
+        f = fit_mount_rates(g, identify(bench.frfset(noise=noise, seed=seed)).K)
+        assert f.identifiable.all()
+        ci = f.ci95()
+        hits.append((ci[..., 0] <= k) & (k <= ci[..., 1]))
+        errs.append(np.abs(f.rates - k) / k)
+    assert np.max(errs) < 0.01
+    assert np.mean(hits) >= 0.8

@@ -66,7 +66,7 @@ class ModeShapesWidget(QtWidgets.QWidget):
         current = self.mode.currentIndex()
         self.mode.blockSignals(True)
         self.mode.clear()
-        if ms is not None:
+        if ms is not None and ms.modes is not None:
             for r, (f, dom) in enumerate(zip(ms.modes.frequency_hz, ms.modes.dominant(),
                                              strict=True)):
                 self.mode.addItem(f"mode {r + 1}: {f:.2f} Hz, mostly {dom}")
@@ -76,13 +76,12 @@ class ModeShapesWidget(QtWidgets.QWidget):
 
     def arrows(self, mode: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(start points (n, 3), displacements (n, 3)) drawn for ``mode`` (unscaled)."""
-        assert self._ms is not None
         ms = self._ms
+        assert ms is not None and ms.modes is not None
         pts = [self._points]
         if ms.mounts is not None:
             pts.append(np.array([m.position for m in ms.mounts.mounts]))
-        if ms.tra is not None:
-            pts.append(ms.tra.point[None, :])
+        pts.append(ms.cog[None, :])
         P = np.vstack(pts)
         phi = ms.modes.shapes[:, mode]
         return P, phi[:3] + np.cross(phi[3:], P)
@@ -92,7 +91,7 @@ class ModeShapesWidget(QtWidgets.QWidget):
             w.getPlotItem().clear()
         ms = self._ms
         r = self.mode.currentIndex()
-        if ms is None or r < 0:
+        if ms is None or ms.modes is None or r < 0:
             return
         P, U = self.arrows(r)
         span = float(np.ptp(P, axis=0).max()) if len(P) > 1 else 1.0
@@ -112,10 +111,10 @@ class ModeShapesWidget(QtWidgets.QWidget):
             if mounts is not None:
                 p.addItem(pg.ScatterPlotItem(mounts[:, i], mounts[:, j], symbol="s", size=11,
                                              brush=COLORS[2], pen=None))
+            p.addItem(pg.ScatterPlotItem([ms.cog[i]], [ms.cog[j]], symbol="+", size=16,
+                                         brush="k", pen=pg.mkPen("k", width=2)))
             t = ms.tra
             if t is not None:
-                p.addItem(pg.ScatterPlotItem([t.point[i]], [t.point[j]], symbol="+", size=16,
-                                             brush="k", pen=pg.mkPen("k", width=2)))
                 self._line(p, t.point, t.direction, span, i, j, pg.mkPen(COLORS[1], width=2))
                 ea = t.elastic_axis
                 if ea is not None:

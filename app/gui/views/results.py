@@ -276,8 +276,10 @@ class ResultsView(QtWidgets.QWidget):
         fill_table(self.tra, ("quantity", "value"), ms.tra_rows())
         for t in tables:
             t.resizeColumnsToContents()
-        self.mount_notes.setText("<br>".join(ms.mount_notes()) if ms.rates is not None else
-                                 "Load a mounts file in the Test plan tab for the individual "
-                                 "mount rates and the torque roll axis.")
+        self.mount_notes.setText("<br>".join([*ms.problems, *ms.mount_notes()])
+                                 if ms.rates is not None else
+                                 "<br>".join([*ms.problems, "Load a mounts file in the Test plan "
+                                              "tab for the individual mount rates and the "
+                                              "torque roll axis."]))
         assert a is not None
         self.mode_shapes.set_system(ms, np.unique(a.frf.resp_xyz, axis=0))
