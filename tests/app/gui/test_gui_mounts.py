@@ -109,3 +109,30 @@ def test_report_with_mounts(tmp_path: Path, qapp, capsys: pytest.CaptureFixture[
     assert main(["report", str(uff), "--mounts", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "crank_axis" in err
+
+
+def test_run_file_mounts_are_loaded_with_the_run(qtbot, make_window, choose_file,
+                                                 tmp_path: Path) -> None:
+    """A run file that carries a mounts table brings it into the plan view and the results."""
+    from app.acquire import plan_for_bench
+    from app.io.mounts import load_mounts
+    from app.io.runfile import RunWriter, write_mounts
+    from drivers.base import ChannelConfig
+
+    _, toml = _files(tmp_path)
+    bench = get_bench("engine-rigid")
+    plan = plan_for_bench("engine-rigid", points=[0, 1, 3, 4, 6, 8])
+    path = tmp_path / "run.h5"
+    w = RunWriter.create(path, plan_data=plan.to_dict(), station_data={},
+                         channels=[ChannelConfig("F", 0, "force", 2.25)], devices=["fe"],
+                         geometry=bench.geometry, fs=256.0, n_samples=8, method="hammer")
+    w.finish("finished", frf=bench.frfset())
+    write_mounts(path, load_mounts(toml))
+    window: MainWindow = make_window()
+    choose_file(path)
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000):
+        window.open_action.trigger()
+    assert window.session.mounts is not None
+    assert _col(window.plan_view.mounts_table, 0) == ["mount 1", "mount 2", "mount 3"]
+    ms = window.results_view.mount_system
+    assert ms is not None and ms.rates is not None and ms.rates.stiffness.identifiable.all()
