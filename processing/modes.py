@@ -114,10 +114,11 @@ class ModeSet:
                 "energy": self.energy[:, r].tolist(),
                 "dominant": self.dominant()[r],
             }
-            if iso is not None:
-                d["frequency_ratio"] = float(iso.ratio[r])
-                d["isolation_margin"] = float(iso.margin[r])
-                d["transmissibility"] = float(iso.transmissibility[r])
+            if iso is not None:  # a 0 Hz mode has no finite ratio: null
+                for key, v in (("frequency_ratio", iso.ratio[r]),
+                               ("isolation_margin", iso.margin[r]),
+                               ("transmissibility", iso.transmissibility[r])):
+                    d[key] = float(v) if np.isfinite(v) else None
             out.append(d)
         return out
 

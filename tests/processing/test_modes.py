@@ -3,6 +3,8 @@ truths built from point masses and springs (``mount_truth.py``)."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -157,6 +159,9 @@ def test_bad_matrices() -> None:
         rigid_body_modes(-np.eye(6), np.eye(6))
     m = rigid_body_modes(np.eye(6), np.diag([-1.0, 1, 1, 1, 1, 1]))
     assert m.frequency_hz[0] == 0.0 and "not positive definite" in m.warnings[0]
+    js = m.to_json(isolation(m, 5.0))  # a 0 Hz mode: no finite ratio, null in JSON
+    assert js[0]["isolation_margin"] is None and js[1]["isolation_margin"] is not None
+    json.dumps(js, allow_nan=False)
     with pytest.raises(ValueError, match="crank axis"):
         torque_roll_axis(np.eye(6), None, [0, 0, 0])
 

@@ -4,6 +4,7 @@ mode-shape arrows) and in the HTML report; screenshots into docs/screenshots wit
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from pathlib import Path
@@ -84,7 +85,9 @@ def test_mounts_in_plan_and_results(qtbot, make_window, choose_file, tmp_path: P
     window.tabs.setCurrentWidget(plan)
     _shot(window, "mounts_plan", tmp_path)
     window.tabs.setCurrentWidget(res)
-    res.table_tabs.setCurrentWidget(res.modes)
+    res.excitation.setValue(25.0)  # the isolation columns appear
+    assert res.modes.columnCount() == 7 and "NOT isolated" in " ".join(_col(res.modes, 5))
+    res.table_tabs.setCurrentWidget(res.modes_page)
     res.plot_tabs.setCurrentWidget(res.mode_shapes)
     res.mode_shapes.mode.setCurrentIndex(2)
     _shot(window, "results_modes", tmp_path)
@@ -92,6 +95,16 @@ def test_mounts_in_plan_and_results(qtbot, make_window, choose_file, tmp_path: P
     _shot(window, "results_mounts", tmp_path)
     res.table_tabs.setCurrentWidget(res.energy)
     _shot(window, "results_energy", tmp_path)
+    # the exported result JSON and report carry the mount system
+    out = tmp_path / "export.json"
+    choose_file(out, save=True)
+    window.export_view.json_button.click()
+    js = json.loads(out.read_text())
+    assert len(js["modes"]) == 6 and len(js["mounts"]) == 3 and "torque_roll_axis" in js
+    report = tmp_path / "export.html"
+    choose_file(report, save=True)
+    window.export_view.html_button.click()
+    assert "<h2>Individual mount rates</h2>" in report.read_text()
 
 
 def test_report_with_mounts(tmp_path: Path, qapp, capsys: pytest.CaptureFixture[str]) -> None:
