@@ -33,11 +33,12 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from app.io.mounts import MountsFile, MountsFileError, mounts_from_dict
 from drivers.base import ChannelConfig
 from processing.data import FRFSet, Geometry
 
 __all__ = ["SCHEMA_VERSION", "ChannelInfo", "RecordTable", "RunData", "RunFileError",
-           "RunWriter", "read_run", "repair"]
+           "RunWriter", "read_run", "repair", "write_mounts"]
 
 SCHEMA_VERSION = 1
 FORMAT = "insitu-run"
@@ -125,6 +126,8 @@ class RunData:
     notes: tuple[tuple[float, str], ...]
     frf: FRFSet | None
     result: dict[str, Any] | None
+    #: the mounts table (optional group ``/mounts``), or None
+    mounts: MountsFile | None = None
 
 
 def _text(group: h5py.Group, name: str, obj: Any, units: str = "n/a") -> None:
@@ -507,6 +510,7 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
                      {"estimator": _str(g.attrs.get("estimator", "H1")),
                       "n_averages": g["n_averages"][()].tolist()})
     result = json.loads(_str(f["result"][()])) if "result" in f else None
+    mounts = _read_mounts(p, f["mounts"]) if "mounts" in f else None
     state = _str(f.attrs.get("state", ""))
     return RunData(
         path=str(p), schema_version=version,
@@ -516,4 +520,37 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
         plan_data=json.loads(_str(f["plan"][()])),
         station_data=json.loads(_str(f["station"][()])),
         channels=channels, geometry=geometry, records=records, notes=notes, frf=frf,
-        result=result)
+        result=result, mounts=mounts)
+
+
+def _read_mounts(p: Path, g: h5py.Group) -> MountsFile:
+    data = {"crank_axis": g["crank_axis"][()].tolist(),
+            "mount": [{"name": _str(n), "position": pos.tolist(), "axes": ax.tolist()}
+                      for n, pos, ax in zip(g["name"][()], g["position"][()], g["axes"][()],
+                                            strict=True)]}
+    try:
+        return mounts_from_dict(data, f"{p} /mounts")
+    except MountsFileError as err:
+        raise RunFileError(str(err)) from err
+
+
+def write_mounts(path: str | Path, mounts: MountsFile | None) -> None:
+    """Store (or with None remove) the mounts table in the group ``/mounts`` of a run file
+    that no writer has open (after :meth:`RunWriter.finish`); one-line :class:`RunFileError`."""
+    p = Path(path)
+    read_run(p, with_data=False)  # one-line error if foreign or damaged
+    try:
+        with _append(p) as f:
+            if "mounts" in f:
+                del f["mounts"]
+            if mounts is None:
+                return
+            g = f.create_group("mounts")
+            _array(g, "crank_axis", np.array(mounts.crank_axis), "1")
+            _array(g, "name", np.array([m.name.encode("utf-8") for m in mounts.mounts],
+                                       dtype="S64"), "n/a")
+            _array(g, "position", np.array([m.position for m in mounts.mounts]), "m")
+            _array(g, "axes", np.array([m.axes for m in mounts.mounts]), "1")
+    except OSError as err:
+        raise RunFileError(f"{p}: cannot write the mounts table: "
+                           f"{str(err).splitlines()[0]}") from err
