@@ -74,11 +74,7 @@ def frfset(plan: TestPlan, points: Sequence[ImpactResult], geometry: Geometry,
 def identify_frfs(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
     """The identification of a run's FRFs, on the lines above 0 Hz and up to fs / 2.56
     (above it the front ends' anti-alias filters shape the data)."""
-    keep = (frf.freq > 0) & (frf.freq <= frf.freq[-1] / 1.28)
-    coh = None if frf.coherence is None else np.nan_to_num(frf.coherence[..., keep])
-    cut = FRFSet(frf.freq[keep], frf.H[..., keep], frf.resp_nodes, frf.resp_dirs,
-                 frf.exc_nodes, frf.exc_dirs, frf.geometry, coh, dict(frf.meta))
-    return identify(cut, options or IdentifyOptions())
+    return identify(frf.select_lines(frf.anti_alias_fmax()), options or IdentifyOptions())
 
 
 class RunAnalysis:

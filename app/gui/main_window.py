@@ -19,13 +19,14 @@ from app.gui.views.results import ResultsView
 from app.gui.views.station import StationView
 from app.gui.widgets import MessageBar
 from app.gui.worker import TaskRunner
+from app.pipeline import SUFFIXES
 from app.report.analysis import Analysis
-from app.report.sources import FRF_SUFFIXES, RUN_SUFFIXES
 
 __all__ = ["MainWindow"]
 
-_OPEN_FILTER = (f"FRFs or run ({' '.join('*' + s for s in FRF_SUFFIXES + RUN_SUFFIXES)});;"
-                "UFF FRF file (*.uff *.unv);;Run file (*.h5 *.hdf5);;All files (*)")
+_OPEN_FILTER = (f"FRFs, time records or run ({' '.join('*' + s for s in SUFFIXES)});;"
+                "UFF file of FRFs or time records (*.uff *.unv);;"
+                "Run file or FRF file (*.h5 *.hdf5);;All files (*)")
 
 
 class MainWindow(QtWidgets.QMainWindow):
@@ -120,7 +121,8 @@ class MainWindow(QtWidgets.QMainWindow):
             self.open_file(Path(name))
 
     def open_file(self, path: Path) -> None:
-        """Open a UFF FRF file or a run file and replay it through the views."""
+        """Open any file the command line reads (UFF FRFs or time records, a run file, an
+        FRF file) and replay it through the views."""
         self.settings.setValue("last_data", str(path))
         self.session.open_file(path)
 

@@ -30,8 +30,8 @@ from app.gui.views.plan import PlanView
 from app.gui.views.projections import ProjectionsWidget
 from app.gui.views.station import StationView
 from app.gui.widgets import verdict_color
+from app.pipeline import RUN_FILE
 from app.report.analysis import message_of
-from app.report.runs import usable_lines
 
 __all__ = ["AcquisitionView"]
 
@@ -338,8 +338,8 @@ class AcquisitionView(QtWidgets.QWidget):
             self.next_label.setText("Finished: every point done")
             self.progress_bar.setValue(self.progress_bar.maximum())
             self.message.emit("info", f"acquisition finished: {things} saved in {path}")
-            self.session.set_frf(usable_lines(proc.frf), path.name if path else "acquisition",
-                                 path)
+            frf = proc.frf.select_lines(proc.frf.anti_alias_fmax())  # as the pipeline opens it
+            self.session.set_frf(frf, path.name if path else "acquisition", path, RUN_FILE)
         else:
             why = proc.message if proc is not None and proc.message else state.value
             self.next_label.setText(f"Ended ({state.value}): {why}")
