@@ -35,7 +35,7 @@ from app.acquire.events import HitRecord, RunState
 from app.acquire.events import Progress as RunProgress
 from app.acquire.overrides import override_run, parse_override
 from app.acquire.plan import TestPlan, parse_plan
-from app.acquire.procedure import Procedure
+from app.acquire.recording import RecordingProcedure
 from app.acquire.shaker import ShakerProcedure
 from app.cli.common import UserError
 from app.io.runfile import read_run
@@ -108,7 +108,7 @@ def _mock_plan(args: argparse.Namespace) -> TestPlan:
 
 
 def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Namespace,
-               bench: InProcessBench | None) -> Procedure:
+               bench: InProcessBench | None) -> RecordingProcedure:
     method = plan.method if plan is not None else read_run(args.out, with_data=False).method
     if method == "shaker":
         return ShakerProcedure(plan, station, args.out, resume=args.resume,
@@ -138,9 +138,9 @@ def _remote_operator(station: StationConfig, plan: TestPlan, stack: contextlib.E
     return operator
 
 
-def _check_rate(proc: Procedure, plan: TestPlan, station: StationConfig) -> None:
+def _check_rate(proc: RecordingProcedure, plan: TestPlan, station: StationConfig) -> None:
     """A mock bench's front end runs at its station's ``fs``: refuse another plan rate now."""
-    fs = station.devices[proc.ref_name].fs  # type: ignore[attr-defined]
+    fs = station.devices[proc.ref_name].fs
     if fs is not None and fs != plan.record.fs:
         raise UserError(f"{plan.source}: record.fs is {plan.record.fs:g} Hz but the mock "
                         f"bench's front end runs at {fs:g} Hz: make them equal (insitu "
@@ -205,10 +205,10 @@ def run(args: argparse.Namespace) -> int:
         proc = _procedure(plan, station, args, bench)
         operator = None
         if args.mock_operator:
-            _check_rate(proc, proc.plan, station)  # type: ignore[attr-defined]
-            operator = _remote_operator(station, proc.plan, stack)  # type: ignore[attr-defined]
+            _check_rate(proc, proc.plan, station)
+            operator = _remote_operator(station, proc.plan, stack)
             proc.add_listener(operator)
-        n = len(proc.plan.excitations)  # type: ignore[attr-defined]
+        n = len(proc.plan.excitations)
         gave_up = ""
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
@@ -233,12 +233,12 @@ def run(args: argparse.Namespace) -> int:
     if gave_up:
         raise UserError(f"{gave_up}; the run stopped, acquired records are in {args.out} "
                         "(continue with --resume)")
-    hits: list[HitRecord] = proc.hits  # type: ignore[attr-defined]
+    hits: list[HitRecord] = proc.hits
     if proc.state is not RunState.FINISHED:
         raise UserError(f"run {proc.state.value}: {proc.message}; acquired records are in "
                         f"{args.out} (continue with --resume)")
     console.print(f"{len(hits)} records, run written to {args.out}")
-    result = proc.result  # type: ignore[attr-defined]
+    result = proc.result
     if result is not None:
         from app.cli.summary import print_result
 
