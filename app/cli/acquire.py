@@ -25,12 +25,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from app.acquire import HammerProcedure, InProcessBench, Listener, load_plan, plan_for_bench
+from app.acquire import HammerProcedure, Listener, load_plan
 from app.acquire.events import HitRecord, RunState
 from app.acquire.events import Progress as RunProgress
 from app.acquire.overrides import override_run, parse_override
@@ -40,8 +40,10 @@ from app.acquire.shaker import ShakerProcedure
 from app.cli.common import UserError
 from app.io.runfile import read_run
 from drivers.station import StationConfig, load_station
-from hardware_mocks.bench_control import BenchControl, BenchControlError, control_address
-from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator, check_points
+
+if TYPE_CHECKING:  # the mock bench is imported by --mock and --mock-operator only
+    from app.mockbench.bench import InProcessBench
+    from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator
 
 #: what a pause that waits for the operator to attach the shaker says first
 ATTACH = "attach the shaker"
@@ -98,6 +100,8 @@ def add_parser(sub: Any) -> None:
 
 
 def _mock_plan(args: argparse.Namespace) -> TestPlan:
+    from app.mockbench.bench import plan_for_bench
+
     pts = [int(x) for x in args.points.split(",")] if args.points else None
     if args.method == "shaker":
         fs = 1024.0
@@ -105,6 +109,18 @@ def _mock_plan(args: argparse.Namespace) -> TestPlan:
             "waveform": "chirp", "nperseg": round(args.length * fs), "averages": args.hits,
             "f_start": 2.0, "f_stop": fs / 2.56, "ramp": 0.2, "settle": 1.5})
     return plan_for_bench(args.bench, points=pts, hits=args.hits, length=args.length)
+
+
+def _in_process_bench(name: str, fs: float) -> InProcessBench:
+    """The built-in mock bench ``name`` in this process (front end at ``fs`` Hz); one line
+    where it cannot run."""
+    from app.mockbench import unavailable
+
+    if why := unavailable():
+        raise UserError(f"--mock: {why}")
+    from app.mockbench.bench import InProcessBench
+
+    return InProcessBench(name, fs_frontend=fs)
 
 
 def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Namespace,
@@ -121,6 +137,9 @@ def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Nam
 def _remote_operator(station: StationConfig, plan: TestPlan, stack: contextlib.ExitStack
                      ) -> RemoteOperator | RemoteShakerOperator:
     """The simulated operator of the mock bench process ``station`` connects to."""
+    from hardware_mocks.bench_control import BenchControl, BenchControlError, control_address
+    from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator, check_points
+
     try:
         host, port = control_address(station)
         control = stack.enter_context(BenchControl(host, port))
@@ -194,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
             known = plan if plan is not None or not args.resume else parse_plan(
                 read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan")
             fs = known.record.fs if known is not None else 1024.0
-            bench = stack.enter_context(InProcessBench(args.bench, fs_frontend=fs))
+            bench = stack.enter_context(_in_process_bench(args.bench, fs))
             station = bench.station
             if plan is None and not args.resume:
                 plan = _mock_plan(args)

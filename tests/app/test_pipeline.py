@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from app.acquire import plan_for_bench
 from app.acquire.analysis import margin_samples, run_frfs
 from app.io.frf_h5 import write_frf_h5
 from app.io.runfile import RunWriter, read_run
 from app.io.uff import write_frf_uff
 from app.io.uff_time import TimeRun, write_time_uff
+from app.mockbench.bench import plan_for_bench
 from app.pipeline import (
     FRF_H5,
     FRF_UFF,
