@@ -149,3 +149,16 @@ def test_run_file_every_point_or_usable_points(tmp_path: Path) -> None:
     assert next(r.message for r in reports if r.skipped).endswith(
         "no hit recorded: hit it again (insitu acquire --resume)")
     assert_array_equal(frf.H, open_frfs(whole, Settings(run_points="usable"))[0].H[:, [0, 2]])
+
+
+def test_no_function_over_80_lines() -> None:
+    import ast
+
+    import app.pipeline
+
+    root = Path(app.pipeline.__file__).parent
+    long = [f"{p.name}:{n.name} ({n.end_lineno - n.lineno + 1} lines)"
+            for p in sorted(root.glob("*.py")) for n in ast.walk(ast.parse(p.read_text()))
+            if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef)
+            and n.end_lineno is not None and n.end_lineno - n.lineno + 1 > 80]
+    assert long == []
