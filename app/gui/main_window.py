@@ -81,9 +81,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.station_view.start()
         self._restore()
         if self.station_view.station is None:
+            mock = "" if self.station_view.mock_unavailable else "use the built-in mock bench or "
             self.messages.show_message(
-                "info", "No station yet: use the built-in mock bench or open a station file "
-                "(Station tab), or open recorded FRFs (File > Open)")
+                "info", f"No station yet: {mock}open a station file (Station tab), or open "
+                "recorded FRFs (File > Open)")
 
     def _add_acquisition_views(self, station: Path | None) -> None:
         """The Station tab (first) and the Acquisition view (added after the plan)."""

@@ -104,7 +104,9 @@ class StationView(QtWidgets.QWidget):
         top.addWidget(self.check_button)
         top.addWidget(self.monitor_button)
         top.addWidget(self.tap_button)
-        self.name_label = QtWidgets.QLabel("No station: use the mock bench or open a station file")
+        self.name_label = QtWidgets.QLabel(
+            "No station: open a station file" if self.mock_unavailable else
+            "No station: use the mock bench or open a station file")
         self.devices = QtWidgets.QTableWidget()
         self.devices.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.channels = QtWidgets.QTableWidget()
