@@ -20,16 +20,11 @@ from typing import Any
 
 from rich.console import Console
 
-from app.acquire.analysis import analyse_run
 from app.cli.common import UserError
-from app.cli.frf import add_processing_arguments, frfset_from_time_uff
+from app.cli.frf import add_processing_arguments, open_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
-from app.io.frf_h5 import FORMAT as FRF_FORMAT
-from app.io.frf_h5 import h5_format, read_frf_h5
 from app.io.mounts import MountsFile, load_mounts
-from app.io.runfile import read_run
-from app.io.uff import read_frf_uff
-from app.io.uff_time import uff_holds_time_data
+from app.pipeline import TIME_UFF, detect_format
 from app.report.mount_system import mount_system
 from processing.data import FRFSet
 from processing.identify import IdentificationResult, IdentifyOptions, identify
@@ -102,26 +97,16 @@ def run(args: argparse.Namespace) -> int:
     if args.refine_points < 0:
         raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
     args.mounts_file = mounts_from(args)
-    if args.file.suffix.lower() in (".h5", ".hdf5") and h5_format(args.file) == FRF_FORMAT:
-        frf = read_frf_h5(args.file)
-        return _report(args, frf, identify(frf, options_from(args)))
-    if args.file.suffix.lower() in (".h5", ".hdf5"):  # a run file: raw hits -> FRFs -> result
-        data = read_run(args.file)
-        if len(data.records) == 0:
-            raise UserError(f"{args.file}: the run holds no hit yet")
-        frf, result, _ = analyse_run(data, options_from(args))
-        if args.mounts_file is None and data.mounts is not None:
-            print(f"{args.file}: using the run file's mounts table ({len(data.mounts.mounts)} "
-                  "mounts)")
-            check_mounts(data.mounts.mounts)
-            args.mounts_file = data.mounts
-        return _report(args, frf, result)
-    if uff_holds_time_data(args.file):
+    fmt = detect_format(args.file)
+    if fmt == TIME_UFF:
         print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")
-        frf, n_bad = frfset_from_time_uff(args.file, args)
-        return max(_report(args, frf, identify(frf, options_from(args))), 2 if n_bad else 0)
-    frf = read_frf_uff(args.file)
-    return _report(args, frf, identify(frf, options_from(args)))
+    frf, n_bad = open_and_show(args, settings_from(args), fmt)
+    stored = frf.meta.get("mounts")
+    if args.mounts_file is None and isinstance(stored, MountsFile):
+        print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")
+        check_mounts(stored.mounts)
+        args.mounts_file = stored
+    return max(_report(args, frf, identify(frf, options_from(args))), 2 if n_bad else 0)
 
 
 def _report(args: argparse.Namespace, frf: FRFSet, result: IdentificationResult) -> int:
