@@ -111,13 +111,14 @@ def show_reports(args: argparse.Namespace, reports: list[RunReport]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    settings = settings_from(args, run_points="usable")  # options checked before any file
     out = args.out or args.file.with_name(args.file.stem + "_frf.uff")
     suffix = out.suffix.lower()
     if suffix not in H5_SUFFIXES + UFF_SUFFIXES:
         raise UserError(f"--out {out}: unknown suffix {out.suffix!r}: use .uff or .unv (UFF 58) "
                         "or .h5 or .hdf5 (HDF5 FRF file)")
     fmt = RUN_FILE if args.file.suffix.lower() in H5_SUFFIXES else TIME_UFF
-    frfs, n_bad = open_and_show(args, settings_from(args, run_points="usable"), fmt)
+    frfs, n_bad = open_and_show(args, settings, fmt)
     if suffix in H5_SUFFIXES:
         write_frf_h5(out, frfs, source=str(args.file))
     else:

@@ -96,11 +96,12 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
 def run(args: argparse.Namespace) -> int:
     if args.refine_points < 0:
         raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
+    settings = settings_from(args)  # every option checked before any file is read
     args.mounts_file = mounts_from(args)
     fmt = detect_format(args.file)
     if fmt == TIME_UFF:
         print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")
-    frf, n_bad = open_and_show(args, settings_from(args), fmt)
+    frf, n_bad = open_and_show(args, settings, fmt)
     stored = frf.meta.get("mounts")
     if args.mounts_file is None and isinstance(stored, MountsFile):
         print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")

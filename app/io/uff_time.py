@@ -263,7 +263,7 @@ def read_time_uff(
     if not records:
         raise InputError(
             f"{p.name} has no time records (dataset 58 with function type 1): "
-            "export time data, or read FRF files with read_frf_uff"
+            "give a file of time records, or give an FRF file to insitu identify"
         )
     groups: dict[int, list[tuple[int, Dataset]]] = {}
     for i, ds in records:

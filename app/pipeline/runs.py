@@ -51,7 +51,6 @@ def open_run_file(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
 
 def _usable_points(run: RunData, path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
     """The FRFs of the points with a used record, each other point reported and left out."""
-    s.check_averages()
     if len(run.records) == 0:
         raise OpenError(f"{path}: the run holds no hit yet: record hits (insitu acquire)")
     fmax = s.fmax if s.fmax is not None else run.records.fs / 2.56

@@ -2,13 +2,27 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
+import scipy.signal
+
 from processing.data import InputError
 
 __all__ = ["OpenError", "RunReport", "Settings"]
+
+#: largest accepted --nperseg (samples), --record (s) and --fmax (Hz): far beyond any test,
+#: small enough that a typo is refused before memory is asked for
+MAX_NPERSEG = 2**24
+MAX_RECORD = 3600.0
+MAX_FMAX = 1e7
+
+
+def _between(option: str, value: float, lo: float, hi: float, unit: str) -> None:
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise InputError(f"{option} must be from {lo:.10g} to {hi:.10g} {unit}, got {value:.10g}")
 
 
 @dataclass(frozen=True)
@@ -53,10 +67,45 @@ class Settings:
     run_points: Literal["all", "usable"] = "all"
     stored: bool = False
 
-    def check_averages(self) -> None:
-        """Refuse (InputError, one line) an ``averages`` below 1."""
+    def __post_init__(self) -> None:
+        """Every option checked once, here, in the units the user typed; one line each."""
+        _between("--nperseg", self.nperseg, 8, MAX_NPERSEG, "samples")
+        if not isinstance(self.nperseg, int):
+            raise InputError(f"--nperseg must be a whole number of samples, got {self.nperseg}")
+        if not (math.isfinite(self.overlap) and 0 <= self.overlap < 1):
+            raise InputError(f"--overlap must be at least 0 and below 1, got {self.overlap:g}")
+        try:
+            scipy.signal.get_window(self.window, 16)
+        except (ValueError, TypeError) as err:
+            raise InputError(f"--window {self.window!r} is not a window scipy knows: use hann, "
+                             "hamming, blackman, flattop, boxcar, ...") from err
         if self.averages is not None and self.averages < 1:
             raise InputError(f"--averages must be at least 1, got {self.averages}")
+        if self.level is not None and not (math.isfinite(self.level) and self.level > 0):
+            raise InputError(f"--level must be a positive force in N (the trigger fires when "
+                             f"the force rises above it), got {self.level:g}")
+        _between("--record", self.record, 1e-3, MAX_RECORD, "s")
+        if not (math.isfinite(self.pretrigger) and 0 <= self.pretrigger < self.record):
+            raise InputError(f"--pretrigger must be at least 0 s and shorter than --record "
+                             f"({self.record:g} s), got {self.pretrigger:g} s")
+        if self.exp_tau is not None and not (math.isfinite(self.exp_tau) and self.exp_tau > 0):
+            raise InputError(f"--exp-tau must be a positive time constant in s, got "
+                             f"{self.exp_tau:g}")
+        if not (math.isfinite(self.coherence) and 0 <= self.coherence <= 1):
+            raise InputError(f"--coherence must be from 0 to 1, got {self.coherence:g}")
+        if self.fmax is not None:
+            _between("--fmax", self.fmax, 1e-3, MAX_FMAX, "Hz")
+
+    def check_rate(self, fs: float, longest: float) -> None:
+        """The options that depend on the data, checked once per file: ``fs`` its sample
+        rate (Hz), ``longest`` its longest run (s)."""
+        if self.fmax is not None and self.fmax > fs / 2:
+            raise InputError(f"--fmax {self.fmax:g} Hz is above the records' Nyquist frequency "
+                             f"({fs / 2:g} Hz): give at most {fs / 2.56:g} Hz (fs / 2.56) or "
+                             "leave it out")
+        if self.excitation == "impact" and self.record > longest:
+            raise InputError(f"--record {self.record:g} s is longer than every run (the "
+                             f"longest is {longest:g} s): give at most that, or leave it out")
 
 
 @dataclass(frozen=True)

@@ -151,11 +151,13 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
     each run's verdicts, each bad run (skipped), the coherence gate and the rigidity check.
     Raises :class:`OpenError` (one line) when no run is usable or a setting fits no run.
     """
-    if not 0 <= s.overlap < 1:
-        raise OpenError(f"--overlap must be in [0, 1), got {s.overlap}")
-    s.check_averages()
     runs, problems = read_time_uff(path, strict=False)
     reports = [RunReport(msg, skipped=True) for _, msg in problems]
+    if runs:  # options that depend on the data: once for the file, not once per run
+        try:
+            s.check_rate(runs[0].fs, max(r.n_samples / r.fs for r in runs))
+        except InputError as err:
+            raise OpenError(str(err), reports) from err
     if runs and s.excitation == "random" and max(r.n_samples for r in runs) < s.nperseg:
         raise OpenError(f"the longest run has {max(r.n_samples for r in runs)} samples, fewer "
                         f"than --nperseg {s.nperseg}: lower --nperseg", reports)
