@@ -1,28 +1,20 @@
-"""Compiled (numba) Welch accumulation of one block: finite check, tail, FFT, window in
-frequency, products and float64 sums, in one call parallel over channels (:func:`add_block`).
+"""Compiled (numba) Welch accumulation of a block in one call parallel over channels
+(:func:`add_block`): finite check, tail, FFT, window in frequency, products, float64 sums.
 
-After the FFT, every step of the cross-spectral sums is a pass over the spectra that
-numpy cannot fuse: the window (a short convolution in frequency when the window is a
+After the FFT, :func:`accumulate` does in one pass, a cache-sized chunk of lines at a time,
+what numpy would do in several: the window (a short convolution in frequency when it is a
 short cosine sum, such as Hann), the mean removal, the products with each reference and
-the squares, then the additions into float64 sums. :func:`accumulate` does them all in
-one pass, a cache-sized chunk of lines at a time, reading each spectrum once.
+the squares, added to float64 sums. Spectra arrive as interleaved real views ``(re, im,
+...)`` of ``2 n_f`` values; the sums, per line (read by
+:func:`processing.spectral._spectra_sums`), are ``P[2a] += Re(conj(F_a) X)``,
+``P[2a + 1] += Im(conj(F_a) X)`` and ``Q += |X|^2``. Each channel's sums are written by
+one thread, every value summed over the segments in order, and the FFT of a segment does
+not depend on the others in its call: the same bits whatever the block boundaries, the
+grouping and the number of threads.
 
-Layout (the one :func:`processing.spectral._spectra_sums` reads): spectra arrive as
-interleaved real views ``(re, im, re, im, ...)`` of ``2 n_f`` values; the sums are kept
-per line, ``P[2a] += Re(conj(F_a) X)``, ``P[2a + 1] += Im(conj(F_a) X)`` and
-``Q += |X|^2``, in float64 (``3 n_f`` values per channel and reference, read and written
-once per group of segments). Each channel's sums are written by one thread, every value
-summed over the segments in order, and the FFT of a segment does not depend on the others
-transformed with it: the same bits whatever the block boundaries, the grouping and the
-number of threads.
-
-Threads: the ``numba.prange`` loops of :func:`add_block` run on numba's thread pool
-(``numba.set_num_threads``), its ``workqueue`` layer unless ``NUMBA_THREADING_LAYER``
-says otherwise: threads that sleep between tasks, where OpenMP's spin and take the
-cores from the others on a loaded machine (one launch at a time: see
-:mod:`processing.spectral`); pocketfft is called from compiled code through rocket-fft.
-
-The hot loops index from zero upwards only: numba's wrap-around of negative indices
+Threads: numba's ``workqueue`` layer unless ``NUMBA_THREADING_LAYER`` says otherwise (its
+threads sleep between tasks; OpenMP's spin, taking the cores from the others on a loaded
+machine). The hot loops index from zero upwards: numba's wrap-around of negative indices
 stops LLVM vectorising a loop.
 """
 
@@ -41,14 +33,12 @@ from numpy.typing import NDArray
 
 __all__ = ["CHUNK", "accumulate", "add_block", "all_finite", "compile_ahead", "window_ref"]
 
-#: interleaved values per chunk (4 kB of float64): a chunk of a channel's windowed
-#: spectrum and of its sums stays in the first-level cache over the segments of a group
+#: interleaved values per chunk (4 kB of float64, kept in the first-level cache)
 CHUNK = 512
-#: segments per FFT call of a reference (pocketfft transforms 4 single-precision segments
-#: at once, 2 double-precision ones; a call's transforms beyond a multiple of it are slower)
+#: segments per FFT call of a reference (pocketfft's SIMD lanes: 4 in single precision)
 LANES = 4
-#: most segments of a compiled call (the references' windowed spectra of a block are
-#: held, ``2 n_ref n_f`` float64 per segment): longer blocks are cut
+#: most segments of a compiled call (the references' windowed spectra are held): longer
+#: blocks are cut
 BATCH = 64
 
 if "NUMBA_THREADING_LAYER" not in os.environ:
@@ -64,10 +54,8 @@ def _edge(zr: NDArray[np.floating], n: int, taps: NDArray[np.float64], zero_dc: 
           k: int) -> tuple[float, float]:
     """Windowed value (re, im) of line ``k``, the convolution wrapping around the two-sided
     DFT of length ``n`` (negative lines are conjugates); line 0 taken as 0 if ``zero_dc``."""
-    n_f = zr.shape[0] // 2
-    M = taps.shape[0] - 1
-    re = 0.0
-    im = 0.0
+    n_f, M = zr.shape[0] // 2, taps.shape[0] - 1
+    re = im = 0.0
     for m in range(-M, M + 1):
         j = (k - m) % n
         if zero_dc and j == 0:
@@ -90,9 +78,8 @@ def _window_chunk(zr: NDArray[np.floating], n: int, taps: NDArray[np.float64], z
     ``X_w[k] = sum_{|m| <= M} taps[|m|] X[k - m]``; the lines near both ends, which wrap
     around, the slow way.
     """
-    n2 = zr.shape[0]
+    n2, M = zr.shape[0], taps.shape[0] - 1
     n_f = n2 // 2
-    M = taps.shape[0] - 1
     k_lo = M + 1 if (M > 0 or zero_dc) else 0  # first line of the plain formula
     i0 = max(c0, 2 * k_lo)
     i1 = min(c1, n2 - 2 * M)
@@ -100,23 +87,12 @@ def _window_chunk(zr: NDArray[np.floating], n: int, taps: NDArray[np.float64], z
         a = zr[i0 - 2 * M : i1 + 2 * M]
         y = x[i0 - c0 : i1 - c0]
         w = i1 - i0
-        t0 = taps[0]
-        if M == 0:
+        for j in range(w):
+            y[j] = taps[0] * a[j + 2 * M]
+        for m in range(1, M + 1):
+            lo, hi = a[2 * (M - m) :], a[2 * (M + m) :]
             for j in range(w):
-                y[j] = t0 * a[j]
-        elif M == 1:
-            t1 = taps[1]
-            for j in range(w):
-                y[j] = t0 * a[j + 2] + t1 * (a[j] + a[j + 4])
-        else:
-            for j in range(w):
-                y[j] = t0 * a[j + 2 * M]
-            for m in range(1, M + 1):
-                t = taps[m]
-                lo = a[2 * (M - m) :]
-                hi = a[2 * (M + m) :]
-                for j in range(w):
-                    y[j] += t * (lo[j] + hi[j])
+                y[j] += taps[m] * (lo[j] + hi[j])
     for k in range(c0 // 2, min(k_lo, c1 // 2)):
         x[2 * k - c0], x[2 * k + 1 - c0] = _edge(zr, n, taps, zero_dc, k)
     for k in range(max(n_f - M, c0 // 2), c1 // 2):
@@ -127,29 +103,14 @@ def _window_chunk(zr: NDArray[np.floating], n: int, taps: NDArray[np.float64], z
 def accumulate(fg: NDArray[np.float64], zown: NDArray[np.floating], n: int,
                taps: NDArray[np.float64], zero_dc: bool, row0: int, P: NDArray[np.float64],
                Q: NDArray[np.float64], x: NDArray[np.float64]) -> None:
-    """Add one group of segments of some channels to the sums.
-
-    Parameters
-    ----------
-    fg : (>= n_seg, 2 n_ref, n_f) float64
-        The references' windowed spectra of the same segments (:func:`window_ref`).
-    zown : (n_own, n_seg, 2 n_f) float32 or float64
-        Interleaved spectra of the group's segments (DFT length ``n``) of the channels
-        summed; not yet windowed if ``taps`` has more than one value.
-    taps : (M + 1,) float64
-        The window in frequency, ``rfft(window)[:M + 1] / n`` (real: a periodic, even
-        window); ``[1.0]`` for spectra already windowed.
-    zero_dc : bool
-        Remove each segment's mean (line 0 of the un-windowed spectrum taken as 0).
-    P, Q : (2 n_ref, n_ch, n_f), (n_ch, n_f) float64
-        Sums; ``zown[b]`` adds to rows ``row0 + b``.
-    x : (>= CHUNK,) float64
-        Scratch: a chunk of a windowed spectrum.
-    """
-    n_seg, n2 = zown.shape[1], zown.shape[2]
-    n_f = n2 // 2
-    n_ref = fg.shape[1] // 2
-    M = taps.shape[0] - 1
+    """Add the segments ``zown`` (n_own, n_seg, 2 n_f) of some channels (interleaved
+    spectra, DFT length ``n``, float32 or float64) to the sums ``P`` (2 n_ref, n_ch, n_f)
+    and ``Q`` (n_ch, n_f), ``zown[b]`` to row ``row0 + b``. ``fg`` (>= n_seg, 2 n_ref,
+    n_f): the references' windowed spectra of the same segments (:func:`window_ref`);
+    ``taps`` (M + 1,): the window in frequency, ``rfft(window)[:M + 1] / n`` (``[1.0]``
+    for spectra already windowed); ``zero_dc``: remove each segment's mean (line 0 of the
+    un-windowed spectrum taken as 0); ``x`` (>= CHUNK,) float64 scratch."""
+    n_seg, n_f, n_ref, M = zown.shape[1], zown.shape[2] // 2, fg.shape[1] // 2, taps.shape[0] - 1
     t0 = taps[0]
     t1 = taps[1] if M > 0 else 0.0
     L = CHUNK // 2  # lines per chunk
@@ -207,32 +168,9 @@ def window_ref(z: NDArray[np.floating], n: int, taps: NDArray[np.float64], zero_
 
 
 @_jit
-def accumulate_ref(fg: NDArray[np.float64], a: int, row: int, P: NDArray[np.float64],
-                   Q: NDArray[np.float64]) -> None:
-    """Add reference ``a``'s own segments (row ``row``) from its windowed spectra ``fg``:
-    the values and the order of :func:`accumulate`'s sums."""
-    n_ref, n_f = fg.shape[1] // 2, fg.shape[2]
-    for k0 in range(0, n_f, CHUNK // 2):
-        k1 = min(k0 + CHUNK // 2, n_f)
-        q = Q[row, k0:k1]
-        for s in range(fg.shape[0]):
-            vr, vi = fg[s, 2 * a, k0:k1], fg[s, 2 * a + 1, k0:k1]
-            for j in range(k1 - k0):
-                q[j] += vr[j] * vr[j] + vi[j] * vi[j]
-            for b in range(n_ref):
-                pr, pi = P[2 * b, row, k0:k1], P[2 * b + 1, row, k0:k1]
-                fr, fi = fg[s, 2 * b, k0:k1], fg[s, 2 * b + 1, k0:k1]
-                for j in range(k1 - k0):
-                    pr[j] += fr[j] * vr[j] + fi[j] * vi[j]
-                    pi[j] += fr[j] * vi[j] - fi[j] * vr[j]
-
-
-@_jit
 def all_finite(x: NDArray[np.floating]) -> bool:
     """Whether every sample of ``x`` (1-D) is finite: ``v - v`` is 0 for a finite value
-    (however large: nothing can overflow) and NaN otherwise, and an or-reduction of
-    comparisons vectorises (twice as fast as numpy's ``isfinite(sum)``, which can also
-    overflow)."""
+    (nothing can overflow) and NaN otherwise; an or-reduction of comparisons vectorises."""
     bad = False
     for j in range(x.shape[0]):
         v = x[j]
@@ -271,9 +209,13 @@ def _transform(seg: NDArray[np.floating], win: NDArray[np.floating], dc_bins: ND
 
 
 @_jit
-def _segments(src: Any, r: int, start: int, m: int, n: int, step: int) -> Any:
-    """Row ``r``'s ``m`` segments of ``n`` samples of ``src`` (n_ch, samples) from sample
-    ``start`` on, every ``step`` samples: a view (1, m, n)."""
+def _segments(tail: Any, arr: Any, r: int, s: int, most: int, n: int, step: int, n_tail: int,
+              n_head: int, n_seg: int) -> Any:
+    """Row ``r``'s segments (1, m, n) from segment ``s`` on, at most ``most``: the first
+    ``n_head`` of the ``n_seg`` start in ``tail``, the others in ``arr`` (``n_tail``
+    samples of the tail before it); none across."""
+    m = min(most, (n_head if s < n_head else n_seg) - s)
+    src, start = (tail, s * step) if s < n_head else (arr, s * step - n_tail)
     s0, s1 = src.strides
     return as_strided(src[r : r + 1, start:], shape=(1, m, n), strides=(s0, step * s1, s1))
 
@@ -282,21 +224,20 @@ def _segments(src: Any, r: int, start: int, m: int, n: int, step: int) -> Any:
 def add_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: int,
               n_head: int, n: int, step: int, G: int, order: Any, ref_of: Any, taps: Any,
               zero_dc: bool, win: Any, dc_bins: Any, dc_values: Any, P: Any, Q: Any,
-              fg: Any) -> bool:
+              zr: Any, fg: Any) -> bool:
     """Add a block ``arr`` (n_ch, n_new) to the sums ``P``, ``Q``; False, and nothing added
     or kept, if a sample is not finite. Two loops over the channels, each channel on one
     of ``numba.get_num_threads()`` threads.
 
-    The tail, the samples not consumed by the blocks before, is ``store[:, :n_tail]``; the
+    The tail (samples not consumed by the blocks before) is ``store[:, :n_tail]``; the
     block's first ``need`` samples are appended to it. Its ``n_seg`` complete segments of
-    ``n`` samples, every ``step``, the first ``n_head`` starting in the tail, are added,
-    up to ``G`` segments per FFT call; then the samples from the first unconsumed one on
-    go to ``dst``, the next block's tail. ``order``: the channels, references first;
-    ``ref_of``: each channel's index among the references, or -1; ``fg``
-    ``(>= n_seg, 2 n_ref, n_f)`` float64 scratch, the references' windowed spectra. The
-    window: in frequency (``taps``, and ``zero_dc`` for the mean removal; ``win`` empty)
-    or on the samples (``win``, the mean removed on the lines ``dc_bins`` of its
-    spectrum, values ``dc_values``; ``taps`` [1]).
+    ``n`` samples, every ``step``, the first ``n_head`` starting in the tail, are added
+    (up to ``G`` per FFT call); then the samples not consumed go to ``dst``. ``order``: the
+    channels, references first; ``ref_of``: each channel's index among the references, or
+    -1; ``zr`` (n_ref, >= n_seg, 2 n_f), ``fg`` (>= n_seg, 2 n_ref, n_f) float64: scratch,
+    the references' spectra and windowed spectra. The window: in frequency (``taps``;
+    ``zero_dc`` removes the mean; ``win`` empty) or on the samples (``win``; the mean
+    removed on the lines ``dc_bins`` of its spectrum, values ``dc_values``; ``taps`` [1]).
     """
     n_ch, n_new = arr.shape
     tail = store[:, : n_tail + need]
@@ -312,26 +253,24 @@ def add_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: int
         x = np.empty(max(CHUNK, 2 * (n // 2 + 1)))
         s = 0
         while s < n_seg:
-            m = min(LANES, (n_head if s < n_head else n_seg) - s)  # never across the tail's end
-            seg = (_segments(tail, r, s * step, m, n, step) if s < n_head else
-                   _segments(arr, r, s * step - n_tail, m, n, step))
-            z = _transform(seg, win, dc_bins, dc_values)
-            window_ref(z[0].view(arr.dtype), n, taps, zero_dc, ref_of[r], fg[s : s + m], x)
+            seg = _segments(tail, arr, r, s, LANES, n, step, n_tail, n_head, n_seg)
+            m = seg.shape[1]
+            zr[ref_of[r], s : s + m] = _transform(seg, win, dc_bins, dc_values)[0].view(arr.dtype)
+            window_ref(zr[ref_of[r], s : s + m], n, taps, zero_dc, ref_of[r], fg[s : s + m], x)
             s += m
     if bad:
         return False
     start = n_seg * step
     for i in prange(n_ch):  # the sums, then the samples kept
         r = order[i]
+        x = np.empty(CHUNK)
         if ref_of[r] >= 0:
-            accumulate_ref(fg[:n_seg], ref_of[r], r, P, Q)
+            accumulate(fg, zr[ref_of[r] : ref_of[r] + 1, :n_seg], n, taps, zero_dc, r, P, Q, x)
         else:
-            x = np.empty(CHUNK)
             s = 0
             while s < n_seg:
-                m = min(G, (n_head if s < n_head else n_seg) - s)
-                seg = (_segments(tail, r, s * step, m, n, step) if s < n_head else
-                       _segments(arr, r, s * step - n_tail, m, n, step))
+                seg = _segments(tail, arr, r, s, G, n, step, n_tail, n_head, n_seg)
+                m = seg.shape[1]
                 z = _transform(seg, win, dc_bins, dc_values)
                 accumulate(fg[s : s + m], z.view(arr.dtype), n, taps, zero_dc, r, P, Q, x)
                 s += m
@@ -347,9 +286,8 @@ def add_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: int
 
 
 def compile_ahead() -> None:
-    """Compile (or load from numba's on-disk cache) the kernels for both sample precisions
-    and any layout of a block, so that the first live spectrum does not wait for it
-    (``make`` calls this at set-up)."""
+    """Compile (or load from numba's cache on disk) the kernels for both sample precisions
+    and any block layout, so that the first spectrum does not wait (``make`` calls it)."""
     n, n_f = 8, 5
     for real in (np.float32, np.float64):
         for block in (np.ones((3, 24), real), np.ones((3, 48), real)[:, ::2]):
@@ -358,8 +296,8 @@ def compile_ahead() -> None:
                 add_block(block, store, store.copy(), 0, 0, 5, 0, n, 4, 4,
                           np.arange(3), np.array([0, -1, -1]), np.ones(1), False, win,
                           np.array([0]), np.ones(1, np.complex128), np.zeros((2, 3, n_f)),
-                          np.zeros((3, n_f)), np.empty((5, 2, n_f)))
-        z = np.zeros((1, 1, 2 * n_f), real)
-        accumulate(np.zeros((1, 2, n_f)), z, n, np.ones(1), False, 0, np.zeros((2, 1, n_f)),
-                   np.zeros((1, n_f)), np.empty(CHUNK))
-        window_ref(z[0], n, np.ones(1), False, 0, np.zeros((1, 2, n_f)), np.empty(CHUNK))
+                          np.zeros((3, n_f)), np.empty((1, 5, 2 * n_f), real),
+                          np.empty((5, 2, n_f)))
+        z, fg, P = np.zeros((1, 1, 2 * n_f), real), np.zeros((1, 2, n_f)), np.zeros((2, 1, n_f))
+        window_ref(z[0], n, np.ones(1), False, 0, fg, np.empty(CHUNK))  # record_spectra's
+        accumulate(fg, z, n, np.ones(1), False, 0, P, P[0] * 0, np.empty(CHUNK))

@@ -11,7 +11,7 @@ windowed (periodic Hann by default). Time is the last axis of every input.
 samples not yet consumed, so a live display, a long recording and a replay all
 go through the same code. Every complete segment is used as soon as it is in,
 each value summed over the segments in order, so the result is bit for bit the
-same whatever the block sizes and the number of worker threads.
+same whatever the block sizes and the number of threads.
 
 Several references (shakers) give ``H = G_xf G_ff^-1`` per line and the
 multiple coherence of each response.
@@ -32,21 +32,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing._welch_kernel import BATCH, CHUNK, accumulate, add_block, all_finite, window_ref
 
-__all__ = [
-    "ESTIMATORS",
-    "CrossSpectra",
-    "SpectralAccumulator",
-    "SpectralError",
-    "coherence",
-    "combine",
-    "frf",
-    "h1",
-    "h2",
-    "hv",
-    "ordinary_coherence",
-    "record_spectra",
-    "welch_spectra",
-]
+__all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError", "coherence",
+           "combine", "frf", "h1", "h2", "hv", "ordinary_coherence", "record_spectra",
+           "welch_spectra"]
 
 #: names accepted by :func:`frf`
 ESTIMATORS = ("H1", "H2", "Hv")
@@ -54,13 +42,12 @@ ESTIMATORS = ("H1", "H2", "Hv")
 Scaling = Literal["density", "spectrum"]
 #: summed (Sff, Sfx, Sxx) of some segments
 _Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64]]
+
+
 class SpectralError(ValueError):
     """Bad spectral-analysis parameters or data; the message names the value and what is allowed."""
 
 
-# ----------------------------------------------------------------------------------------------
-# result
-# ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CrossSpectra:
     """Averaged one-sided spectra between reference (force) and response channels.
@@ -88,27 +75,19 @@ class CrossSpectra:
     resp_channels: tuple[int, ...]
 
     def __post_init__(self) -> None:
-        freq = np.asarray(self.freq, dtype=float).ravel()
-        Sff = np.asarray(self.Sff, dtype=np.complex128)
-        Sfx = np.asarray(self.Sfx, dtype=np.complex128)
-        Sxx = np.asarray(self.Sxx, dtype=np.float64)
-        n_f = freq.size
-        n_ref, n_resp = len(self.ref_channels), len(self.resp_channels)
-        for name, arr, shape in (
-            ("Sff", Sff, (n_ref, n_ref, n_f)),
-            ("Sfx", Sfx, (n_ref, n_resp, n_f)),
-            ("Sxx", Sxx, (n_resp, n_f)),
-        ):
+        object.__setattr__(self, "freq", np.asarray(self.freq, dtype=float).ravel())
+        n_f, n_ref, n_resp = self.freq.size, len(self.ref_channels), len(self.resp_channels)
+        for name, dtype, shape in (("Sff", np.complex128, (n_ref, n_ref, n_f)),
+                                   ("Sfx", np.complex128, (n_ref, n_resp, n_f)),
+                                   ("Sxx", np.float64, (n_resp, n_f))):
+            arr = np.asarray(getattr(self, name), dtype=dtype)
             if arr.shape != shape:
                 raise SpectralError(f"{name} has shape {arr.shape}, expected {shape}")
+            object.__setattr__(self, name, arr)
         if n_ref < 1:
             raise SpectralError("at least one reference channel is needed")
         if self.n_averages < 0:
             raise SpectralError(f"n_averages must be >= 0, got {self.n_averages}")
-        object.__setattr__(self, "freq", freq)
-        object.__setattr__(self, "Sff", Sff)
-        object.__setattr__(self, "Sfx", Sfx)
-        object.__setattr__(self, "Sxx", Sxx)
         object.__setattr__(self, "ref_channels", tuple(int(c) for c in self.ref_channels))
         object.__setattr__(self, "resp_channels", tuple(int(c) for c in self.resp_channels))
 
@@ -140,9 +119,6 @@ def combine(a: CrossSpectra, b: CrossSpectra) -> CrossSpectra:
     )
 
 
-# ----------------------------------------------------------------------------------------------
-# estimators
-# ----------------------------------------------------------------------------------------------
 def _solve_refs(sp: CrossSpectra, rhs: NDArray[np.complex128]) -> NDArray[np.complex128]:
     """``Sff^-1 rhs`` per line, (n_ref, k, n_f) -> (n_ref, k, n_f); NaN where Sff is singular."""
     if sp.n_ref == 1:
@@ -258,9 +234,6 @@ def frf(
     return H, coh
 
 
-# ----------------------------------------------------------------------------------------------
-# accumulation
-# ----------------------------------------------------------------------------------------------
 def _channel_roles(
     n_ch: int, references: Sequence[int], responses: Sequence[int] | None
 ) -> tuple[tuple[int, ...], tuple[int, ...]]:
@@ -300,11 +273,8 @@ _MAX_TAPS = 8
 def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """The window as a short convolution in frequency, ``rfft(win)[:M + 1] / n``, when it is
     a periodic cosine sum of at most ``_MAX_TAPS`` terms to 1e-13 of its peak (Hann, Hamming,
-    Blackman, flat top, rectangular, as :func:`scipy.signal.get_window` gives them); else None.
-
-    Applied in frequency, such a window and the mean removal cost nothing more than the
-    products (see :mod:`processing._welch_kernel`), and the FFT reads the samples in place.
-    """
+    Blackman, flat top, rectangular, as :func:`scipy.signal.get_window` gives them); else None
+    (the window is then applied to the samples)."""
     n = win.size
     W = np.fft.rfft(win) / n
     M = int(np.flatnonzero(np.abs(W) > 1e-13 * np.abs(W).max())[-1])
@@ -317,11 +287,6 @@ def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
     if np.abs(rebuilt - win).max() > 1e-13 * np.abs(win).max():
         return None
     return taps
-
-
-def _interleaved(Z: NDArray[np.complexfloating]) -> NDArray[np.floating]:
-    """Real view ``(re, im, re, im, ...)`` of spectra contiguous along their last axis."""
-    return Z.view(Z.real.dtype)
 
 
 def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
@@ -354,35 +319,26 @@ class SpectralAccumulator:
     scaling : {'density', 'spectrum'}
         Unit**2/Hz or unit**2, as in scipy.
     group : int, optional
-        Most segments of a channel per FFT call; by default 16 for float32 samples, 4 for
-        float64. Results are independent of it (the FFT of a segment does not depend on
-        the others in its call; tested).
+        Most segments of a channel per FFT call (default 16 for float32 samples, 4 else).
     workers : int, optional
-        Threads sharing the channels (numba's thread pool): by default all of them
-        (``numba.config.NUMBA_NUM_THREADS``, the number of cores unless set), and at most
-        that. Results are independent of it.
+        Threads sharing the channels, at most (and by default) numba's
+        ``NUMBA_NUM_THREADS`` (the number of cores unless set).
 
     Notes
     -----
-    Float32 samples are transformed in single precision (complex64 FFT), anything
-    else in double precision; the products are formed and summed in float64
-    (:mod:`processing._welch_kernel`, compiled by numba and cached on disk). Each block
-    is one compiled call: a check that every sample is finite, then the FFT, window,
-    products and sums of each channel on one of the threads.
-    Segments are taken as :func:`scipy.signal.csd` takes them: from the first
-    sample on, every ``nperseg - noverlap`` samples, trailing samples that do not
-    fill a segment unused. A window that is a short cosine sum (Hann, Hamming,
-    Blackman, flat top, rectangular) is applied in frequency, as a convolution over
-    ``2 M + 1`` lines, and the mean removal by zeroing the un-windowed spectrum's
-    line 0: the FFT reads the samples where they are and no pass windows them; any
-    other window is applied to the samples. Each value is summed over the segments
-    in order: the same bits whatever the block boundaries and the number of threads.
+    Float32 samples are transformed in single precision, anything else in double; the
+    products are formed and summed in float64 (:mod:`processing._welch_kernel`). Segments
+    are taken as :func:`scipy.signal.csd` takes them: from the first sample on, every
+    ``nperseg - noverlap`` samples; trailing samples that do not fill a segment wait for
+    the next block. A window that is a short cosine sum (Hann, Hamming, Blackman, flat
+    top, rectangular) is applied in frequency, as a convolution over ``2 M + 1`` lines,
+    and the mean removal by zeroing the un-windowed spectrum's line 0; any other window
+    is applied to the samples. Each value is summed over the segments in order: the same
+    bits whatever the block boundaries, ``group`` and ``workers`` (tested).
 
-    Memory: two buffers of ``2 nperseg`` samples per channel taking turns holding
-    the unconsumed tail (less than ``nperseg`` samples per channel, plus the start of
-    the next block, less than ``nperseg``), the sums (``3 * n_ch * nperseg`` values for
-    one reference), the references' windowed spectra of up to 64 segments, and the
-    spectra of each FFT call (``group * nperseg`` values), which come and go.
+    Memory: two buffers of ``2 nperseg`` samples per channel holding the samples not yet
+    consumed, the sums (``3 n_ch nperseg`` values for one reference), the references'
+    spectra of up to 65 segments, and each FFT call's spectra (``group nperseg`` values).
 
     Examples
     --------
@@ -431,35 +387,33 @@ class SpectralAccumulator:
             win = np.asarray(window, dtype=float)
         if win.shape != (nperseg,):
             raise SpectralError(f"window has shape {win.shape}, expected ({nperseg},)")
-        self.fs = float(fs)
-        self.nperseg = nperseg
-        self.noverlap = noverlap
+        self.fs, self.nperseg, self.noverlap = float(fs), nperseg, noverlap
         self.step = nperseg - noverlap
-        self.window = win
-        self.detrend = detrend
-        self.scaling: Scaling = scaling
+        self.window, self.detrend, self.scaling = win, detrend, scaling
         self._group = None if group is None else int(group)
         most = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
         self.workers = most if workers is None else min(int(workers), most)
         self._references = tuple(int(r) for r in references)
         self._responses = None if responses is None else tuple(int(r) for r in responses)
+        # the window in frequency (taps; the mean removed by zero_dc), or on the samples
+        # (the mean removed on the lines dc_bins of its spectrum): see add_block
         self._taps = _cosine_taps(win)
+        self._zero_dc = self._taps is not None and detrend == "constant"
         W = np.fft.rfft(win)
-        self._dc_bins = np.flatnonzero(np.abs(W) > 1e-12 * np.abs(W[0]))
-        self._dc_values = W[self._dc_bins]
+        bins = np.flatnonzero(np.abs(W) > 1e-12 * np.abs(W[0]))
+        if self._taps is not None or detrend is False:
+            bins = bins[:0]
+        self._dc_bins, self._dc_values = bins, W[bins]
         self.freq = np.asarray(np.fft.rfftfreq(nperseg, 1.0 / fs), dtype=np.float64)
         self.reset()
 
-    # -- state ---------------------------------------------------------------------------------
     def reset(self) -> None:
         """Forget every sample and average (keeps the parameters)."""
         self._tail: NDArray[np.floating] | None = None
         self._dtype: np.dtype[np.floating] | None = None
-        self._n_ch = 0
+        self._n_ch = self._n_seg = self._n_samples = 0
         self._refs: tuple[int, ...] = ()
         self._resps: tuple[int, ...] = ()
-        self._n_seg = 0
-        self._n_samples = 0
 
     @property
     def n_averages(self) -> int:
@@ -468,8 +422,7 @@ class SpectralAccumulator:
 
     @property
     def group(self) -> int:
-        """Most segments of a channel per FFT call: as given, else 16 for float32
-        samples, 4 for anything else."""
+        """Most segments of a channel per FFT call."""
         if self._group is not None:
             return self._group
         return 16 if self._dtype == np.float32 else 4
@@ -479,37 +432,26 @@ class SpectralAccumulator:
         """Samples per channel received so far."""
         return self._n_samples
 
-    # -- work ----------------------------------------------------------------------------------
     def _first_block(self, block: NDArray[np.generic]) -> None:
         self._n_ch = n_ch = block.shape[0]
-        self._refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
-        dtype: np.dtype[np.floating] = np.dtype(np.float32 if block.dtype == np.float32
-                                                 else np.float64)
-        self._dtype = dtype
+        refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
+        self._refs, n_ref, n_f = refs, len(refs), self.freq.size
+        dtype = self._dtype = np.dtype(np.float32 if block.dtype == np.float32 else np.float64)
         # two buffers taking turns holding the tail (a prefix of the first): fewer than
         # nperseg samples, and fewer than nperseg appended to it (see update)
         self._stores = [np.empty((n_ch, 2 * self.nperseg), dtype) for _ in range(2)]
         self._tail = self._stores[0][:, :0]
-        self._order = np.array(self._refs + tuple(c for c in range(n_ch) if c not in self._refs))
+        self._order = np.array(refs + tuple(c for c in range(n_ch) if c not in refs))
         self._ref_of = np.full(n_ch, -1)  # each row's index among the references
-        self._ref_of[list(self._refs)] = np.arange(len(self._refs))
-        # the window in frequency (taps) or in time (win, with the mean removal on the
-        # window's lines dc_bins): see processing._welch_kernel.add_block
-        in_freq = self._taps is not None
-        self._taps_k = self._taps if self._taps is not None else _NO_TAPS
-        self._zero_dc = in_freq and self.detrend == "constant"
-        self._win_t = np.empty(0, dtype) if in_freq else self.window.astype(dtype)
-        time_dc = not in_freq and self.detrend == "constant"
-        self._dc_k = np.asarray(self._dc_bins if time_dc else [], np.int64)
-        self._dc_v = np.asarray(self._dc_values if time_dc else [], np.complex128)
-        n_f = self.freq.size
-        self._P = np.zeros((2 * len(self._refs), n_ch, n_f))
-        self._Q = np.zeros((n_ch, n_f))
-        self._fg = np.empty((BATCH + 1, 2 * len(self._refs), n_f))  # see add_block
+        self._ref_of[list(refs)] = np.arange(n_ref)
+        self._win = np.empty(0, dtype) if self._taps is not None else self.window.astype(dtype)
+        self._P, self._Q = np.zeros((2 * n_ref, n_ch, n_f)), np.zeros((n_ch, n_f))
+        self._zr = np.empty((n_ref, BATCH + 1, 2 * n_f), dtype)  # scratch of add_block
+        self._fg = np.empty((BATCH + 1, 2 * n_ref, n_f))
 
     def _admit(self, block: ArrayLike) -> NDArray[np.floating]:
-        """``block`` as the kernel takes it (checked; converted to the accumulator's sample
-        type, and copied if read-only: compiled for writeable samples, never written)."""
+        """``block`` checked, as the kernel takes it (the accumulator's sample type, and
+        writeable: copied if not, never written)."""
         arr = np.asarray(block)
         if arr.ndim != 2:
             raise SpectralError(f"a block must have shape (n_channels, n_samples), got {arr.shape}")
@@ -528,10 +470,7 @@ class SpectralAccumulator:
         Raises :class:`SpectralError` for a block of another shape or type, or with a NaN
         or infinite sample (nothing of it is added).
         """
-        arr = block
-        if not (type(arr) is np.ndarray and self._tail is not None and arr.dtype == self._dtype
-                and arr.ndim == 2 and arr.shape[0] == self._n_ch and arr.flags.writeable):
-            arr = self._admit(block)
+        arr = self._admit(block)
         assert self._tail is not None
         n_tail, n_new = self._tail.shape[-1], arr.shape[-1]
         step, N = self.step, self.nperseg
@@ -543,14 +482,11 @@ class SpectralAccumulator:
             return
         avail = n_tail + n_new
         n_seg = 0 if avail < N else (avail - N) // step + 1  # every complete segment
-        # segments starting in the tail are views of it, once the block's first samples they
-        # need are appended to it (all of the block if no segment is complete: less than a
-        # segment is copied per block); the others are views of the block
+        # segments starting in the tail are read there once the block's first samples they
+        # need are appended to it (all of the block if no segment is complete); the others
+        # where they are, in the block
         n_head = min(n_seg, -(-n_tail // step))
-        if n_seg == 0:
-            need = n_new
-        else:
-            need = max(0, (n_head - 1) * step + N - n_tail) if n_head else 0
+        need = n_new if n_seg == 0 else (max(0, (n_head - 1) * step + N - n_tail) if n_head else 0)
         with _LAUNCH:
             threads = numba.get_num_threads()
             numba.set_num_threads(self.workers)
@@ -558,19 +494,18 @@ class SpectralAccumulator:
             try:
                 finite = add_block(arr, self._stores[0], self._stores[1], n_tail, need, n_seg,
                                    n_head, N, step, self.group, self._order, self._ref_of,
-                                   self._taps_k, self._zero_dc, self._win_t, self._dc_k,
-                                   self._dc_v, self._P, self._Q, self._fg)
+                                   _NO_TAPS if self._taps is None else self._taps,
+                                   self._zero_dc, self._win, self._dc_bins, self._dc_values,
+                                   self._P, self._Q, self._zr, self._fg)
             finally:
                 numba.set_parallel_chunksize(chunk)
                 numba.set_num_threads(threads)
         if not finite:
             raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
-        if n_seg == 0:
-            self._tail = self._stores[0][:, : n_tail + n_new]
-            return
-        self._n_seg += n_seg
-        self._stores.reverse()
+        if n_seg:
+            self._n_seg += n_seg
+            self._stores.reverse()
         self._tail = self._stores[0][:, : avail - n_seg * step]
 
     def spectra(self) -> CrossSpectra:
@@ -623,22 +558,12 @@ def record_spectra(
 ) -> CrossSpectra:
     """Spectra averaged over separate records (hits, bursts, periods), no overlap, no detrend.
 
-    Parameters
-    ----------
-    records : (n_rec, n_ch, n) array
-        One record per hit/burst/period, all channels.
-    fs : float
-        Sample rate, Hz.
-    windows : array broadcastable to (n_rec, n_ch, n), optional
-        Windows (force and exponential windows): one for all, one per channel
-        (n_ch, n) or one per record and channel; rectangular by default.
-    references, responses : channel indices, as for :class:`SpectralAccumulator`.
-
-    Returns
-    -------
-    CrossSpectra
-        Scaled as energy densities ``2 conj(X) Y / (fs n)`` (one-sided); with
-        transients only ratios (FRFs, coherence) are meaningful.
+    ``records`` (n_rec, n_ch, n): one record per hit/burst/period, all channels, sampled at
+    ``fs`` Hz; ``windows`` (broadcastable to the records: one for all, one per channel or
+    one per record and channel; rectangular by default): the force and exponential
+    windows; ``references``, ``responses``: as for :class:`SpectralAccumulator`. Scaled as
+    energy densities ``2 conj(X) Y / (fs n)`` (one-sided): with transients only ratios
+    (FRFs, coherence) are meaningful.
     """
     rec = np.asarray(records)
     if rec.ndim != 3:
@@ -664,8 +589,8 @@ def record_spectra(
     P, Q = np.zeros((2 * len(refs), n_ch, n_f)), np.zeros((n_ch, n_f))
     fg, buf = np.empty((n_rec, 2 * len(refs), n_f)), np.empty(max(CHUNK, 2 * n_f))
     for a, r in enumerate(refs):
-        window_ref(_interleaved(Z[r]), n, _NO_TAPS, False, a, fg, buf)
-    accumulate(fg, _interleaved(Z), n, _NO_TAPS, False, 0, P, Q, buf)
+        window_ref(Z[r].view(x.dtype), n, _NO_TAPS, False, a, fg, buf)
+    accumulate(fg, Z.view(x.dtype), n, _NO_TAPS, False, 0, P, Q, buf)
     Sff, Sfx, Sxx = _spectra_sums(P, Q, refs, resps)
     freq = np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64)
     scale = _onesided_scale(freq.size, n, fs * n) / n_rec
