@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 import scipy.signal
@@ -193,6 +194,14 @@ def test_a_long_block_is_taken_in_parts_and_refused_whole():
     with pytest.raises(SpectralError, match="nothing was added"):
         fresh.update(bad)
     assert fresh.n_averages == 0 and fresh.n_samples == 0
+
+
+def test_threads_default_to_every_numba_thread():
+    # the live shaker analysis (app/acquire/blocks.py) takes the default
+    most = numba.config.NUMBA_NUM_THREADS
+    assert SpectralAccumulator(FS, 256).workers == most
+    assert SpectralAccumulator(FS, 256, workers=1000).workers == most
+    assert SpectralAccumulator(FS, 256, workers=1).workers == 1
 
 
 def test_spectra_can_be_read_while_streaming():
