@@ -35,7 +35,8 @@ __all__ = ["CHUNK", "accumulate", "add_block", "all_finite", "compile_ahead", "w
 
 #: interleaved values per chunk (4 kB of float64, kept in the first-level cache)
 CHUNK = 512
-#: segments per FFT call of a reference (pocketfft's SIMD lanes: 4 in single precision)
+#: segments per FFT call of a reference, most rows of the others' (pocketfft's SIMD
+#: lanes: 4 transforms at once in single precision)
 LANES = 4
 #: most segments of a compiled call (the references' windowed spectra are held): longer
 #: blocks are cut
@@ -169,13 +170,15 @@ def window_ref(z: NDArray[np.floating], n: int, taps: NDArray[np.float64], zero_
 
 @_jit
 def all_finite(x: NDArray[np.floating]) -> bool:
-    """Whether every sample of ``x`` (1-D) is finite: ``v - v`` is 0 for a finite value
+    """Whether every sample of ``x`` (2-D) is finite: ``v - v`` is 0 for a finite value
     (nothing can overflow) and NaN otherwise; an or-reduction of comparisons vectorises."""
-    bad = False
-    for j in range(x.shape[0]):
-        v = x[j]
-        bad |= (v - v) != 0.0
-    return not bad
+    for i in range(x.shape[0]):
+        bad = False
+        for j in range(x.shape[1]):
+            bad |= (x[i, j] - x[i, j]) != 0.0
+        if bad:
+            return False
+    return True
 
 
 @_jit
@@ -209,20 +212,20 @@ def _transform(seg: NDArray[np.floating], win: NDArray[np.floating], dc_bins: ND
 
 
 @_jit
-def _segments(tail: Any, arr: Any, r: int, s: int, most: int, n: int, step: int, n_tail: int,
-              n_head: int, n_seg: int) -> Any:
-    """Row ``r``'s segments (1, m, n) from segment ``s`` on, at most ``most``: the first
-    ``n_head`` of the ``n_seg`` start in ``tail``, the others in ``arr`` (``n_tail``
-    samples of the tail before it); none across."""
+def _segments(tail: Any, arr: Any, lo: int, hi: int, s: int, most: int, n: int, step: int,
+              n_tail: int, n_head: int, n_seg: int) -> Any:
+    """Rows ``lo:hi``'s segments (hi - lo, m, n) from segment ``s`` on, at most ``most``:
+    the first ``n_head`` of the ``n_seg`` start in ``tail``, the others in ``arr``
+    (``n_tail`` samples of the tail before it); none across."""
     m = min(most, (n_head if s < n_head else n_seg) - s)
     src, start = (tail, s * step) if s < n_head else (arr, s * step - n_tail)
     s0, s1 = src.strides
-    return as_strided(src[r : r + 1, start:], shape=(1, m, n), strides=(s0, step * s1, s1))
+    return as_strided(src[lo:hi, start:], shape=(hi - lo, m, n), strides=(s0, step * s1, s1))
 
 
 @_parallel
 def add_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: int,
-              n_head: int, n: int, step: int, G: int, order: Any, ref_of: Any, taps: Any,
+              n_head: int, n: int, step: int, G: int, runs: Any, ref_of: Any, taps: Any,
               zero_dc: bool, win: Any, dc_bins: Any, dc_values: Any, P: Any, Q: Any,
               zr: Any, fg: Any) -> bool:
     """Add a block ``arr`` (n_ch, n_new) to the sums ``P``, ``Q``; False, and nothing added
@@ -232,28 +235,29 @@ def add_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: int
     The tail (samples not consumed by the blocks before) is ``store[:, :n_tail]``; the
     block's first ``need`` samples are appended to it. Its ``n_seg`` complete segments of
     ``n`` samples, every ``step``, the first ``n_head`` starting in the tail, are added
-    (up to ``G`` per FFT call); then the samples not consumed go to ``dst``. ``order``: the
-    channels, references first; ``ref_of``: each channel's index among the references, or
-    -1; ``zr`` (n_ref, >= n_seg, 2 n_f), ``fg`` (>= n_seg, 2 n_ref, n_f) float64: scratch,
-    the references' spectra and windowed spectra. The window: in frequency (``taps``;
-    ``zero_dc`` removes the mean; ``win`` empty) or on the samples (``win``; the mean
-    removed on the lines ``dc_bins`` of its spectrum, values ``dc_values``; ``taps`` [1]).
+    (up to ``G`` per FFT call); then the samples not consumed go to ``dst``. ``runs`` (k, 2):
+    the channels as rows ``lo:hi`` taken by one thread, the references first and alone, the
+    others up to ``LANES`` adjacent rows; ``ref_of``: each channel's index among the
+    references, or -1; ``zr`` (n_ref, >= n_seg, 2 n_f), ``fg`` (>= n_seg, 2 n_ref, n_f)
+    float64: scratch, the references' spectra and windowed spectra. The window: in
+    frequency (``taps``; ``zero_dc`` removes the mean; ``win`` empty) or on the samples
+    (``win``; the mean removed on the lines ``dc_bins`` of its spectrum, ``dc_values``).
     """
-    n_ch, n_new = arr.shape
+    n_new = arr.shape[1]
     tail = store[:, : n_tail + need]
     bad = 0
-    for i in prange(n_ch):  # check, append to the tail, the references' windowed spectra
-        r = order[i]
-        if not all_finite(arr[r]):
+    for i in prange(runs.shape[0]):  # check, append to the tail, the references' spectra
+        r, hi = runs[i, 0], runs[i, 1]
+        if not all_finite(arr[r:hi]):
             bad += 1
             continue
-        tail[r, n_tail:] = arr[r, :need]
+        tail[r:hi, n_tail:] = arr[r:hi, :need]
         if ref_of[r] < 0:
             continue
         x = np.empty(max(CHUNK, 2 * (n // 2 + 1)))
         s = 0
         while s < n_seg:
-            seg = _segments(tail, arr, r, s, LANES, n, step, n_tail, n_head, n_seg)
+            seg = _segments(tail, arr, r, r + 1, s, LANES, n, step, n_tail, n_head, n_seg)
             m = seg.shape[1]
             zr[ref_of[r], s : s + m] = _transform(seg, win, dc_bins, dc_values)[0].view(arr.dtype)
             window_ref(zr[ref_of[r], s : s + m], n, taps, zero_dc, ref_of[r], fg[s : s + m], x)
@@ -261,27 +265,27 @@ def add_block(arr: Any, store: Any, dst: Any, n_tail: int, need: int, n_seg: int
     if bad:
         return False
     start = n_seg * step
-    for i in prange(n_ch):  # the sums, then the samples kept
-        r = order[i]
+    for i in prange(runs.shape[0]):  # the sums, then the samples kept
+        lo, hi = runs[i, 0], runs[i, 1]
         x = np.empty(CHUNK)
-        if ref_of[r] >= 0:
-            accumulate(fg, zr[ref_of[r] : ref_of[r] + 1, :n_seg], n, taps, zero_dc, r, P, Q, x)
+        if ref_of[lo] >= 0:
+            accumulate(fg, zr[ref_of[lo] :][:1, :n_seg], n, taps, zero_dc, lo, P, Q, x)
         else:
             s = 0
             while s < n_seg:
-                seg = _segments(tail, arr, r, s, G, n, step, n_tail, n_head, n_seg)
+                seg = _segments(tail, arr, lo, hi, s, G, n, step, n_tail, n_head, n_seg)
                 m = seg.shape[1]
                 z = _transform(seg, win, dc_bins, dc_values)
-                accumulate(fg[s : s + m], z.view(arr.dtype), n, taps, zero_dc, r, P, Q, x)
+                accumulate(fg[s : s + m], z.view(arr.dtype), n, taps, zero_dc, lo, P, Q, x)
                 s += m
         if n_seg == 0:
             continue
         if start < n_tail + need:
             k = n_tail + need - start
-            dst[r, :k] = tail[r, start:]
-            dst[r, k : k + n_new - need] = arr[r, need:]
+            dst[lo:hi, :k] = tail[lo:hi, start:]
+            dst[lo:hi, k : k + n_new - need] = arr[lo:hi, need:]
         else:
-            dst[r, : n_tail + n_new - start] = arr[r, start - n_tail :]
+            dst[lo:hi, : n_tail + n_new - start] = arr[lo:hi, start - n_tail :]
     return True
 
 
@@ -294,7 +298,8 @@ def compile_ahead() -> None:
             for win in (np.empty(0, real), np.ones(n, real)):  # window in frequency, in time
                 store = np.zeros((3, 2 * n), real)
                 add_block(block, store, store.copy(), 0, 0, 5, 0, n, 4, 4,
-                          np.arange(3), np.array([0, -1, -1]), np.ones(1), False, win,
+                          np.array([[0, 1], [1, 3]]), np.array([0, -1, -1]), np.ones(1),
+                          False, win,
                           np.array([0]), np.ones(1, np.complex128), np.zeros((2, 3, n_f)),
                           np.zeros((3, n_f)), np.empty((1, 5, 2 * n_f), real),
                           np.empty((5, 2, n_f)))

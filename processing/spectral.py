@@ -19,6 +19,7 @@ multiple coherence of each response.
 
 from __future__ import annotations
 
+import itertools
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -30,7 +31,7 @@ import scipy.fft
 import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
-from processing._welch_kernel import BATCH, CHUNK, accumulate, add_block, all_finite, window_ref
+from processing import _welch_kernel as _kernel
 
 __all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError", "coherence",
            "combine", "frf", "h1", "h2", "hv", "ordinary_coherence", "record_spectra",
@@ -381,10 +382,8 @@ class SpectralAccumulator:
             raise SpectralError(f"scaling must be 'density' or 'spectrum', got {scaling!r}")
         if (group is not None and group < 1) or (workers is not None and workers < 1):
             raise SpectralError(f"group and workers must be >= 1, got {group}, {workers}")
-        if isinstance(window, (str, tuple)):
-            win = np.asarray(scipy.signal.get_window(window, nperseg), dtype=float)
-        else:
-            win = np.asarray(window, dtype=float)
+        win = np.asarray(scipy.signal.get_window(window, nperseg)
+                         if isinstance(window, (str, tuple)) else window, dtype=float)
         if win.shape != (nperseg,):
             raise SpectralError(f"window has shape {win.shape}, expected ({nperseg},)")
         self.fs, self.nperseg, self.noverlap = float(fs), nperseg, noverlap
@@ -400,9 +399,8 @@ class SpectralAccumulator:
         self._taps = _cosine_taps(win)
         self._zero_dc = self._taps is not None and detrend == "constant"
         W = np.fft.rfft(win)
-        bins = np.flatnonzero(np.abs(W) > 1e-12 * np.abs(W[0]))
-        if self._taps is not None or detrend is False:
-            bins = bins[:0]
+        time_dc = self._taps is None and detrend == "constant"
+        bins = np.flatnonzero((np.abs(W) > 1e-12 * np.abs(W[0])) & time_dc)
         self._dc_bins, self._dc_values = bins, W[bins]
         self.freq = np.asarray(np.fft.rfftfreq(nperseg, 1.0 / fs), dtype=np.float64)
         self.reset()
@@ -441,13 +439,16 @@ class SpectralAccumulator:
         # nperseg samples, and fewer than nperseg appended to it (see update)
         self._stores = [np.empty((n_ch, 2 * self.nperseg), dtype) for _ in range(2)]
         self._tail = self._stores[0][:, :0]
-        self._order = np.array(refs + tuple(c for c in range(n_ch) if c not in refs))
+        rest = [c for c in range(n_ch) if c not in refs]  # in runs of adjacent rows (add_block)
+        cuts = [i for i in range(1, len(rest)) if rest[i] != rest[i - 1] + 1 or i % 4 == 0]
+        self._runs = np.array([(r, r + 1) for r in refs] + [
+            (rest[a], rest[b - 1] + 1) for a, b in itertools.pairwise([0, *cuts, len(rest)])])
         self._ref_of = np.full(n_ch, -1)  # each row's index among the references
         self._ref_of[list(refs)] = np.arange(n_ref)
         self._win = np.empty(0, dtype) if self._taps is not None else self.window.astype(dtype)
         self._P, self._Q = np.zeros((2 * n_ref, n_ch, n_f)), np.zeros((n_ch, n_f))
-        self._zr = np.empty((n_ref, BATCH + 1, 2 * n_f), dtype)  # scratch of add_block
-        self._fg = np.empty((BATCH + 1, 2 * n_ref, n_f))
+        self._zr = np.empty((n_ref, _kernel.BATCH + 1, 2 * n_f), dtype)  # scratch of add_block
+        self._fg = np.empty((_kernel.BATCH + 1, 2 * n_ref, n_f))
 
     def _admit(self, block: ArrayLike) -> NDArray[np.floating]:
         """``block`` checked, as the kernel takes it (the accumulator's sample type, and
@@ -474,17 +475,16 @@ class SpectralAccumulator:
         assert self._tail is not None
         n_tail, n_new = self._tail.shape[-1], arr.shape[-1]
         step, N = self.step, self.nperseg
-        if n_new > BATCH * step:  # in parts of at most BATCH + 1 segments, once checked
-            if not all(all_finite(row) for row in arr):
+        if n_new > _kernel.BATCH * step:  # in parts of at most BATCH + 1 segments, once checked
+            if not _kernel.all_finite(arr):
                 raise SpectralError("block contains NaN or infinite samples; nothing was added")
-            for k in range(0, n_new, BATCH * step):
-                self.update(arr[:, k : k + BATCH * step])
+            for k in range(0, n_new, _kernel.BATCH * step):
+                self.update(arr[:, k : k + _kernel.BATCH * step])
             return
         avail = n_tail + n_new
         n_seg = 0 if avail < N else (avail - N) // step + 1  # every complete segment
         # segments starting in the tail are read there once the block's first samples they
-        # need are appended to it (all of the block if no segment is complete); the others
-        # where they are, in the block
+        # need are appended to it (all of it if no segment is complete); the others in place
         n_head = min(n_seg, -(-n_tail // step))
         need = n_new if n_seg == 0 else (max(0, (n_head - 1) * step + N - n_tail) if n_head else 0)
         with _LAUNCH:
@@ -492,11 +492,11 @@ class SpectralAccumulator:
             numba.set_num_threads(self.workers)
             chunk = numba.set_parallel_chunksize(1)  # a thread free takes the next channel
             try:
-                finite = add_block(arr, self._stores[0], self._stores[1], n_tail, need, n_seg,
-                                   n_head, N, step, self.group, self._order, self._ref_of,
-                                   _NO_TAPS if self._taps is None else self._taps,
-                                   self._zero_dc, self._win, self._dc_bins, self._dc_values,
-                                   self._P, self._Q, self._zr, self._fg)
+                finite = _kernel.add_block(
+                    arr, self._stores[0], self._stores[1], n_tail, need, n_seg, n_head, N, step,
+                    self.group, self._runs, self._ref_of,
+                    _NO_TAPS if self._taps is None else self._taps, self._zero_dc, self._win,
+                    self._dc_bins, self._dc_values, self._P, self._Q, self._zr, self._fg)
             finally:
                 numba.set_parallel_chunksize(chunk)
                 numba.set_num_threads(threads)
@@ -532,17 +532,10 @@ class SpectralAccumulator:
         )
 
 
-def welch_spectra(
-    data: ArrayLike,
-    fs: float,
-    nperseg: int,
-    noverlap: int | None = None,
-    **kwargs: object,
-) -> CrossSpectra:
-    """One-shot :class:`SpectralAccumulator`: spectra of ``data`` (n_ch, n) at ``fs`` Hz.
-
-    Keyword arguments are those of :class:`SpectralAccumulator`.
-    """
+def welch_spectra(data: ArrayLike, fs: float, nperseg: int, noverlap: int | None = None,
+                  **kwargs: object) -> CrossSpectra:
+    """Spectra of ``data`` (n_ch, n) at ``fs`` Hz by a one-shot :class:`SpectralAccumulator`
+    (keyword arguments: its own)."""
     acc = SpectralAccumulator(fs, nperseg, noverlap, **kwargs)  # type: ignore[arg-type]
     acc.update(data)
     return acc.spectra()
@@ -587,10 +580,10 @@ def record_spectra(
     Z = np.ascontiguousarray(scipy.fft.rfft(x, axis=-1, overwrite_x=True).swapaxes(0, 1))
     n_f = Z.shape[-1]
     P, Q = np.zeros((2 * len(refs), n_ch, n_f)), np.zeros((n_ch, n_f))
-    fg, buf = np.empty((n_rec, 2 * len(refs), n_f)), np.empty(max(CHUNK, 2 * n_f))
+    fg, buf = np.empty((n_rec, 2 * len(refs), n_f)), np.empty(max(_kernel.CHUNK, 2 * n_f))
     for a, r in enumerate(refs):
-        window_ref(Z[r].view(x.dtype), n, _NO_TAPS, False, a, fg, buf)
-    accumulate(fg, Z.view(x.dtype), n, _NO_TAPS, False, 0, P, Q, buf)
+        _kernel.window_ref(Z[r].view(x.dtype), n, _NO_TAPS, False, a, fg, buf)
+    _kernel.accumulate(fg, Z.view(x.dtype), n, _NO_TAPS, False, 0, P, Q, buf)
     Sff, Sfx, Sxx = _spectra_sums(P, Q, refs, resps)
     freq = np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64)
     scale = _onesided_scale(freq.size, n, fs * n) / n_rec
