@@ -397,7 +397,7 @@ def main() -> int:
         args.pyfrf = False
         pyfrf_note = "pyFRF is not installed: (b) not measured (pip install pyFRF)"
 
-    console = Console(width=200)
+    console = Console(width=260)
     title = (f"H1 spectra, 1 force + {N_RESP} accelerations, {args.duration:g} s, "
              f"nperseg {NPERSEG}, 50 % overlap, ours with {args.workers} threads")
     columns = COLUMNS + (AGAINST if args.against else ())
