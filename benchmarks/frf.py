@@ -363,6 +363,7 @@ def write_docs(path: Path, title: str, columns: tuple[str, ...], rows: list[list
         f"- machine: {cpu}, {os.cpu_count()} cores, {platform.system()} "
         f"{platform.release()}, Python {platform.python_version()}",
         f"- command: `{' '.join(['.venv/bin/python', 'benchmarks/frf.py', *sys.argv[1:]])}`",
+        f"- load average (1 min) when written: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores",
         "", "| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns),
         *("| " + " | ".join(r) + " |" for r in rows), "", note, "",
     ]

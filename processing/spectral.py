@@ -490,7 +490,7 @@ class SpectralAccumulator:
         with _LAUNCH:
             threads = numba.get_num_threads()
             numba.set_num_threads(self.workers)
-            chunk = numba.set_parallel_chunksize(1)  # a thread free takes the next channel
+            chunk = numba.set_parallel_chunksize(1)  # the runs handed out one at a time
             try:
                 finite = _kernel.add_block(
                     arr, self._stores[0], self._stores[1], n_tail, need, n_seg, n_head, N, step,
