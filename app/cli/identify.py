@@ -59,8 +59,9 @@ def add_mount_arguments(p: Any) -> None:
     """``--mounts``, ``--excitation-hz``, ``--loss-factor-hz`` (also used by ``report``)."""
     g = p.add_argument_group("mount system (modes are always reported)")
     g.add_argument("--mounts", type=Path, metavar="TOML",
-                   help="mounts file (crank_axis, [[mount]] name/position/axes, METHOD.md): "
-                        "individual mount rates and loss factors, torque roll axis")
+                   help="mounts file (crank_axis, [[mount]] name/position/axes; "
+                        "docs/conventions.md): individual mount rates and loss factors, "
+                        "torque roll axis")
     g.add_argument("--excitation-hz", type=float, metavar="F",
                    help="excitation frequency (e.g. idle firing order), Hz: each mode's "
                         "frequency ratio, isolation margin (ratio / sqrt 2) and transmissibility")

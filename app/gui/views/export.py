@@ -33,7 +33,8 @@ class ExportView(QtWidgets.QWidget):
                                    "settings, FRFs and result")
         self.uff_button.setToolTip("FRFs with geometry (UFF 164, 2411, 58), as pyuff and "
                                    "'insitu identify' read them")
-        self.json_button.setToolTip("The identification result (METHOD.md result JSON)")
+        self.json_button.setToolTip("The identification result (the result JSON of "
+                                    "docs/conventions.md)")
         self.html_button.setToolTip("One self-contained HTML page with tables and figures")
         self.run_button.clicked.connect(self._save_run)
         self.uff_button.clicked.connect(self._export_uff)
