@@ -102,6 +102,8 @@ class Bands:
     leakage: bool
     choice: BandChoice | None
     warnings: tuple[str, ...]
+    #: which bands were chosen and why, in words
+    reason: str = ""
 
 
 def _band_mask(freq: NDArray[np.float64], band: tuple[float, float], what: str) -> (
@@ -145,12 +147,16 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None) -> Bands
                                         rigid_band_top=rigid_band_top)
     mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
     stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
+    reason = "bands given" if choice is None else (
+        choice.reason if opt.mass_band is None else "mass line given; stiffness band chosen")
+    if choice is not None and choice.relaxed and opt.mass_band is None:
+        warnings.append(choice.reason)
     return Bands(
         mass_band=(float(mass_band[0]), float(mass_band[1])),
         stiffness_band=(float(stiff_band[0]), float(stiff_band[1])),
         in_mass=_band_mask(problem.freq, mass_band, "mass-line"),
         in_stiffness=_band_mask(problem.freq, stiff_band, "stiffness"),
-        leakage=leak, choice=choice, warnings=tuple(warnings),
+        leakage=leak, choice=choice, warnings=tuple(warnings), reason=reason,
     )
 
 
@@ -222,6 +228,8 @@ class Fit:
     normal: NDArray[np.float64]
     physical_enforced: bool
     operators: LineOperators
+    #: how the mass-line model was chosen, in words
+    model_note: str = ""
 
 
 class _StiffnessStep:
@@ -308,35 +316,116 @@ def _iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
     return fit_, theta, K, C, Xcs, opt.max_iter, False
 
 
+def _mass_line_rhs(problem: Problem, Xm: NDArray[np.complex128], wm: NDArray[np.float64],
+                   K: NDArray[np.float64], C: NDArray[np.float64]) -> NDArray[np.complex128]:
+    """``B = T + K* X / w^2`` on the mass lines (K* as the exponential window shows it)."""
+    a = problem.window_decay
+    s2 = (1j * wm + a) ** 2
+    KX = np.einsum("ab,bel->ael", K + a * C, Xm) + 1j * wm * np.einsum("ab,bel->ael", C, Xm)
+    return problem.T[:, :, None] - KX / s2 + 0j
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    """One mass-line model fitted to the end of the iteration."""
+
+    ml: MassLineProblem
+    fit: MassLineFit
+    theta: NDArray[np.float64]
+    K: NDArray[np.float64]
+    C: NDArray[np.float64]
+    Xs: NDArray[np.complex128]
+    iterations: int
+    converged: bool
+
+
+def _fit_model(problem: Problem, weights: LineWeights, step: _StiffnessStep,
+               shapes: list[NDArray[np.complex128]]) -> _Candidate:
+    """The mass-line model with the given leakage shapes, fitted (plain method without a
+    window: the article's fixed point, solved directly)."""
+    msel, ssel = weights.mass_lines, weights.stiffness_lines
+    ml = MassLineProblem(problem.X[..., msel], weights=weights.mass, row_scale=problem.row_scale,
+                         shapes=np.array([stack_real(s[msel]) for s in shapes]) if shapes
+                         else None)
+    if not problem.improved and not problem.window_decay:
+        # the article's iteration is affine in theta here: its limit is solved directly
+        mean = step.mean
+        fit_ = ml.fixed_point_affine(problem.T, mean.w2, mean.KB, mean.C, problem.w[msel])
+        Xs = problem.X[..., ssel]
+        K, C = step(mass_matrix(fit_.theta), Xs)
+        return _Candidate(ml, fit_, fit_.theta, K, C, Xs, 1, True)
+    fit_, theta, K, C, Xs, it, converged = _iterate(problem, weights, ml, step, shapes)
+    return _Candidate(ml, fit_, theta, K, C, Xs, it, converged)
+
+
+def _halves(weights: LineWeights) -> tuple[LineWeights, LineWeights]:
+    """The mass lines split into their lower and upper halves."""
+    idx = np.flatnonzero(weights.mass_lines)
+    n = idx.size // 2
+    parts = []
+    for sl in (slice(0, n), slice(n, None)):
+        lines = np.zeros_like(weights.mass_lines)
+        lines[idx[sl]] = True
+        parts.append(dataclasses.replace(weights, mass_lines=lines, mass=weights.mass[:, sl]))
+    return parts[0], parts[1]
+
+
+def _spread(problem: Problem, weights: LineWeights, step: _StiffnessStep,
+            shapes: list[NDArray[np.complex128]]) -> float:
+    """How far the estimates from the two halves of the mass line disagree: the largest
+    difference of mass, first moments / L and inertia / L^2, relative to the mass."""
+    L = problem.geometry.length
+    scale = np.array([1.0, *(3 * [1 / L]), *(6 * [1 / L**2])])
+    lo, hi = (_fit_model(problem, w, step, shapes).theta for w in _halves(weights))
+    return float(np.max(np.abs(hi - lo) * scale) / max(abs(lo[0] + hi[0]) / 2, 1e-300))
+
+
+def _upper_residual_chosen(problem: Problem, weights: LineWeights,
+                           step: _StiffnessStep) -> tuple[bool, str]:
+    """Whether the upper residual (a ``w^2`` term per equation entry, for modes above the
+    band) is modelled: when the estimate from the two halves of the mass line agrees
+    better with it than without it (unmodelled residual makes the estimate drift with
+    the band; a residual fitted to noise makes it scatter)."""
+    if np.count_nonzero(weights.mass_lines) < 8:
+        return False, "upper residual not modelled: fewer than 8 mass lines"
+    w = problem.w
+    without = _spread(problem, weights, step, [])
+    with_ = _spread(problem, weights, step, [(w / w[-1]) ** 2 + 0j])
+    use = with_ < without
+    return use, (f"upper residual (w^2 term) {'modelled' if use else 'not modelled'}: "
+                 f"half-band disagreement {with_:.2%} with it, {without:.2%} without")
+
+
 def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
     """Inertia, K and C: the article's fixed point solved directly (plain, no window), else
-    the iteration of section 2.2; then projected onto consistent inertia if asked."""
+    the iteration of section 2.2; then projected onto consistent inertia if asked.
+
+    Improved method without modelled elastic leakage: the fit with an upper residual (a
+    ``w^2`` term for modes above the band) is kept when the data call for it (BIC).
+    """
     opt, T = problem.options, problem.T
-    msel, ssel = weights.mass_lines, weights.stiffness_lines
+    ssel = weights.stiffness_lines
     ins = bands.in_stiffness
     ops = line_operators(problem.X[..., ins], T, problem.w[ins])  # eq. 14 operators, per line
     step = _StiffnessStep(problem, weights, ops, ssel[ins])
     shapes = _leakage_shapes(problem, bands)
-    ml = MassLineProblem(problem.X[..., msel], weights=weights.mass, row_scale=problem.row_scale,
-                         shapes=np.array([stack_real(s[msel]) for s in shapes]) if shapes
-                         else None)
-    Xs = problem.X[..., ssel]
-    if not problem.improved and not problem.window_decay:
-        # the article's iteration is affine in theta here: its limit is solved directly
-        mean = step.mean
-        fit_ = ml.fixed_point_affine(T, mean.w2, mean.KB, mean.C, problem.w[msel])
-        theta, it, converged = fit_.theta, 1, True
-        K, C = step(mass_matrix(theta), Xs)
-    else:
-        fit_, theta, K, C, Xs, it, converged = _iterate(problem, weights, ml, step, shapes)
+    best = _fit_model(problem, weights, step, shapes)
+    note = ""
+    if problem.improved and not shapes and opt.leakage == "auto":
+        use, note = _upper_residual_chosen(problem, weights, step)
+        if use:
+            w = problem.w
+            best = _fit_model(problem, weights, step, [(w / w[-1]) ** 2 + 0j])
+    theta, K, C, Xs = best.theta, best.K, best.C, best.Xs
     enforced = False
     if opt.physical:
-        theta_c = constrain_physical(theta, fit_.normal)
+        theta_c = constrain_physical(theta, best.fit.normal)
         enforced = not np.array_equal(theta_c, theta)
         if enforced:
             theta = theta_c
             K, C = step(mass_matrix(theta), Xs)
-    return Fit(theta, K, C, it, converged, fit_.normal, enforced, ops)
+    return Fit(theta, K, C, best.iterations, best.converged, best.fit.normal, enforced, ops,
+               note)
 
 
 # --- stage 4: checks -------------------------------------------------------------------------
@@ -416,6 +505,8 @@ def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
         physical_enforced=fitted.physical_enforced,
         warnings=(*problem.warnings, *bands.warnings, *checks.warnings),
         stiffness_per_line=checks.stiffness_per_line,
+        band_reason=bands.reason,
+        model_note=fitted.model_note,
     )
 
 

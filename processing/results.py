@@ -55,6 +55,10 @@ class IdentificationResult:
     #: left out because some FRF's coherence is below ``coherence_threshold``
     coherence_ranges_hz: tuple[tuple[float, float], ...] = ()
     coherence_threshold: float = 0.8
+    #: which bands were chosen and why, in words
+    band_reason: str = ""
+    #: how the mass-line model was chosen (upper residual or not), in words
+    model_note: str = ""
 
     def checks(self) -> dict[str, dict[str, Any]]:
         """Named pass/fail checks with their figures (result JSON ``checks``)."""
@@ -110,6 +114,8 @@ class IdentificationResult:
             "stiffness": self.K.tolist(),
             "damping": self.C.tolist(),
             "bands": {"mass_line": list(self.mass_band), "stiffness": list(self.stiffness_band)},
+            "band_choice": self.band_reason,
+            "mass_line_model": self.model_note,
             "checks": _jsonable(self.checks()),
             "theta": self.theta.tolist(),
             "method": self.method,
