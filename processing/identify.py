@@ -123,9 +123,10 @@ def _band_mask(freq: NDArray[np.float64], band: tuple[float, float], what: str) 
     return m
 
 
-def choose_bands(problem: Problem, rigid_band_top: float | None = None) -> Bands:
+def choose_bands(problem: Problem, rigid_band_top: float | None = None,
+                 rigid_band_fallback: float | None = None) -> Bands:
     """The bands given in the options, or chosen from the data (``rigid_band_top``, Hz,
-    bounds an automatic mass line)."""
+    bounds an automatic mass line; ``rigid_band_fallback`` when it leaves none)."""
     opt, peaks, noise = problem.options, problem.peaks, problem.noise
     # Leakage terms are free per equation entry: on noisy data the regressors left after
     # eliminating them are dominated by noise and the fit is biased low (errors in
@@ -144,7 +145,8 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None) -> Bands
         clean = problem.clean_lines
         choice = choose_automatic_bands(problem.freq[clean], problem.X[..., clean], problem.T,
                                         peaks, elastic_margin=0.7 if leak else 0.5,
-                                        rigid_band_top=rigid_band_top)
+                                        rigid_band_top=rigid_band_top,
+                                        rigid_band_fallback=rigid_band_fallback)
     mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
     stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
     reason = "bands given" if choice is None else (
@@ -513,17 +515,24 @@ def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
 # --- entry points ----------------------------------------------------------------------------
 
 
-def _rigid_band_top(frf: FRFSet) -> tuple[float | None, list[str]]:
+def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]]:
     """Top of the rigid band of the rigidity check (article section 5.1), Hz, when below the
-    data's top, and notes."""
+    data's top; the same with the threshold raised to 3x the check's error floor (noise,
+    location or sensor errors), used when the first leaves no mass line; and notes."""
+    fmin = float(frf.freq[frf.freq > 0][0]) if np.any(frf.freq > 0) else 0.0
     try:
-        rc = rigidity_check(frf, fmin=float(frf.freq[frf.freq > 0][0]))
-    except (GeometryError, IndexError):
-        return None, []  # fewer than 3 response nodes: the elastic-mode detection still bounds it
-    if rc.band is None:
-        return None, ["rigidity check: no rigid band found (check sensor mounting and "
-                      "coordinates)"]
-    return (rc.band[1] if rc.band[1] < frf.freq[-1] else None), []
+        rc = rigidity_check(frf, fmin=fmin)
+    except GeometryError:
+        return None, None, []  # under 3 response nodes: the elastic-mode detection bounds it
+    top = float(frf.freq[-1])
+
+    def below_top(band: tuple[float, float] | None) -> float | None:
+        return band[1] if band is not None and band[1] < top else None
+
+    raised = rc.band_at(3 * rc.error_floor(fmin), fmin=fmin)
+    notes = [] if rc.band is not None else [
+        "rigidity check: no rigid band found (check sensor mounting and coordinates)"]
+    return below_top(rc.band), below_top(raised) if raised != rc.band else None, notes
 
 
 def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
@@ -541,13 +550,15 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
     """
     opt = options or IdentifyOptions()
     rigid_top: float | None = None
+    rigid_raised: float | None = None
     notes: list[str] = []
     if opt.use_rigidity and (opt.mass_band is None or opt.stiffness_band is None):
-        rigid_top, notes = _rigid_band_top(frf)
+        rigid_top, rigid_raised, notes = _rigid_band_tops(frf)
     tau = frf.meta.get("exponential_tau") if frf.meta else None
     result = identify_arrays(
         frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
         coherence=frf.coherence, options=opt, rigid_band_top=rigid_top,
+        rigid_band_fallback=rigid_raised,
         exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0 else None,
     )
     if notes:
@@ -567,19 +578,21 @@ def identify_arrays(
     options: IdentifyOptions | None = None,
     rigid_band_top: float | None = None,
     exponential_tau: float | None = None,
+    rigid_band_fallback: float | None = None,
 ) -> IdentificationResult:
     """:func:`identify` on plain arrays (shapes as in :class:`FRFSet`).
 
-    ``rigid_band_top`` (Hz) bounds the automatic mass-line band; ``exponential_tau``
-    (s) is the time constant of an exponential window applied to the records.
+    ``rigid_band_top`` (Hz) bounds the automatic mass-line band, ``rigid_band_fallback``
+    (Hz) when the first leaves no mass line; ``exponential_tau`` (s) is the time
+    constant of an exponential window applied to the records.
     """
     opt = options or IdentifyOptions()
     if opt.refine_points > 0:
         return _refined(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs, coherence, opt,
-                        rigid_band_top, exponential_tau)
+                        (rigid_band_top, rigid_band_fallback), exponential_tau)
     problem = prepare(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs, coherence=coherence,
                       options=opt, exponential_tau=exponential_tau)
-    bands = choose_bands(problem, rigid_band_top)
+    bands = choose_bands(problem, rigid_band_top, rigid_band_fallback)
     weights = weigh_lines(problem, bands)
     fitted = fit(problem, bands, weights)
     return assemble(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
@@ -589,27 +602,44 @@ def _refined(
     freq: NDArray[np.float64], H: NDArray[np.complex128], resp_xyz: NDArray[np.float64],
     resp_dirs: NDArray[np.float64], exc_xyz: NDArray[np.float64], exc_dirs: NDArray[np.float64],
     coherence: NDArray[np.float64] | None, opt: IdentifyOptions,
-    rigid_band_top: float | None, exponential_tau: float | None,
+    rigid_tops: tuple[float | None, float | None], exponential_tau: float | None,
 ) -> IdentificationResult:
-    """Identification alternated ``opt.refine_points`` times with response-point refinement
-    on the mass-line lines (:mod:`processing.refine`)."""
+    """Identification alternated at most ``opt.refine_points`` times with response-point
+    refinement on the mass-line lines (:mod:`processing.refine`).
+
+    A round is kept only when the synthesised FRFs fit the data better than before; the
+    rounds stop when a step moves no point by more than 0.01 mm (converged) or when a
+    step does not improve the fit (the previous locations are kept). The reason is
+    given in the warnings.
+    """
     once = dataclasses.replace(opt, refine_points=0)
 
     def identify_at(xyz: NDArray[np.float64]) -> IdentificationResult:
         return identify_arrays(freq, H, xyz, resp_dirs, exc_xyz, exc_dirs, coherence=coherence,
-                               options=once, rigid_band_top=rigid_band_top,
+                               options=once, rigid_band_top=rigid_tops[0],
+                               rigid_band_fallback=rigid_tops[1],
                                exponential_tau=exponential_tau)
 
-    result = identify_at(np.asarray(resp_xyz, dtype=float))
-    xyz = np.array(resp_xyz, dtype=float)
+    xyz0 = np.asarray(resp_xyz, dtype=float)
+    result, xyz = identify_at(xyz0), xyz0.copy()
     T = excitation_matrix(exc_xyz, exc_dirs)
     freq = np.asarray(freq, dtype=float)
-    for _ in range(opt.refine_points):
+    why = f"the {opt.refine_points} rounds asked for were done"
+    for k in range(1, opt.refine_points + 1):
         lines = np.isin(freq, result.mass_lines)
         w = 2 * np.pi * freq[lines]
         shapes = [mode_shape_basis(w, p) for p in result.elastic_modes]
         shapes.append(np.asarray(w**2, dtype=np.complex128))  # quasi-static, modes above
-        xyz = xyz - point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
-                                  result.M, result.K, result.C, shapes=np.array(shapes))
-        result = identify_at(xyz)
-    return dataclasses.replace(result, point_corrections=np.asarray(resp_xyz, float) - xyz)
+        step = point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
+                             result.M, result.K, result.C, shapes=np.array(shapes),
+                             applied=xyz0 - xyz)
+        trial = identify_at(xyz - step)
+        if trial.synthesis.overall >= result.synthesis.overall:
+            why = f"round {k} did not improve the fit of the synthesised FRFs; kept round {k - 1}"
+            break
+        result, xyz = trial, xyz - step
+        if np.max(np.abs(step)) < 1e-5:
+            why = f"converged after {k} rounds (last step under 0.01 mm)"
+            break
+    return dataclasses.replace(result, point_corrections=xyz0 - xyz,
+                               warnings=(*result.warnings, f"point refinement: {why}"))

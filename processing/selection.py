@@ -212,6 +212,7 @@ def choose_bands(
     elastic: tuple[ElasticPeak, ...],
     *,
     rigid_band_top: float | None = None,
+    rigid_band_fallback: float | None = None,
     mass_low_factor: float = 2.0,
     elastic_margin: float = 0.7,
 ) -> BandChoice:
@@ -221,7 +222,8 @@ def choose_bands(
     mode and ends at ``elastic_margin`` times the first elastic mode, or at the
     rigidity limit ``rigid_band_top``, or at the end of the data. A limit that
     leaves no mass line above the rigid-body modes is set aside (the rigidity
-    check first, upset by noise or location errors; then the elastic margin,
+    check first, upset by noise or location errors, for ``rigid_band_fallback``,
+    its limit at a threshold above its error floor; then the elastic margin,
     up to 0.9x the mode) and the reason says so: a band is always returned when
     the data hold at least 8 lines. The stiffness band runs from the first line to
     1.5 times the highest rigid-body mode (not into the mass line).
@@ -234,6 +236,8 @@ def choose_bands(
            else "the end of the data")
     if rigid_band_top is not None and rigid_band_top < top:
         limits.append((rigid_band_top, "the rigidity check's limit"))
+    if rigid_band_fallback is not None and rigid_band_fallback < top:
+        limits.append((rigid_band_fallback, "the rigidity check's limit at 3x its error floor"))
     limits.append((top, why))
     if f_el and 0.9 * f_el < f_end:
         limits.append((0.9 * f_el, f"0.9x the first elastic mode ({f_el:.1f} Hz)"))
