@@ -23,6 +23,7 @@ __all__ = [
     "DeviceTimeoutError",
     "ProtocolError",
     "SyncError",
+    "one_line",
 ]
 
 
@@ -60,3 +61,9 @@ class ProtocolError(DeviceError):
 
 class SyncError(DeviceError):
     """Streams from devices on separate clocks cannot be aligned; the run is refused."""
+
+
+def one_line(text: str) -> str:
+    """``text`` with its non-printable characters escaped (a key named ``"\\n"`` in a TOML
+    file, say), so that an error message stays one line."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)

@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import Any
 
 from drivers.base import QUANTITY_UNITS, ChannelConfig
+from drivers.errors import one_line
 
 __all__ = [
     "CanTransportConfig",
@@ -131,7 +132,7 @@ class _Ctx:
         self.source = source
 
     def fail(self, key: str, msg: str) -> StationConfigError:
-        return StationConfigError(f"{self.source}: {key}: {msg}")
+        return StationConfigError(one_line(f"{self.source}: {key}: {msg}"))
 
     def table(self, value: object, key: str) -> dict[str, Any]:
         if not isinstance(value, dict):

@@ -17,6 +17,7 @@ b'ID?\\n'
 from __future__ import annotations
 
 import logging
+import socket
 import threading
 import time
 
@@ -28,6 +29,12 @@ from drivers.errors import DeviceNotAvailableError, DeviceTimeoutError
 __all__ = ["CanLink", "SerialLink", "log_wire"]
 
 wire_logger = logging.getLogger("drivers.wire")
+logger = logging.getLogger(__name__)
+
+#: pauses (s) after each failed connection to a network transport: 4 tries in about 1.5 s
+CONNECT_BACKOFF = (0.1, 0.3, 0.6, 0.0)
+#: one connection attempt's time limit, s
+CONNECT_TIMEOUT = 1.0
 
 
 class _SplitMessageFilter(logging.Filter):
@@ -36,11 +43,15 @@ class _SplitMessageFilter(logging.Filter):
     Its client reads 1024 bytes at a time and logs a WARNING ("Got incomplete
     message => waiting for more data") every time a read ends inside an
     element, which at a few thousand frames per second is most reads; the element
-    is reassembled correctly. Other warnings pass.
+    is reassembled correctly. Its failed connection attempts (one warning per try,
+    hundreds of thousands in its 10 s loop) are dropped too. Other warnings pass.
     """
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not str(record.msg).startswith("Got incomplete message")
+        # its connect loop retries without a pause for 10 s and logs every refusal:
+        # CanLink.open probes the server first and says it once
+        return not str(record.msg).startswith(("Got incomplete message",
+                                                "Failed to connect to server"))
 
 
 _socketcand_filter = _SplitMessageFilter()
@@ -179,12 +190,33 @@ class CanLink:
         if self._bus_kwargs.get("interface") == "socketcand":
             logging.getLogger("can.interfaces.socketcand.socketcand").addFilter(
                 _socketcand_filter)  # adding the same filter twice is a no-op
+            self._probe_server()
         try:
             self._bus = can.Bus(**self._bus_kwargs)  # type: ignore[arg-type]
         except (can.CanError, OSError, ValueError, ImportError) as err:
             raise DeviceNotAvailableError(
                 f"{self.name}: cannot open CAN bus {self._bus_kwargs}: {err}", self.name
             ) from err
+
+    def _probe_server(self) -> None:
+        """Reach a socketcand server's TCP port, retrying with back-off, or refuse in one line."""
+        host = str(self._bus_kwargs.get("host", "localhost"))
+        port = int(str(self._bus_kwargs.get("port", 29536)))
+        last: OSError = ConnectionRefusedError()
+        for attempt, pause in enumerate(CONNECT_BACKOFF, start=1):
+            try:
+                socket.create_connection((host, port), timeout=CONNECT_TIMEOUT).close()
+                return
+            except OSError as err:
+                last = err
+                logger.debug("%s: socketcand %s:%d try %d: %s", self.name, host, port,
+                             attempt, err)
+            time.sleep(pause)
+        reason = last.strerror or type(last).__name__
+        raise DeviceNotAvailableError(
+            f"{self.name}: socketcand server {host}:{port} not reachable ({reason}) after "
+            f"{len(CONNECT_BACKOFF)} tries: start the bench's server or correct host and "
+            "port in the station file", self.name)
 
     @property
     def bus(self) -> can.BusABC:

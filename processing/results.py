@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from processing.geometry import DEFAULT_MAX_COND_T, GeometryReport
 from processing.inertia import InertiaProperties
+from processing.modes import rigid_body_modes
 from processing.selection import ElasticPeak
 from processing.synthesis import SynthesisFit
 
@@ -130,7 +131,18 @@ class IdentificationResult:
             "warnings": list(self.warnings),
             "response_point_corrections": (None if self.point_corrections is None
                                            else self.point_corrections.tolist()),
+            "modes": _modes_json(self.M, self.K, self.C),
         }
+
+
+def _modes_json(M: NDArray[np.float64], K: NDArray[np.float64], C: NDArray[np.float64]
+                ) -> list[dict[str, Any]]:
+    """The six rigid-body modes (``METHOD.md`` key ``modes``); empty when M is not positive
+    definite (no modes exist)."""
+    try:
+        return rigid_body_modes(M, K, C).to_json()
+    except ValueError:
+        return []
 
 
 def _jsonable(obj: Any) -> Any:

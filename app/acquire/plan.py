@@ -60,6 +60,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.base import ChannelConfig
+from drivers.errors import one_line
 from drivers.station import StationConfig
 from processing.data import Geometry
 from processing.geometry import GeometryReport, check_geometry
@@ -286,7 +287,7 @@ class _Ctx:
         self.source = source
 
     def fail(self, key: str, msg: str) -> PlanError:
-        return PlanError(f"{self.source}: {key}: {msg}")
+        return PlanError(one_line(f"{self.source}: {key}: {msg}"))
 
     def table(self, data: Mapping[str, Any], name: str, allowed: set[str]) -> dict[str, Any]:
         t = data.get(name, {})
@@ -324,10 +325,11 @@ class _Ctx:
                             f"must be [x, y, z] numbers, got {v!r}")
         a = np.asarray(v, dtype=float)
         if nonzero:
-            n = float(np.linalg.norm(a))
-            if n == 0:
+            big = float(np.abs(a).max())
+            if big == 0:
                 raise self.fail(f"{key}.{name}", "must be a non-zero direction")
-            a = a / n
+            a = a / big  # scaled first: the norm of [1e200, 0, 1] does not overflow
+            a = a / float(np.linalg.norm(a))
         return (float(a[0]), float(a[1]), float(a[2]))
 
     def node(self, t: Mapping[str, Any], key: str) -> int:

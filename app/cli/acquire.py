@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +57,10 @@ class _Bars(Listener):
 
     def on_next_point(self, point: Any) -> None:
         self.progress.update(self.hits, description=f"hits at {point.label}", completed=0)
+        if not self.console.is_terminal:  # no live bars in a log file: one line a point
+            done = self.progress.tasks[self.points].completed
+            self.console.print(f"{point.label} ({done:g} of "
+                               f"{self.progress.tasks[self.points].total:g} done)")
 
     def on_hit(self, hit: HitRecord) -> None:
         if not hit.accepted:
@@ -77,8 +82,9 @@ def add_parser(sub: Any) -> None:
                        description=__doc__)
     p.add_argument("--station", type=Path, help="station.toml (default: built-in mock bench)")
     p.add_argument("--plan", type=Path, help="test plan TOML (default with --mock: the bench's)")
-    p.add_argument("--out", type=Path, required=True, help="run file to write (RUN.h5)")
-    p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument("--out", type=Path, help="run file to write (RUN.h5)")
+    p.add_argument("--resume", nargs="?", const=True, default=False, metavar="RUN.h5",
+                   help="continue the interrupted run in RUN.h5 (or in --out)")
     p.add_argument("--override", action="append", default=[], metavar="HIT=VERDICT",
                    help="with --resume: accept, reject or clear the verdict of stored record "
                         "HIT (from 1); repeatable")
@@ -174,16 +180,58 @@ def _apply_overrides(args: argparse.Namespace, console: Console) -> bool:
     return True
 
 
+def _kept(path: Path) -> str:
+    """What an ended run left, as it is on the disk: never a file that does not exist."""
+    try:
+        n = len(read_run(path, with_data=False).records) if path.is_file() else 0
+    except ValueError:
+        n = 0
+    if n:
+        return f"its {n} records are in {path} (continue with --resume {path})"
+    if path.is_file():
+        return f"no record was acquired ({path} holds the run's settings; continue with " \
+               f"--resume {path})"
+    return "no record was acquired and no run file was written"
+
+
+def _check_paths(args: argparse.Namespace) -> None:
+    """``--resume RUN.h5`` or ``--resume --out RUN.h5``; refusals before any device opens."""
+    if isinstance(args.resume, str):
+        named = Path(args.resume)
+        if args.out is not None and args.out != named:
+            raise UserError(f"--resume names {named} and --out {args.out}: give the run file "
+                            "once")
+        args.out, args.resume = named, True
+    if args.out is None:
+        raise UserError("give --out RUN.h5 (the run file to write), or --resume RUN.h5")
+    if args.resume:
+        if not args.out.is_file():
+            raise UserError(f"{args.out}: no run file to resume")
+        if not args.override:
+            data = read_run(args.out, with_data=False)
+            if data.state == "finished":
+                raise UserError(f"{args.out} is a finished run ({len(data.records)} records): "
+                                f"nothing to resume; see it with insitu replay {args.out}, or "
+                                "change a verdict with --override HIT=accept|reject")
+        return
+    if args.out.exists():
+        raise UserError(f"{args.out} exists: choose another --out or use --resume")
+    folder = args.out.parent
+    if not folder.is_dir():
+        raise UserError(f"--out {args.out}: folder {folder} does not exist: create it or "
+                        "choose another path")
+    if not os.access(folder, os.W_OK):
+        raise UserError(f"--out {args.out}: folder {folder} is not writable: choose another "
+                        "path")
+
+
 def run(args: argparse.Namespace) -> int:
+    _check_paths(args)
     if args.override and not args.resume:
         raise UserError("--override changes a stored run: give --resume --out RUN.h5")
     if args.mock_operator and (args.mock or args.station is None):
         raise UserError("--mock-operator drives a bench started by insitu mock-bench: give "
                         "--station with its station file (--mock has its own operator)")
-    if args.resume and not args.out.is_file():
-        raise UserError(f"{args.out}: no run file to resume")
-    if not args.resume and args.out.exists():
-        raise UserError(f"{args.out} exists: choose another --out or use --resume")
     console = Console()
     if args.override and _apply_overrides(args, console):
         return 0
@@ -231,12 +279,10 @@ def run(args: argparse.Namespace) -> int:
                 proc.stop()
                 proc.wait()
     if gave_up:
-        raise UserError(f"{gave_up}; the run stopped, acquired records are in {args.out} "
-                        "(continue with --resume)")
+        raise UserError(f"{gave_up}; the run stopped, {_kept(args.out)}")
     hits: list[HitRecord] = proc.hits  # type: ignore[attr-defined]
     if proc.state is not RunState.FINISHED:
-        raise UserError(f"run {proc.state.value}: {proc.message}; acquired records are in "
-                        f"{args.out} (continue with --resume)")
+        raise UserError(f"run {proc.state.value}: {proc.message}; {_kept(args.out)}")
     console.print(f"{len(hits)} records, run written to {args.out}")
     result = proc.result  # type: ignore[attr-defined]
     if result is not None:

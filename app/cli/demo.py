@@ -34,7 +34,9 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--location-error", type=float, default=0.001)
     p.add_argument("--frf-only", action="store_true",
                    help="skip the acquisition: identify simulated FRFs (fast)")
-    p.add_argument("--out", type=Path, help="keep the run file here (default: temporary)")
+    p.add_argument("--out", type=Path,
+                   help="run file to write (default: demo-run.h5 in the current folder, "
+                        "numbered if it exists)")
     p.add_argument("--length", type=float, default=1.5, help="record length per hit, s")
     p.set_defaults(run=run)
 
@@ -45,8 +47,10 @@ def _acquire(args: argparse.Namespace, console: Console) -> int:
     from app.cli.acquire import _Bars
 
     name = "engine" if args.bench == "engine" else args.bench
-    with tempfile.TemporaryDirectory() as tmp, InProcessBench(name) as bench:
-        path = args.out or Path(tmp) / "demo-run.h5"
+    if args.out is not None and args.out.exists():
+        raise UserError(f"{args.out} exists: choose another --out")
+    path = args.out or _free_name()
+    with InProcessBench(name) as bench:
         plan = plan_for_bench(name, length=args.length)
         console.rule(f"insitu demo: {bench.bench.description}")
         console.print(f"hammer test of {len(plan.excitations)} points through the drivers "
@@ -60,10 +64,20 @@ def _acquire(args: argparse.Namespace, console: Console) -> int:
         if proc.state is not RunState.FINISHED or proc.result is None:
             raise UserError(f"demo run {proc.state.value}: {proc.message}")
         model = bench.bench.model
-        console.print(f"run file: {path.stat().st_size / 1e6:.1f} MB, {len(proc.hits)} hits")
         print_result(proc.result, console, truth=inertia_properties(model.theta),
                      K_truth=model.K, C_truth=model.C)
+        console.print(f"run file {path} kept ({path.stat().st_size / 1e6:.1f} MB, "
+                      f"{len(proc.hits)} hits): replay it with insitu replay {path}")
     return 0
+
+
+def _free_name(base: str = "demo-run") -> Path:
+    """``demo-run.h5`` in the current folder, or ``demo-run-2.h5``...: the first free one."""
+    path, k = Path(f"{base}.h5"), 1
+    while path.exists():
+        k += 1
+        path = Path(f"{base}-{k}.h5")
+    return path
 
 
 def run(args: argparse.Namespace) -> int:

@@ -23,14 +23,17 @@ from rich.console import Console
 from app.acquire.analysis import analyse_run
 from app.cli.common import UserError
 from app.cli.frf import add_processing_arguments, frfset_from_time_uff
-from app.cli.summary import print_result
+from app.cli.summary import print_mount_system, print_result
 from app.io.frf_h5 import FORMAT as FRF_FORMAT
 from app.io.frf_h5 import h5_format, read_frf_h5
+from app.io.mounts import MountsFile, load_mounts
 from app.io.runfile import read_run
 from app.io.uff import read_frf_uff
 from app.io.uff_time import uff_holds_time_data
+from app.report.mount_system import mount_system
 from processing.data import FRFSet
 from processing.identify import IdentificationResult, IdentifyOptions, identify
+from processing.mounts import check_mounts
 
 
 def add_parser(sub: Any) -> None:
@@ -51,9 +54,37 @@ def add_parser(sub: Any) -> None:
                    help="improved (default) or the article's plain method")
     p.add_argument("--refine-points", type=int, default=0, metavar="N",
                    help="rounds of response-point location refinement from the data (e.g. 3)")
+    add_mount_arguments(p)
     add_processing_arguments(p.add_argument_group(
         "time data (UFF 58 time records instead of FRFs: FRFs are computed first)"))
     p.set_defaults(run=run)
+
+
+def add_mount_arguments(p: Any) -> None:
+    """``--mounts``, ``--excitation-hz``, ``--loss-factor-hz`` (also used by ``report``)."""
+    g = p.add_argument_group("mount system (modes are always reported)")
+    g.add_argument("--mounts", type=Path, metavar="TOML",
+                   help="mounts file (crank_axis, [[mount]] name/position/axes, METHOD.md): "
+                        "individual mount rates and loss factors, torque roll axis")
+    g.add_argument("--excitation-hz", type=float, metavar="F",
+                   help="excitation frequency (e.g. idle firing order), Hz: each mode's "
+                        "frequency ratio, isolation margin (ratio / sqrt 2) and transmissibility")
+    g.add_argument("--loss-factor-hz", type=float, metavar="F",
+                   help="frequency of the mounts' loss factors 2 pi f c / k, Hz (default: "
+                        "geometric mean of the rigid-body mode frequencies)")
+
+
+def mounts_from(args: argparse.Namespace) -> MountsFile | None:
+    """The mounts file, validated and checked for identifiability before any numerics."""
+    if args.excitation_hz is not None and not args.excitation_hz > 0:
+        raise UserError(f"--excitation-hz must be > 0, got {args.excitation_hz:g}")
+    if args.loss_factor_hz is not None and not args.loss_factor_hz > 0:
+        raise UserError(f"--loss-factor-hz must be > 0, got {args.loss_factor_hz:g}")
+    if args.mounts is None:
+        return None
+    mounts = load_mounts(args.mounts)
+    check_mounts(mounts.mounts)  # refuses (one line) when no rate can be determined
+    return mounts
 
 
 def options_from(args: argparse.Namespace) -> IdentifyOptions:
@@ -70,6 +101,7 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
 def run(args: argparse.Namespace) -> int:
     if args.refine_points < 0:
         raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
+    args.mounts_file = mounts_from(args)
     if args.file.suffix.lower() in (".h5", ".hdf5") and h5_format(args.file) == FRF_FORMAT:
         frf = read_frf_h5(args.file)
         return _report(args, frf, identify(frf, options_from(args)))
@@ -78,6 +110,11 @@ def run(args: argparse.Namespace) -> int:
         if len(data.records) == 0:
             raise UserError(f"{args.file}: the run holds no hit yet")
         frf, result, _ = analyse_run(data, options_from(args))
+        if args.mounts_file is None and data.mounts is not None:
+            print(f"{args.file}: using the run file's mounts table ({len(data.mounts.mounts)} "
+                  "mounts)")
+            check_mounts(data.mounts.mounts)
+            args.mounts_file = data.mounts
         return _report(args, frf, result)
     if uff_holds_time_data(args.file):
         print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")
@@ -93,7 +130,9 @@ def _report(args: argparse.Namespace, frf: FRFSet, result: IdentificationResult)
                   f"{frf.H.shape[1]} excitations, {frf.freq.size} lines "
                   f"{frf.freq[0]:g}-{frf.freq[-1]:g} Hz")
     print_result(result, console)
+    ms = mount_system(result, args.mounts_file, args.excitation_hz, args.loss_factor_hz)
+    print_mount_system(ms, console)
     if args.out:
-        args.out.write_text(json.dumps(result.to_json(), indent=2))
+        args.out.write_text(json.dumps({**result.to_json(), **ms.to_json()}, indent=2))
         console.print(f"result written to {args.out}")
     return 0

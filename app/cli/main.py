@@ -10,13 +10,20 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import logging.handlers
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from app.cli.common import UserError
 
+#: terminal width (characters) assumed when the output is a file or a pipe
+PIPE_COLUMNS = 200
+
 #: verb -> module under app.cli
-VERBS = ("identify", "simulate", "demo", "frf", "mock-bench", "acquire", "replay", "gui", "report")
+VERBS = ("identify", "simulate", "demo", "frf", "mock-bench", "acquire", "replay", "repair",
+         "gui", "report")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -32,21 +39,96 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _OneLine(logging.Formatter):
+    """The terminal's form of a log record: its first line, no traceback."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = f"{record.levelname} {record.name}: {record.getMessage()}"
+        return text.splitlines()[0] if text else text
+
+
+class _Tracebacks(logging.Filter):
+    """Keeps records that carry a traceback off the terminal (they go to the log file)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.exc_info is None
+
+
+class _Errors(logging.Handler):
+    """Counts the errors logged during the command (the log file then holds their details)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.ERROR)
+        self.count = 0
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.count += 1
+
+
+def log_path() -> Path:
+    """The log file: ``$INSITU_LOG``, else ``insitu.log`` in the user's state folder."""
+    if "INSITU_LOG" in os.environ:
+        return Path(os.environ["INSITU_LOG"])
+    state = Path(os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state")
+    return state / "insitu" / "insitu.log"
+
+
+def _configure_logging(verbose: bool) -> tuple[_Errors, Path | None]:
+    """Terminal: warnings, one line each, no traceback. Log file: everything, in full."""
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if getattr(h, "_insitu", False):
+            root.removeHandler(h)
+            h.close()
+    term = logging.StreamHandler(sys.stderr)
+    term.setLevel(logging.DEBUG if verbose else logging.WARNING)
+    term.setFormatter(_OneLine())
+    term.addFilter(_Tracebacks())
+    errors = _Errors()
+    handlers: list[logging.Handler] = [term, errors]
+    path: Path | None = log_path()
+    try:
+        assert path is not None
+        path.parent.mkdir(parents=True, exist_ok=True)
+        file = logging.handlers.RotatingFileHandler(path, maxBytes=5_000_000, backupCount=2,
+                                                    encoding="utf-8")
+        file.setLevel(logging.DEBUG if verbose else logging.INFO)
+        file.setFormatter(logging.Formatter("%(asctime)s %(process)d %(levelname)s "
+                                            "%(name)s: %(message)s"))
+        handlers.append(file)
+    except OSError:
+        path = None  # no writable state folder: the terminal still gets every line
+    for h in handlers:
+        h._insitu = True  # type: ignore[attr-defined]
+        root.addHandler(h)
+    root.setLevel(logging.DEBUG if verbose else logging.INFO)
+    return errors, path
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    if not sys.stdout.isatty():
+        # rich sizes tables to COLUMNS, 80 when output goes to a file or a pipe: a log of
+        # `insitu demo > run.log` would cut the K and C cells
+        os.environ.setdefault("COLUMNS", str(PIPE_COLUMNS))
+    errors, path = _configure_logging(args.verbose)
     try:
         return int(args.run(args) or 0)
     except (UserError, ValueError, OSError) as err:
-        print(f"insitu {args.verb}: error: {err}", file=sys.stderr)
+        details = f" (details in {path})" if errors.count and path is not None else ""
+        print(f"insitu {args.verb}: error: {err}{details}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"insitu {args.verb}: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:  # a bug of ours: one line here, the traceback in the log file
+        logging.getLogger(__name__).exception("insitu %s failed", args.verb)
+        where = f"details in {path}" if path is not None else "run again with -v"
+        first = str(err).splitlines()[0] if str(err) else ""
+        print(f"insitu {args.verb}: internal error: {type(err).__name__}: {first} ({where}; "
+              "please report it)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -17,6 +17,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", type=Path, help="HTML file (default: FILE with .html)")
     p.add_argument("--physical", action="store_true",
                    help="constrain the inertia to physically consistent values")
+    p.add_argument("--mounts", type=Path, metavar="TOML",
+                   help="mounts file: individual mount rates and the torque roll axis")
+    p.add_argument("--excitation-hz", type=float, metavar="F",
+                   help="excitation frequency for the modes' isolation margins, Hz")
     p.set_defaults(run=run)
 
 
@@ -28,6 +32,14 @@ def run(args: argparse.Namespace) -> int:
     if not args.file.is_file():
         raise UserError(f"no such file {args.file}")
     out = args.out or args.file.with_suffix(".html")
+    from app.io.mounts import load_mounts
+    from processing.mounts import check_mounts
+
+    if args.excitation_hz is not None and not args.excitation_hz > 0:
+        raise UserError(f"--excitation-hz must be > 0, got {args.excitation_hz:g}")
+    mounts = load_mounts(args.mounts) if args.mounts is not None else None
+    if mounts is not None:
+        check_mounts(mounts.mounts)
     a = analyse(load_frfs(args.file), IdentifyOptions(physical=args.physical), args.file.name)
     # figures are drawn by Qt off screen: no display needed
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
@@ -36,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     from app.report.html import build_report
 
     _qt_app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(["insitu-report"])
-    html = build_report(a, f"In situ identification report: {args.file.name}")
+    html = build_report(a, f"In situ identification report: {args.file.name}", mounts,
+                        args.excitation_hz)
     out.write_text(html, encoding="utf-8")
     print(a.summary())
     print(f"report written to {out}")

@@ -7,6 +7,7 @@ from numpy.typing import NDArray
 from rich.console import Console
 from rich.table import Table
 
+from app.report.mount_system import MountSystem
 from processing.identify import IdentificationResult
 from processing.inertia import InertiaProperties
 
@@ -61,7 +62,7 @@ def matrix_table(title: str, A: NDArray[np.float64], truth: NDArray[np.float64] 
     t = Table(title=title)
     t.add_column("")
     for d in _DOF:
-        t.add_column(d, justify="right")
+        t.add_column(d, justify="right", overflow="fold")  # a narrow screen wraps, never cuts
     scale = np.sqrt(np.abs(np.outer(np.diag(truth if truth is not None else A),
                                     np.diag(truth if truth is not None else A))))
     for i, d in enumerate(_DOF):
@@ -79,7 +80,7 @@ def checks_table(result: IdentificationResult) -> Table:
     t = Table(title="Checks")
     t.add_column("check")
     t.add_column("verdict")
-    t.add_column("figures")
+    t.add_column("figures", overflow="fold")
     for name, c in result.checks().items():
         figs = ", ".join(
             f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
@@ -129,3 +130,39 @@ def print_result(
     con.print(coherence_line(result))
     for w in result.warnings:
         con.print(f"[yellow]warning:[/yellow] {w}")
+
+
+def _rich_table(title: str, head: list[str], rows: list[list[str]], left: int = 1) -> Table:
+    t = Table(title=title)
+    for i, h in enumerate(head):
+        t.add_column(h, justify="left" if i < left else "right")
+    for r in rows:
+        t.add_row(*r)
+    return t
+
+
+def print_mount_system(ms: MountSystem, console: Console | None = None) -> None:
+    """Print the modes, the energy decoupling, and with mounts the rates and the TRA."""
+    con = console or Console()
+    con.print(_rich_table("Rigid-body modes of the identified M, K, C (damping: modal "
+                          "approximation)", ms.mode_head(), ms.mode_rows()))
+    con.print(_rich_table("Kinetic-energy decoupling (% of each mode's energy, at the CoG)",
+                          ["mode", *_DOF], ms.energy_rows()))
+    if ms.modes is not None:
+        con.print(f"Mode shapes at O (mass-normalised) are in the result JSON; largest "
+                  f"off-diagonal modal damping coupling {ms.modes.damping_coupling:.3f} "
+                  "(small: the modal damping approximation holds)")
+    for w in ms.problems:
+        con.print(f"[yellow]warning:[/yellow] {w}")
+    if ms.rates is not None:
+        rows = ms.mount_rows()
+        for row in rows:
+            if row[-1] == "NO":
+                row[-1] = "[red]NO[/red]"
+        con.print(_rich_table("Individual mount rates (non-negative least squares on K and C)",
+                              ms.mount_head(), rows, left=2))
+        for n in ms.mount_notes():
+            con.print(n)
+    if ms.tra is not None:
+        con.print(_rich_table("Torque roll axis and the mounts' elastic axis",
+                              ["quantity", "value"], ms.tra_rows(), left=2))

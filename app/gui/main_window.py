@@ -77,6 +77,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.session.analysis_changed.connect(self._show_summary)
         self.runner.busy.connect(lambda b: self.busy_label.setText("working…" if b else ""))
         self.plan_view.plan_loaded.connect(self._remember_plan)
+        self.plan_view.mounts_loaded.connect(self.session.set_mounts)
+        self.session.mounts_changed.connect(self.plan_view.set_mounts)
         self.station_view.start()
         self._restore()
         if self.station_view.station is None:

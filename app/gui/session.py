@@ -13,6 +13,7 @@ from pathlib import Path
 from PySide6 import QtCore
 
 from app.gui.worker import TaskRunner
+from app.io.mounts import MountsFile
 from app.report.analysis import Analysis, analyse
 from app.report.sources import load_frfs
 from processing.data import FRFSet
@@ -32,11 +33,15 @@ class Session(QtCore.QObject):
         A newer analysis of the current data is ready.
     message(str, str)
         (level, text) for the window's message bar; level is "info", "warning" or "error".
+    mounts_changed(object)
+        A mounts file was loaded (or cleared) in the plan view.
     """
 
     data_changed = QtCore.Signal(object)
     analysis_changed = QtCore.Signal(object)
     message = QtCore.Signal(str, str)
+    #: the mounts file (:class:`~app.io.mounts.MountsFile`) or None
+    mounts_changed = QtCore.Signal(object)
 
     def __init__(self, runner: TaskRunner, parent: QtCore.QObject | None = None) -> None:
         super().__init__(parent)
@@ -46,6 +51,7 @@ class Session(QtCore.QObject):
         self.path: Path | None = None
         self.analysis: Analysis | None = None
         self.options = IdentifyOptions()
+        self.mounts: MountsFile | None = None
         self._generation = 0  # bumped with each new data set: older analyses are dropped
         runner.done.connect(self._on_done)
         runner.failed.connect(self._on_failed)
@@ -65,6 +71,13 @@ class Session(QtCore.QObject):
         self.data_changed.emit(frf)
         self.reanalyse()
 
+    def set_mounts(self, mounts: MountsFile | None) -> None:
+        """The mounts the results view analyses (rates, torque roll axis); None clears."""
+        if mounts is self.mounts:
+            return
+        self.mounts = mounts
+        self.mounts_changed.emit(mounts)
+
     def set_options(self, options: IdentifyOptions) -> None:
         """New identification options; re-identifies the current data in the background."""
         self.options = options
@@ -83,6 +96,8 @@ class Session(QtCore.QObject):
             assert isinstance(result, tuple)
             path, frf = result
             self.message.emit("info", f"opened {path.name}")
+            if isinstance(frf.meta.get("mounts"), MountsFile):  # a run file's mounts table
+                self.set_mounts(frf.meta["mounts"])
             self.set_frf(frf, path.name, path)
         elif key == "session.analysis":
             assert isinstance(result, tuple)

@@ -8,6 +8,7 @@ dimension gives the SI value (a file in mm has length factor 1000).
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -95,6 +96,19 @@ def as_list(sets: Any) -> list[Dataset]:
     return list(sets)
 
 
+def _check_complete(p: Path) -> None:
+    """Refuse a file cut short: a universal file ends with the '    -1' closing its last set."""
+    size = p.stat().st_size
+    with p.open("rb") as f:
+        f.seek(max(0, size - 256))
+        tail = f.read().rstrip()
+    # the last set's closing delimiter, not the opening one of a set cut right after it
+    if size and (not tail.endswith(b"    -1") or re.search(rb"    -1[ \t]*\r?\n    -1$", tail)):
+        raise InputError(f"{p.name} is truncated: it ends in the middle of a dataset "
+                         f"(after {size} bytes, without the closing '    -1'): copy or "
+                         "export the file again")
+
+
 def load_sets(path: str | Path, only: Iterable[int] | None = None) -> list[Dataset]:
     """Read the datasets of a universal file, raising InputError on any failure.
 
@@ -116,6 +130,7 @@ def load_sets(path: str | Path, only: Iterable[int] | None = None) -> list[Datas
                 f"{p.name} holds no UFF datasets (no '    -1' delimiters): "
                 "is it a universal file?"
             )
+        _check_complete(p)
         wanted = set(only) if only is not None else None
         index = [i for i, t in enumerate(types) if wanted is None or t in wanted]
         if not index:

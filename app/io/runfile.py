@@ -1,11 +1,12 @@
 """One HDF5 file per acquisition run: raw records, verdicts, settings, FRFs and results.
 
 The layout is documented in ``docs/run-file.md`` (schema version :data:`SCHEMA_VERSION`).
-During acquisition the file is in HDF5 single-writer/multiple-reader (SWMR) mode:
-every object is created up front and records are *appended* to resizable
-datasets, flushed after each one, so a power cut or ``kill -9`` leaves a file
-that reads back with every record flushed so far. :meth:`RunWriter.finish`
-ends the SWMR session and writes the state, FRFs and identification result.
+Every object is created up front and records are *appended* to resizable
+datasets; the writer opens the file only for each change and closes it after
+an ``fsync``, so a power cut or ``kill -9`` leaves a file that any HDF5 tool
+reads, with every record written so far (:func:`repair` mends the rare file
+killed in the middle of a write). :meth:`RunWriter.finish` writes the state,
+FRFs and identification result.
 
 Example
 -------
@@ -16,10 +17,14 @@ Example
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import json
 import os
-from collections.abc import Mapping, Sequence
+import threading
+import time
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,11 +33,12 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from app.io.mounts import MountsFile, MountsFileError, mounts_from_dict
 from drivers.base import ChannelConfig
 from processing.data import FRFSet, Geometry
 
 __all__ = ["SCHEMA_VERSION", "ChannelInfo", "RecordTable", "RunData", "RunFileError",
-           "RunWriter", "read_run"]
+           "RunWriter", "read_run", "repair", "write_mounts"]
 
 SCHEMA_VERSION = 1
 FORMAT = "insitu-run"
@@ -120,6 +126,8 @@ class RunData:
     notes: tuple[tuple[float, str], ...]
     frf: FRFSet | None
     result: dict[str, Any] | None
+    #: the mounts table (optional group ``/mounts``), or None
+    mounts: MountsFile | None = None
 
 
 def _text(group: h5py.Group, name: str, obj: Any, units: str = "n/a") -> None:
@@ -147,10 +155,29 @@ class RunWriter:
     Not thread-safe: one thread (the procedure's worker) writes.
     """
 
-    def __init__(self, path: Path, f: h5py.File) -> None:
+    def __init__(self, path: Path, n_records: int) -> None:
         self.path = path
-        self._f = f
-        self._f.swmr_mode = True
+        self._n = n_records
+        self._lock = threading.Lock()
+        self._closed = False
+
+    @contextlib.contextmanager
+    def _session(self) -> Iterator[h5py.File]:
+        """The file, open for one change, then flushed to disk (fsync) and closed."""
+        with self._lock:
+            if self._closed:
+                raise RunFileError(f"{self.path}: the run file is closed")
+            try:
+                f = _append(self.path)
+            except OSError as err:
+                raise RunFileError(f"{self.path}: cannot open the run file to append: "
+                                   f"{str(err).splitlines()[0]}") from err
+            try:
+                yield f
+                f.flush()
+                _fsync(f)
+            finally:
+                f.close()
 
     # -- opening --------------------------------------------------------------------------------
     @classmethod
@@ -214,7 +241,9 @@ class RunWriter:
         _column(notes, "time", "f8", "s")
         _column(notes, "text", f"S{TEXT * 2}", "n/a")
         f.flush()
-        return cls(p, f)
+        _fsync(f)
+        f.close()
+        return cls(p, 0)
 
     @classmethod
     def resume(cls, path: str | Path) -> RunWriter:
@@ -226,28 +255,22 @@ class RunWriter:
         """
         p = Path(path)
         read_run(p, with_data=False)  # one-line error if foreign or damaged
-        try:
-            f = h5py.File(p, "a", libver="latest")
-        except OSError:
-            tmp = p.with_name(p.name + ".resume-tmp")
-            with h5py.File(p, "r", swmr=True) as src, h5py.File(tmp, "w", libver="latest") as dst:
-                dst.attrs.update(dict(src.attrs))
-                for key in src:
-                    src.copy(src[key], dst, name=key)
-            os.replace(tmp, p)
-            f = h5py.File(p, "a", libver="latest")
-        f.attrs["state"] = "running"
-        f.attrs["message"] = ""
-        for key in ("frf", "result"):
-            if key in f:
-                del f[key]
-        f.flush()
-        return cls(p, f)
+        repair(p)
+        with _append(p) as f:
+            f.attrs["state"] = "running"
+            f.attrs["message"] = ""
+            for key in ("frf", "result"):
+                if key in f:
+                    del f[key]
+            n = int(f["records/point"].shape[0])
+            f.flush()
+            _fsync(f)
+        return cls(p, n)
 
     # -- appending ------------------------------------------------------------------------------
     @property
     def n_records(self) -> int:
-        return int(self._f["records/point"].shape[0])
+        return self._n
 
     def add_record(self, point: int, data: NDArray[np.float64], *, time: float,
                    peak_force: float, auto_accepted: bool, reason: str, bad_frames: int = 0,
@@ -259,31 +282,32 @@ class RunWriter:
         ``sync`` is the common channel's record (N) and ``sync_offset`` the alignment
         correction it gave (s), for a run created with a ``sync_channel``.
         """
-        rec = self._f["records"]
-        i = self.n_records
+        i = self._n
         values = {"point": point, "time": time, "peak_force": peak_force,
                   "auto_accepted": bool(auto_accepted),
                   "reason": reason.encode("utf-8")[:TEXT], "override": 0,
                   "bad_frames": bad_frames, "missing": missing}
-        rec["data"].resize(i + 1, axis=0)
-        rec["data"][i] = data
-        if "force_raw" in rec:
-            raw = np.full(rec["force_raw"].shape[1], np.nan)
-            if force_raw is not None:
-                k = min(raw.size, force_raw.size)
-                raw[:k] = force_raw[:k]
-            rec["force_raw"].resize(i + 1, axis=0)
-            rec["force_raw"][i] = raw
-        if "sync" in rec:
-            rec["sync"].resize(i + 1, axis=0)
-            rec["sync"][i] = np.nan if sync is None else sync
-            rec["sync_offset"].resize(i + 1, axis=0)
-            rec["sync_offset"][i] = sync_offset
-        for name, v in values.items():  # columns last: a record counts once its point is in
-            ds = rec[name]
-            ds.resize(i + 1, axis=0)
-            ds[i] = v
-        self._f.flush()
+        with self._session() as f:
+            rec = f["records"]
+            rec["data"].resize(i + 1, axis=0)
+            rec["data"][i] = data
+            if "force_raw" in rec:
+                raw = np.full(rec["force_raw"].shape[1], np.nan)
+                if force_raw is not None:
+                    k = min(raw.size, force_raw.size)
+                    raw[:k] = force_raw[:k]
+                rec["force_raw"].resize(i + 1, axis=0)
+                rec["force_raw"][i] = raw
+            if "sync" in rec:
+                rec["sync"].resize(i + 1, axis=0)
+                rec["sync"][i] = np.nan if sync is None else sync
+                rec["sync_offset"].resize(i + 1, axis=0)
+                rec["sync_offset"][i] = sync_offset
+            for name, v in values.items():  # columns last: a record counts once its point is in
+                ds = rec[name]
+                ds.resize(i + 1, axis=0)
+                ds[i] = v
+        self._n = i + 1
         return i
 
     def set_override(self, index: int, override: str) -> None:
@@ -292,24 +316,23 @@ class RunWriter:
             raise ValueError(f"override must be one of accept, reject or '', got {override!r}")
         if not 0 <= index < self.n_records:
             raise ValueError(f"no record {index}: the run has {self.n_records}")
-        self._f["records/override"][index] = OVERRIDES[override]
-        self._f.flush()
+        with self._session() as f:
+            f["records/override"][index] = OVERRIDES[override]
 
     def add_note(self, text: str, time: float) -> None:
         """Append an operator note (``time`` s since the run started)."""
-        notes = self._f["notes"]
-        i = notes["time"].shape[0]
-        for name, v in (("time", time), ("text", text.encode("utf-8")[: 2 * TEXT])):
-            notes[name].resize(i + 1, axis=0)
-            notes[name][i] = v
-        self._f.flush()
+        with self._session() as f:
+            notes = f["notes"]
+            i = notes["time"].shape[0]
+            for name, v in (("time", time), ("text", text.encode("utf-8")[: 2 * TEXT])):
+                notes[name].resize(i + 1, axis=0)
+                notes[name][i] = v
 
     # -- ending ---------------------------------------------------------------------------------
     def finish(self, state: str, message: str = "", frf: FRFSet | None = None,
                result: Mapping[str, Any] | None = None) -> None:
-        """End the SWMR session and record the final state, FRFs and result."""
-        self.close()
-        with h5py.File(self.path, "a", libver="latest") as f:
+        """Record the final state, FRFs and result; the writer is closed after it."""
+        with self._session() as f:
             f.attrs["state"] = state
             f.attrs["message"] = message
             for key in ("frf", "result"):
@@ -329,28 +352,67 @@ class RunWriter:
                 _array(g, "n_averages", np.asarray(frf.meta.get("n_averages", []), int), "1")
             if result is not None:
                 _text(f, "result", dict(result), "SI, see METHOD.md")
+        self.close()
 
     def close(self) -> None:
-        """Close the file (idempotent); records already added stay."""
-        if self._f.id.valid:
-            self._f.flush()
-            self._f.close()
+        """Refuse further changes (idempotent); every record added is already on disk."""
+        with self._lock:
+            self._closed = True
+
+
+def _fsync(f: h5py.File) -> None:
+    """Push the file's written pages to the disk (the durability of every record)."""
+    os.fsync(f.id.get_vfd_handle())
+
+
+def repair(path: str | Path) -> bool:
+    """Make a run file whose writer was killed readable by any HDF5 tool; True if it had to.
+
+    The writer opens the file only while it appends a record, so a crash leaves HDF5's
+    "open for writing" mark only if it struck during that write. Such a file is copied
+    object by object into a fresh one that then replaces it (the original stays in place
+    until the copy is complete); every record whose columns were all written reads back.
+    """
+    p = Path(path)
+    with _open(p) as f:
+        if f.mode == "r" and not f.swmr_mode:
+            return False
+    tmp = p.with_name(p.name + ".repair-tmp")
+    with h5py.File(p, "r", swmr=True) as src, h5py.File(tmp, "w", libver="latest") as dst:
+        dst.attrs.update(dict(src.attrs))
+        for key in src:
+            src.copy(src[key], dst, name=key)
+        dst.flush()
+        _fsync(dst)
+    os.replace(tmp, p)
+    return True
 
 
 # -- reading ------------------------------------------------------------------------------------
-def _open(p: Path) -> h5py.File:
+def _append(p: Path) -> h5py.File:
+    """The file opened to append, whoever reads it: a reader's lock never stops a record."""
+    return h5py.File(p, "a", libver="latest", locking=False)
+
+
+def _open(p: Path, patience: float = 2.0) -> h5py.File:
+    """The run file opened to read; waits up to ``patience`` s while a record is written."""
     if not p.is_file():
         raise RunFileError(f"{p}: no such run file")
-    try:
-        return h5py.File(p, "r")
-    except OSError as err:
-        first = err
-    if "already open for write" in str(first):
-        # a writer is active or was killed mid-run: the SWMR reader sees every flushed record
+    deadline = time.monotonic() + patience
+    while True:
         try:
-            return h5py.File(p, "r", swmr=True)
+            return h5py.File(p, "r")
         except OSError as err:
             first = err
+        if "already open for write" in str(first):
+            # killed mid-write (or being written): the SWMR reader sees every whole record
+            try:
+                return h5py.File(p, "r", swmr=True)
+            except OSError as err:
+                first = err
+        if "unable to lock file" not in str(first) or time.monotonic() > deadline:
+            break
+        time.sleep(0.02)  # the writer holds the file for a few ms per record
     raise RunFileError(f"{p}: not a readable HDF5 run file (truncated or damaged?): "
                        f"{str(first).splitlines()[0]}") from first
 
@@ -373,13 +435,33 @@ def read_run(path: str | Path, with_data: bool = True) -> RunData:
         if version != SCHEMA_VERSION:
             raise RunFileError(f"{p}: run-file schema version {version}; this insitu reads "
                                f"version {SCHEMA_VERSION}")
-        return _read(p, f, version, with_data)
-    except (KeyError, OSError, ValueError, TypeError) as err:
+        with warnings.catch_warnings():
+            # never drop an imaginary part, never cast NaN to a node number
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            warnings.simplefilter("error", RuntimeWarning)
+            return _read(p, f, version, with_data)
+    except (KeyError, OSError, ValueError, TypeError, IndexError, AttributeError,
+            RuntimeWarning) as err:
+        # an object missing, or of another type or shape than the schema's
         if isinstance(err, RunFileError):
             raise
-        raise RunFileError(f"{p}: damaged run file: {str(err).splitlines()[0]}") from err
+        first = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise RunFileError(f"{p}: damaged run file: {first}") from err
     finally:
         f.close()
+
+
+def _check_shapes(p: Path, rec: h5py.Group, n_channels: int) -> None:
+    """Each record column one value a record, of its kind; ``data`` (records, channels, samples)."""
+    for name, (dtype, _) in _COLUMNS.items():
+        ds = rec[name]
+        if ds.ndim != 1 or ds.dtype.kind != np.dtype(dtype).kind:
+            raise RunFileError(f"{p}: damaged run file: /records/{name} is {ds.dtype} of shape "
+                               f"{ds.shape}, expected {np.dtype(dtype)} of shape (records,)")
+    data = rec["data"]
+    if data.ndim != 3 or data.shape[1] != n_channels or data.dtype.kind != "f":
+        raise RunFileError(f"{p}: damaged run file: /records/data is {data.dtype} of shape "
+                           f"{data.shape}, expected float (records, {n_channels}, samples)")
 
 
 def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
@@ -392,6 +474,7 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
             names, ch["device"][()], ch["quantity"][()], ch["unit"][()], ch["sensitivity"][()],
             ch["range"][()], ch["iepe"][()], ch["node"][()], ch["direction"][()], strict=True))
     rec = f["records"]
+    _check_shapes(p, rec, len(names))
     n = min(rec[c].shape[0] for c in _COLUMNS)  # rows complete in every column
     n = min(n, rec["data"].shape[0])
     data = rec["data"][:n] if with_data else np.zeros((0, *rec["data"].shape[1:]))
@@ -427,6 +510,7 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
                      {"estimator": _str(g.attrs.get("estimator", "H1")),
                       "n_averages": g["n_averages"][()].tolist()})
     result = json.loads(_str(f["result"][()])) if "result" in f else None
+    mounts = _read_mounts(p, f["mounts"]) if "mounts" in f else None
     state = _str(f.attrs.get("state", ""))
     return RunData(
         path=str(p), schema_version=version,
@@ -436,4 +520,37 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
         plan_data=json.loads(_str(f["plan"][()])),
         station_data=json.loads(_str(f["station"][()])),
         channels=channels, geometry=geometry, records=records, notes=notes, frf=frf,
-        result=result)
+        result=result, mounts=mounts)
+
+
+def _read_mounts(p: Path, g: h5py.Group) -> MountsFile:
+    data = {"crank_axis": g["crank_axis"][()].tolist(),
+            "mount": [{"name": _str(n), "position": pos.tolist(), "axes": ax.tolist()}
+                      for n, pos, ax in zip(g["name"][()], g["position"][()], g["axes"][()],
+                                            strict=True)]}
+    try:
+        return mounts_from_dict(data, f"{p} /mounts")
+    except MountsFileError as err:
+        raise RunFileError(str(err)) from err
+
+
+def write_mounts(path: str | Path, mounts: MountsFile | None) -> None:
+    """Store (or with None remove) the mounts table in the group ``/mounts`` of a run file
+    that no writer has open (after :meth:`RunWriter.finish`); one-line :class:`RunFileError`."""
+    p = Path(path)
+    read_run(p, with_data=False)  # one-line error if foreign or damaged
+    try:
+        with _append(p) as f:
+            if "mounts" in f:
+                del f["mounts"]
+            if mounts is None:
+                return
+            g = f.create_group("mounts")
+            _array(g, "crank_axis", np.array(mounts.crank_axis), "1")
+            _array(g, "name", np.array([m.name.encode("utf-8") for m in mounts.mounts],
+                                       dtype="S64"), "n/a")
+            _array(g, "position", np.array([m.position for m in mounts.mounts]), "m")
+            _array(g, "axes", np.array([m.axes for m in mounts.mounts]), "1")
+    except OSError as err:
+        raise RunFileError(f"{p}: cannot write the mounts table: "
+                           f"{str(err).splitlines()[0]}") from err

@@ -14,8 +14,10 @@ from datetime import datetime
 
 import pyqtgraph as pg
 
+from app.io.mounts import MountsFile
 from app.report import figures
 from app.report.analysis import Analysis
+from app.report.mount_system import mount_system
 from app.report.tables import check_rows, format_matrix, inertia_rows, principal_rows
 
 __all__ = ["build_report"]
@@ -60,13 +62,45 @@ def _checks(a: Analysis) -> str:
     return f"<table>{head}{rows}</table>"
 
 
-def build_report(a: Analysis, title: str = "In situ identification report") -> str:
+def _mount_system(a: Analysis, mounts: MountsFile | None, excitation_hz: float | None) -> str:
+    """Modes, energy decoupling and, with mounts, the rates and the torque roll axis."""
+    if a.result is None:
+        return ""
+    try:
+        ms = mount_system(a.result, mounts, excitation_hz)
+    except ValueError as err:
+        return f"<h2>Mount system</h2><p class=\"warn\">{html.escape(str(err))}</p>"
+    parts = [f"<p class=\"warn\">{html.escape(w)}</p>" for w in ms.problems]
+    parts += [
+        "<h2>Rigid-body modes</h2><p>Of the identified M, K, C; damping ratios by the modal "
+        "approximation. Mode shapes at O (mass-normalised) are in the result JSON.</p>",
+        _table(ms.mode_head(), ms.mode_rows()),
+        "<p>Kinetic-energy decoupling: percentage of each mode's kinetic energy in each DOF, "
+        "at the centre of gravity, global axis directions.</p>",
+        _table(("mode", *figures.DOF_LABELS), ms.energy_rows()),
+    ]
+    if ms.rates is not None:
+        parts += ["<h2>Individual mount rates</h2><p>Non-negative least squares of the mounts' "
+                  "rates on K (and C for the loss factors); 'NO': not determined by this test."
+                  "</p>", _table(ms.mount_head(), ms.mount_rows(), left=2),
+                  "<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in ms.mount_notes())
+                  + "</ul>"]
+    if ms.tra is not None:
+        parts += ["<h2>Torque roll axis</h2>", _table(("quantity", "value"), ms.tra_rows(),
+                                                      left=2)]
+    return "".join(parts)
+
+
+def build_report(a: Analysis, title: str = "In situ identification report",
+                 mounts: MountsFile | None = None, excitation_hz: float | None = None) -> str:
     """The HTML page of one analysis.
 
     Parameters
     ----------
     a : the analysis (data, identification, checks)
     title : page heading
+    mounts : the mounts file, for the mount rates and the torque roll axis (optional)
+    excitation_hz : excitation frequency for the isolation margins, Hz (optional)
 
     Returns
     -------
@@ -109,6 +143,7 @@ def build_report(a: Analysis, title: str = "In situ identification report") -> s
                    [(d, *row) for d, row in zip(figures.DOF_LABELS, format_matrix(r.C),
                                                 strict=True)]),
         ]
+        parts.append(_mount_system(a, mounts, excitation_hz))
         if r.warnings:
             parts.append("<ul class=\"warn\">" + "".join(
                 f"<li>{html.escape(w)}</li>" for w in r.warnings) + "</ul>")

@@ -35,4 +35,6 @@ def read_run_frfs(path: str | Path) -> FRFSet:
     run = read_run(path)
     frf = usable_lines(run.frf if run.frf is not None else analyse_run(run)[0])
     frf.meta.update({"file": Path(path).name, "run_state": run.state})
+    if run.mounts is not None:
+        frf.meta["mounts"] = run.mounts
     return frf

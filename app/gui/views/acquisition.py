@@ -30,6 +30,7 @@ from app.gui.views.plan import PlanView
 from app.gui.views.projections import ProjectionsWidget
 from app.gui.views.station import StationView
 from app.gui.widgets import verdict_color
+from app.io.runfile import RunFileError, write_mounts
 from app.report.analysis import message_of
 from app.report.runs import usable_lines
 
@@ -338,6 +339,11 @@ class AcquisitionView(QtWidgets.QWidget):
             self.next_label.setText("Finished: every point done")
             self.progress_bar.setValue(self.progress_bar.maximum())
             self.message.emit("info", f"acquisition finished: {things} saved in {path}")
+            if path is not None and self.session.mounts is not None:
+                try:
+                    write_mounts(path, self.session.mounts)
+                except RunFileError as err:
+                    self.message.emit("error", f"the mounts table was not saved: {err}")
             self.session.set_frf(usable_lines(proc.frf), path.name if path else "acquisition",
                                  path)
         else:

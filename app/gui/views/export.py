@@ -13,6 +13,7 @@ from app.gui.session import Session
 from app.io.uff import write_frf_uff
 from app.report.analysis import Analysis
 from app.report.html import build_report
+from app.report.mount_system import mount_system
 from app.report.sources import RUN_SUFFIXES
 
 __all__ = ["ExportView"]
@@ -128,7 +129,12 @@ class ExportView(QtWidgets.QWidget):
         if path is None:
             return
         try:
-            path.write_text(json.dumps(a.result.to_json(), indent=2))
+            out = a.result.to_json()
+            try:  # modes with isolation, and with a mounts file its rates and the TRA
+                out.update(mount_system(a.result, self.session.mounts).to_json())
+            except ValueError as err:
+                self.session.message.emit("warning", f"mount system left out: {err}")
+            path.write_text(json.dumps(out, indent=2))
         except OSError as err:
             self._fail("result JSON", err)
         else:
@@ -136,7 +142,7 @@ class ExportView(QtWidgets.QWidget):
 
     def write_report(self, a: Analysis, path: Path) -> None:
         """Write the HTML report of ``a`` to ``path`` (GUI thread: it draws figures)."""
-        path.write_text(build_report(a), encoding="utf-8")
+        path.write_text(build_report(a, mounts=self.session.mounts), encoding="utf-8")
 
     def _export_html(self) -> None:
         a = self.session.analysis

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from app.acquire.plan import TestPlan, load_plan
@@ -18,14 +19,17 @@ from app.gui.plan_rows import (
     write_csv_rows,
 )
 from app.gui.views.projections import ProjectionsWidget
-from app.gui.widgets import set_verdict
+from app.gui.widgets import fill_table, set_verdict
+from app.io.mounts import MountsFile, MountsFileError, load_mounts
 from app.io.uff import read_frf_uff
 from app.report.analysis import message_of
 from drivers.station import StationConfig
+from processing.mounts import check_mounts
 
 __all__ = ["PlanView"]
 
 _COLUMNS = ("role", "node", "x (m)", "y (m)", "z (m)", "dir x", "dir y", "dir z", "label")
+_MOUNT_COLUMNS = ("mount", "x (m)", "y (m)", "z (m)", "u axis", "v axis", "w axis")
 
 
 class PlanView(QtWidgets.QWidget):
@@ -37,12 +41,15 @@ class PlanView(QtWidgets.QWidget):
         The plan's rows after an import or an edit.
     plan_loaded(object)
         An acquisition plan (:class:`~app.acquire.plan.TestPlan`) was imported from TOML.
+    mounts_loaded(object)
+        A mounts file (:class:`~app.io.mounts.MountsFile`) was loaded.
     message(str, str)
         (level, text) for the window's message bar.
     """
 
     rows_changed = QtCore.Signal(object)
     plan_loaded = QtCore.Signal(object)
+    mounts_loaded = QtCore.Signal(object)
     message = QtCore.Signal(str, str)
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
@@ -58,8 +65,12 @@ class PlanView(QtWidgets.QWidget):
         self.save_csv_button = QtWidgets.QPushButton("Save CSV…")
         self.add_button = QtWidgets.QPushButton("Add row")
         self.remove_button = QtWidgets.QPushButton("Remove row")
+        self.mounts_button = QtWidgets.QPushButton("Load mounts (TOML)…")
+        self.mounts_button.setToolTip("mounts file: crank_axis and [[mount]] name, position, "
+                                      "axes (for the mount rates and the torque roll axis)")
         for b in (self.import_plan_button, self.import_csv_button, self.import_uff_button,
-                  self.save_csv_button, self.add_button, self.remove_button):
+                  self.save_csv_button, self.add_button, self.remove_button,
+                  self.mounts_button):
             buttons.addWidget(b)
         buttons.addStretch(1)
         self.import_plan_button.clicked.connect(self._import_plan)
@@ -68,6 +79,14 @@ class PlanView(QtWidgets.QWidget):
         self.save_csv_button.clicked.connect(self._save_csv)
         self.add_button.clicked.connect(self._add_row)
         self.remove_button.clicked.connect(self._remove_row)
+        self.mounts_button.clicked.connect(self._load_mounts)
+        self.mounts: MountsFile | None = None
+        self.mounts_table = QtWidgets.QTableWidget(0, len(_MOUNT_COLUMNS))
+        self.mounts_table.setHorizontalHeaderLabels(list(_MOUNT_COLUMNS))
+        self.mounts_table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.mounts_label = QtWidgets.QLabel("No mounts file: load one for the individual mount "
+                                             "rates and the torque roll axis")
+        self.mounts_label.setWordWrap(True)
         self.table = QtWidgets.QTableWidget(0, len(_COLUMNS))
         self.table.setHorizontalHeaderLabels(list(_COLUMNS))
         self.table.itemChanged.connect(self._on_edit)
@@ -80,9 +99,11 @@ class PlanView(QtWidgets.QWidget):
         ll = QtWidgets.QVBoxLayout(left)
         ll.setContentsMargins(0, 0, 0, 0)
         ll.addLayout(buttons)
-        ll.addWidget(self.table, 1)
+        ll.addWidget(self.table, 3)
         ll.addWidget(self.geometry_label)
         ll.addWidget(self.geometry_details)
+        ll.addWidget(self.mounts_label)
+        ll.addWidget(self.mounts_table, 1)
         split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
         split.addWidget(left)
         split.addWidget(self.projections)
@@ -206,6 +227,48 @@ class PlanView(QtWidgets.QWidget):
         self.message.emit("info", f"plan {plan.name!r} imported from {path.name}: "
                           f"{len(plan.excitations)} excitation points")
         return True
+
+    def _load_mounts(self) -> None:
+        path = self._ask_open("Load mounts file", "Mounts (*.toml);;All files (*)")
+        if path is not None:
+            self.load_mounts_file(path)
+
+    def load_mounts_file(self, path: Path) -> bool:
+        """Read a mounts file (TOML); returns False (with a message) on failure."""
+        try:
+            mounts = load_mounts(path)
+            check_mounts(mounts.mounts)
+        except (MountsFileError, ValueError) as err:
+            self.message.emit("error", f"cannot use the mounts file: {message_of(err)}")
+            return False
+        self.set_mounts(mounts)
+        self.message.emit("info", f"{len(mounts.mounts)} mounts loaded from {path.name}")
+        return True
+
+    def set_mounts(self, mounts: MountsFile | None) -> None:
+        """Show ``mounts`` in the table and the projections and pass them on."""
+        if mounts is self.mounts:
+            return
+        self.mounts = mounts
+        if mounts is None:
+            fill_table(self.mounts_table, _MOUNT_COLUMNS, [])
+            self.projections.set_mounts(np.zeros((0, 3)), np.zeros((0, 3, 3)))
+        else:
+            def vec(v: np.ndarray) -> str:
+                return ", ".join(f"{x:+.3f}" for x in v)
+            fill_table(self.mounts_table, _MOUNT_COLUMNS, [
+                (m.name, *(f"{x:.4f}" for x in m.position), *(vec(a) for a in m.axes))
+                for m in mounts.mounts])
+            self.mounts_table.resizeColumnsToContents()
+            rank, ident = check_mounts(mounts.mounts)
+            t = mounts.crank_axis
+            self.mounts_label.setText(
+                f"<b>Mounts</b> ({len(mounts.mounts)}, crank axis [{t[0]:.3f}, {t[1]:.3f}, "
+                f"{t[2]:.3f}]): this geometry determines {int(ident.sum())} of "
+                f"{ident.size} rates (design rank {rank})")
+            self.projections.set_mounts(np.array([m.position for m in mounts.mounts]),
+                                        np.array([m.axes for m in mounts.mounts]))
+        self.mounts_loaded.emit(mounts)
 
     def set_plan(self, plan: TestPlan, path: Path | None = None) -> None:
         """Show an acquisition plan given by the program (the mock bench's)."""

@@ -36,6 +36,8 @@ class ProjectionsWidget(QtWidgets.QWidget):
         self._arrows: list[pg.PlotDataItem] = []
         self._next: list[pg.ScatterPlotItem] = []
         self._labels: list[list[pg.TextItem]] = []
+        self._mounts: list[pg.ScatterPlotItem] = []
+        self._mount_axes: list[pg.PlotDataItem] = []
         for k, (title, i, j) in enumerate(_VIEWS):
             w = pg.PlotWidget()
             p = w.getPlotItem()
@@ -48,7 +50,11 @@ class ProjectionsWidget(QtWidgets.QWidget):
             resp = pg.ScatterPlotItem(symbol="o", size=9, brush=COLORS[0], pen=None)
             exc = pg.ScatterPlotItem(symbol="t", size=10, brush=COLORS[1], pen=None)
             nxt = pg.ScatterPlotItem(symbol="star", size=22, brush="#F0E442", pen=pg.mkPen("k"))
-            for item in (resp, exc, nxt):
+            mnt = pg.ScatterPlotItem(symbol="s", size=12, brush=COLORS[2], pen=None)
+            mnt_axes = p.plot([], [], pen=pg.mkPen(COLORS[2], width=2), connect="pairs")
+            self._mounts.append(mnt)
+            self._mount_axes.append(mnt_axes)
+            for item in (resp, exc, nxt, mnt):
                 p.addItem(item)
             self.plots.append(w)
             self._resp.append(resp)
@@ -63,7 +69,9 @@ class ProjectionsWidget(QtWidgets.QWidget):
             "font-size:14pt'>▼</span> excitation DOF (hit or shaker)<br>"
             "<span style='color:#555555; font-size:14pt'>—</span> measured or excited "
             "direction, from the point<br><span style='color:#C8B400; font-size:14pt'>★</span>"
-            " next point to excite<br>numbers: node ids. Drag to pan, wheel to zoom.")
+            " next point to excite<br>"
+            f"<span style='color:{COLORS[2]}; font-size:14pt'>■</span> mount, with its u, v, w "
+            "axes<br>numbers: node ids. Drag to pan, wheel to zoom.")
         self.help.setWordWrap(True)
         lay.addWidget(self.help, 1, 1)
 
@@ -94,6 +102,18 @@ class ProjectionsWidget(QtWidgets.QWidget):
                 plot.addItem(t)
                 self._labels[k].append(t)
             plot.vb.enableAutoRange(x=True, y=True)
+
+    def set_mounts(self, positions: np.ndarray, axes: np.ndarray, length: float = 0.05) -> None:
+        """Draw mounts at ``positions`` (n, 3), m, with their axes (n, 3, 3) rows u, v, w."""
+        P = np.asarray(positions, dtype=float).reshape(-1, 3)
+        A = np.asarray(axes, dtype=float).reshape(-1, 3, 3)
+        seg = np.empty((6 * len(P), 3))
+        seg[0::2] = np.repeat(P, 3, axis=0)
+        seg[1::2] = (P[:, None, :] + length * A).reshape(-1, 3)
+        for k, (_, i, j) in enumerate(_VIEWS):
+            self._mounts[k].setData(P[:, i], P[:, j])
+            self._mount_axes[k].setData(seg[:, i], seg[:, j])
+            self.plots[k].getPlotItem().vb.enableAutoRange(x=True, y=True)
 
     def highlight(self, xyz: Sequence[float] | None) -> None:
         """Mark the next point to excite (None clears the mark)."""

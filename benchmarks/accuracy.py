@@ -1,0 +1,237 @@
+"""Accuracy on the independent reference model's scenario suite (``hardware_mocks.reference``).
+
+Each scenario (a lattice body on inclined mounts with its exact truth, FRFs measured with
+noise and sensor/location errors, see ``hardware_mocks/reference/scenarios.py``) is written
+to a binary UFF file with its reported geometry, and identified three ways:
+
+- ``default``: ``insitu identify FILE.uff`` as a user runs it (``app.cli.main.main``
+  in-process; a non-zero exit status is a refusal, its stderr line the reason);
+- ``plain``: ``insitu identify FILE.uff --method plain``;
+- ``article``: the article's method written independently
+  (``hardware_mocks/reference/article.py``) with its own band rule, on the same FRFs and
+  reported geometry.
+
+Errors (``hardware_mocks/reference/metrics.py``): mass %, CoG distance mm, worst inertia
+entry (about O and about the CoG) as % of the largest principal moment, worst K entry as %
+of sqrt(Kii Kjj). The table gives, per family (body shape), per tag and overall, the median
+and 95th percentile over the scenarios a method answered, and its refusals.
+
+Run: ``.venv/bin/python benchmarks/accuracy.py [--scenarios 200] [--family engine]
+[--jobs 2] [--write-docs]``. BLAS runs single-threaded in every process (set before numpy
+is imported); ``--jobs`` runs scenarios in parallel processes.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import io  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from datetime import UTC, datetime  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+from rich.console import Console  # noqa: E402
+from rich.table import Table  # noqa: E402
+
+from app.cli.main import main as insitu_main  # noqa: E402
+from app.io.uff import write_frf_uff  # noqa: E402
+from hardware_mocks.reference.article import ArticleRefusalError, identify_scenario  # noqa: E402
+from hardware_mocks.reference.metrics import METRICS, errors  # noqa: E402
+from hardware_mocks.reference.scenarios import (  # noqa: E402
+    Scenario,
+    ScenarioSpec,
+    build_scenario,
+    suite,
+)
+from processing.data import FRFSet, Geometry  # noqa: E402
+
+METHODS = ("default", "plain", "article")
+DOCS = Path(__file__).resolve().parent.parent / "docs" / "accuracy.md"
+
+
+def frfset_of(sc: Scenario) -> FRFSet:
+    """The scenario's measured FRFs as the project's FRFSet (reported geometry)."""
+    ids, xyz = sc.geometry()
+    return FRFSet(freq=sc.freq, H=sc.H, resp_nodes=sc.sensors.ids,
+                  resp_dirs=sc.sensors.reported_dirs, exc_nodes=sc.forces.ids,
+                  exc_dirs=sc.forces.reported_dirs, geometry=Geometry(ids, xyz),
+                  coherence=sc.coherence)
+
+
+def run_cli(args: list[str]) -> tuple[int, dict[str, Any] | None, str]:
+    """``insitu ARGS --out JSON`` in-process: exit status, result JSON, last stderr line."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "result.json"
+        err = io.StringIO()
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+            code = insitu_main([*args, "--out", str(out)])
+        result = json.loads(out.read_text()) if code == 0 and out.exists() else None
+    lines = err.getvalue().strip().splitlines()
+    return code, result, lines[-1] if lines else ""
+
+
+def evaluate(spec: ScenarioSpec) -> dict[str, Any]:
+    """Errors (or the refusal) of each method on one scenario."""
+    sc = build_scenario(spec)
+    row: dict[str, Any] = {"spec": spec, "name": spec.name}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"{spec.name}.uff"
+        write_frf_uff(path, frfset_of(sc), binary=True)
+        for method, extra in (("default", []), ("plain", ["--method", "plain"])):
+            t0 = time.perf_counter()
+            code, res, msg = run_cli(["identify", str(path), *extra])
+            if res is None:
+                row[method] = {"refused": msg or f"exit status {code}"}
+            else:
+                row[method] = {"errors": errors(sc.truth, res["mass"], res["cog"],
+                                                res["inertia_origin"], res["inertia_cog"],
+                                                res["stiffness"]),
+                               "bands": res["bands"], "seconds": time.perf_counter() - t0}
+    try:
+        a = identify_scenario(sc)
+        row["article"] = {"errors": errors(sc.truth, a.mass, a.cog, a.inertia_origin,
+                                           a.inertia_cog, a.K),
+                          "bands": {"mass_line": a.mass_band, "stiffness": a.stiffness_band}}
+    except ArticleRefusalError as err:
+        row["article"] = {"refused": str(err)}
+    return row
+
+
+def worse_than_article(row: dict[str, Any]) -> bool:
+    """Default refused where the article answered, or is worse in any metric."""
+    art, dft = row["article"], row["default"]
+    if "errors" not in art:
+        return False
+    if "errors" not in dft:
+        return True
+    return any(dft["errors"][k] > art["errors"][k] for k, _ in METRICS)
+
+
+def groups(rows: list[dict[str, Any]]) -> list[tuple[str, list[dict[str, Any]]]]:
+    """(name, rows) per family, per tag, then all."""
+    out = []
+    for fam in sorted({r["spec"].family for r in rows}):
+        out.append((fam, [r for r in rows if r["spec"].family == fam]))
+    for tag in sorted({t for r in rows for t in r["spec"].tags}):
+        out.append((f"[{tag}]", [r for r in rows if tag in r["spec"].tags]))
+    out.append(("all", rows))
+    return out
+
+
+def summary(rows: list[dict[str, Any]]) -> list[list[str]]:
+    """Table rows: group, method, scenarios, refusals, then median / p95 of each metric."""
+    table = []
+    for name, rs in groups(rows):
+        for method in METHODS:
+            ok = [r[method]["errors"] for r in rs if "errors" in r[method]]
+            cells = [name, method, str(len(rs)), str(len(rs) - len(ok))]
+            for key, _ in METRICS:
+                v = np.array([e[key] for e in ok])
+                cells.append(f"{np.median(v):.3g} / {np.percentile(v, 95):.3g}" if v.size
+                             else "-")
+            table.append(cells)
+    return table
+
+
+HEADER = ["group", "method", "scenarios", "refused",
+          *(f"{k} {u} (median / p95)" for k, u in METRICS)]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--scenarios", type=int, default=200, help="number of scenarios (200)")
+    p.add_argument("--family", choices=("block", "engine", "gearbox"),
+                   help="only this body shape")
+    p.add_argument("--jobs", type=int, default=2, help="parallel processes (2)")
+    p.add_argument("--seed", type=int, default=2026, help="suite seed (2026)")
+    p.add_argument("--write-docs", action="store_true", help=f"write the table to {DOCS}")
+    p.add_argument("--verbose", action="store_true", help="print each scenario's errors")
+    args = p.parse_args(argv)
+    specs = [s for s in suite(args.scenarios, args.seed)
+             if args.family is None or s.family == args.family]
+    console = Console()
+    t0 = time.perf_counter()
+    rows: list[dict[str, Any]] = []
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        for row in pool.map(evaluate, specs, chunksize=1):
+            rows.append(row)
+            if args.verbose:
+                console.print(row["name"], {m: row[m].get("errors", row[m].get("refused"))
+                                            for m in METHODS})
+    elapsed = time.perf_counter() - t0
+    table = Table(title=f"Accuracy on {len(rows)} reference scenarios ({elapsed:.0f} s)")
+    for h in HEADER:
+        table.add_column(h, justify="left" if h in ("group", "method") else "right")
+    body = summary(rows)
+    for cells in body:
+        table.add_row(*cells)
+    console.print(table)
+    worse = [r["name"] for r in rows if worse_than_article(r)]
+    both = sum(1 for r in rows if "errors" in r["article"])
+    console.print(f"default worse than the article's method in some metric (or refused where "
+                  f"it answered): {len(worse)} of {both} scenarios the article answered")
+    refusals = sorted({r["default"]["refused"] for r in rows if "refused" in r["default"]})
+    for msg in refusals[:10]:
+        console.print(f"  default refusal: {msg}")
+    if args.write_docs:
+        write_docs(body, rows, worse, both, elapsed, args, refusals)
+        console.print(f"written to {DOCS}")
+    return 0
+
+
+def write_docs(body: list[list[str]], rows: list[dict[str, Any]], worse: list[str], both: int,
+               elapsed: float, args: argparse.Namespace, refusals: list[str]) -> None:
+    cmd = "python benchmarks/accuracy.py " + " ".join(sys.argv[1:])
+    lines = [
+        "# Accuracy on the independent reference model",
+        "",
+        "Produced by `benchmarks/accuracy.py` (do not edit by hand). Scenarios: "
+        "`hardware_mocks/reference/scenarios.py` (`suite`, seed "
+        f"{args.seed}); truth, FRFs and errors are computed without any code from "
+        "`processing/` (see `hardware_mocks/reference/`). Each scenario is written to a "
+        "binary UFF file; `default` and `plain` are `insitu identify FILE.uff` "
+        "(`--method plain`), `article` the article's method with its own band rule "
+        "(`hardware_mocks/reference/article.py`, given the system's true highest rigid-body "
+        "and first elastic frequencies).",
+        "",
+        "Errors: mass %; CoG distance, mm; worst inertia-tensor entry about O and about the "
+        "CoG, % of the largest principal moment; worst K entry, % of sqrt(Kii Kjj). Each "
+        "cell: median / 95th percentile over the scenarios the method answered.",
+        "",
+        f"- date: {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}",
+        f"- machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}, {platform.system()} {platform.release()}",
+        f"- command: `{cmd}` ({elapsed:.0f} s)",
+        "",
+        "| " + " | ".join(HEADER) + " |",
+        "| " + " | ".join("---" if i < 2 else "---:" for i in range(len(HEADER))) + " |",
+        *("| " + " | ".join(c) + " |" for c in body),
+        "",
+        f"Scenarios where `default` is worse than the article's method in at least one "
+        f"metric, or refuses where it answers: **{len(worse)}** of the {both} it answered.",
+        "",
+    ]
+    if refusals:
+        lines += ["Refusals of `default` (distinct messages):", "",
+                  *(f"- `{m}`" for m in refusals), ""]
+    art = sorted({r["article"]["refused"] for r in rows if "refused" in r["article"]})
+    if art:
+        lines += ["Refusals of the article's method (distinct messages):", "",
+                  *(f"- `{m}`" for m in art[:10]), ""]
+    DOCS.write_text("\n".join(lines))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,151 @@
+"""The mount system in the GUI (plan view's mounts, results' modes, decoupling, mount rates,
+mode-shape arrows) and in the HTML report; screenshots into docs/screenshots with
+``INSITU_SCREENSHOTS=1``."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PySide6 import QtWidgets
+
+from app.cli.main import main
+from app.gui.main_window import MainWindow
+from app.io.uff import write_frf_uff
+from hardware_mocks.benches import get_bench
+
+DOC_SHOTS = Path(__file__).resolve().parents[3] / "docs" / "screenshots"
+
+
+def _files(tmp_path: Path) -> tuple[Path, Path]:
+    bench = get_bench("engine-rigid")
+    uff = tmp_path / "engine.uff"
+    write_frf_uff(uff, bench.frfset())
+    lines = ["crank_axis = [1.0, 0.0, 0.0]"]
+    for i, m in enumerate(bench.model.mounts):
+        axes = ", ".join("[" + ", ".join(repr(float(x)) for x in a) + "]" for a in m.axes.T)
+        lines += ["[[mount]]", f'name = "mount {i + 1}"',
+                  "position = [" + ", ".join(repr(float(x)) for x in m.position) + "]",
+                  f"axes = [{axes}]"]
+    toml = tmp_path / "mounts.toml"
+    toml.write_text("\n".join(lines) + "\n")
+    return uff, toml
+
+
+def _shot(window: MainWindow, name: str, tmp: Path) -> None:
+    QtWidgets.QApplication.processEvents()
+    folder = DOC_SHOTS if os.environ.get("INSITU_SCREENSHOTS") == "1" else tmp / "screenshots"
+    folder.mkdir(parents=True, exist_ok=True)
+    assert window.grab().save(str(folder / f"{name}.png"))
+
+
+def _col(table: QtWidgets.QTableWidget, col: int) -> list[str]:
+    return [table.item(r, col).text() if table.item(r, col) else ""
+            for r in range(table.rowCount())]
+
+
+def test_mounts_in_plan_and_results(qtbot, make_window, choose_file, tmp_path: Path) -> None:
+    uff, toml = _files(tmp_path)
+    model = get_bench("engine-rigid").model
+    window: MainWindow = make_window()
+    plan = window.plan_view
+    # a bad mounts file: one line in the message bar, nothing loaded
+    bad = tmp_path / "bad.toml"
+    bad.write_text("crank_axis = [1, 0, 0]\n")
+    choose_file(bad)
+    plan.mounts_button.click()
+    assert window.messages.level == "error" and "no [[mount]]" in window.messages.text
+    assert window.session.mounts is None
+    choose_file(toml)
+    plan.mounts_button.click()
+    assert window.session.mounts is not None
+    assert _col(plan.mounts_table, 0) == ["mount 1", "mount 2", "mount 3"]
+    assert "determines 9 of 9 rates" in plan.mounts_label.text()
+    # open the FRFs: the results show the modes, decoupling, rates and arrows
+    choose_file(uff)
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000):
+        window.open_action.trigger()
+    res = window.results_view
+    ms = res.mount_system
+    assert ms is not None and ms.rates is not None
+    f = [float(x) for x in _col(res.modes, 1)]
+    np.testing.assert_allclose(f, model.rigid_modes().frequency, rtol=2e-3)
+    assert res.energy.rowCount() == 6 and res.energy.columnCount() == 7
+    rates = [float(x) for x in _col(res.mount_rates, 2)]
+    np.testing.assert_allclose(rates, np.concatenate([m.stiffness for m in model.mounts]),
+                               rtol=0.01)
+    assert set(_col(res.mount_rates, 6)) == {"yes"}
+    assert res.tra.rowCount() >= 5
+    P, U = res.mode_shapes.arrows(0)
+    assert P.shape == U.shape and len(P) == 4 + 3 + 1  # 4 response points, 3 mounts, CoG
+    window.tabs.setCurrentWidget(plan)
+    _shot(window, "mounts_plan", tmp_path)
+    window.tabs.setCurrentWidget(res)
+    res.excitation.setValue(25.0)  # the isolation columns appear
+    assert res.modes.columnCount() == 7 and "NOT isolated" in " ".join(_col(res.modes, 5))
+    res.table_tabs.setCurrentWidget(res.modes_page)
+    res.plot_tabs.setCurrentWidget(res.mode_shapes)
+    res.mode_shapes.mode.setCurrentIndex(2)
+    _shot(window, "results_modes", tmp_path)
+    res.table_tabs.setCurrentWidget(res.mounts_page)
+    _shot(window, "results_mounts", tmp_path)
+    res.table_tabs.setCurrentWidget(res.energy)
+    _shot(window, "results_energy", tmp_path)
+    # the exported result JSON and report carry the mount system
+    out = tmp_path / "export.json"
+    choose_file(out, save=True)
+    window.export_view.json_button.click()
+    js = json.loads(out.read_text())
+    assert len(js["modes"]) == 6 and len(js["mounts"]) == 3 and "torque_roll_axis" in js
+    report = tmp_path / "export.html"
+    choose_file(report, save=True)
+    window.export_view.html_button.click()
+    assert "<h2>Individual mount rates</h2>" in report.read_text()
+
+
+def test_report_with_mounts(tmp_path: Path, qapp, capsys: pytest.CaptureFixture[str]) -> None:
+    uff, toml = _files(tmp_path)
+    out = tmp_path / "r.html"
+    assert main(["report", str(uff), "--mounts", str(toml), "--excitation-hz", "25",
+                 "--out", str(out)]) == 0
+    html = out.read_text()
+    for h in ("Rigid-body modes", "Individual mount rates", "Torque roll axis"):
+        assert f"<h2>{h}</h2>" in html
+    assert len(re.findall(r"<td class=\"l\">mount \d</td>", html)) == 3
+    assert "NOT isolated" in html  # 25 Hz is within sqrt(2) of the upper modes
+    bad = tmp_path / "bad.toml"
+    bad.write_text("crank_axis = [1, 0]\n")
+    assert main(["report", str(uff), "--mounts", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "crank_axis" in err
+
+
+def test_run_file_mounts_are_loaded_with_the_run(qtbot, make_window, choose_file,
+                                                 tmp_path: Path) -> None:
+    """A run file that carries a mounts table brings it into the plan view and the results."""
+    from app.acquire import plan_for_bench
+    from app.io.mounts import load_mounts
+    from app.io.runfile import RunWriter, write_mounts
+    from drivers.base import ChannelConfig
+
+    _, toml = _files(tmp_path)
+    bench = get_bench("engine-rigid")
+    plan = plan_for_bench("engine-rigid", points=[0, 1, 3, 4, 6, 8])
+    path = tmp_path / "run.h5"
+    w = RunWriter.create(path, plan_data=plan.to_dict(), station_data={},
+                         channels=[ChannelConfig("F", 0, "force", 2.25)], devices=["fe"],
+                         geometry=bench.geometry, fs=256.0, n_samples=8, method="hammer")
+    w.finish("finished", frf=bench.frfset())
+    write_mounts(path, load_mounts(toml))
+    window: MainWindow = make_window()
+    choose_file(path)
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000):
+        window.open_action.trigger()
+    assert window.session.mounts is not None
+    assert _col(window.plan_view.mounts_table, 0) == ["mount 1", "mount 2", "mount 3"]
+    ms = window.results_view.mount_system
+    assert ms is not None and ms.rates is not None and ms.rates.stiffness.identifiable.all()

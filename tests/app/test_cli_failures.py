@@ -1,0 +1,127 @@
+"""What an operator meets when things go wrong: one line, exit 2, nothing claimed that is untrue."""
+
+from __future__ import annotations
+
+import re
+import socket
+import time
+from pathlib import Path
+
+import pytest
+
+from app.cli.main import main
+from app.io.runfile import read_run
+from drivers.errors import DeviceNotAvailableError
+from drivers.transports import CanLink
+from hardware_mocks.bench_process import MockBench
+
+PLAN = Path(__file__).resolve().parents[2] / "docs" / "mock_bench_plan.toml"
+
+
+def _dead_station(tmp_path: Path) -> Path:
+    """The station file of a mock bench that has since stopped: every device unreachable."""
+    with MockBench("engine") as bench:
+        text = bench.station_toml()
+    text = re.sub(r'url = "[^"]+"', 'url = "/dev/insitu-no-such-port"', text)
+    path = tmp_path / "bench.toml"
+    path.write_text(text)
+    return path
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "Traceback" not in err[0]
+    return err[0]
+
+
+def test_unreachable_socketcand_is_one_line_in_bounded_time(caplog: pytest.LogCaptureFixture
+                                                            ) -> None:
+    link = CanLink(name="fe", interface="socketcand", host="127.0.0.1", port=_free_port(),
+                   channel="vcan0")
+    t = time.monotonic()
+    with pytest.raises(DeviceNotAvailableError, match=r"fe: socketcand server 127\.0\.0\.1:\d+ "
+                                                      r"not reachable .* after 4 tries"):
+        link.open()
+    assert time.monotonic() - t < 5.0
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]
+
+
+def test_acquire_on_a_dead_station_writes_no_file_and_claims_none(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    station = _dead_station(tmp_path)
+    out = tmp_path / "dead.h5"
+    assert main(["acquire", "--station", str(station), "--plan", str(PLAN), "--out",
+                 str(out)]) == 2
+    line = _one_line(capsys)
+    assert "no record was acquired and no run file was written" in line
+    assert "records are in" not in line and not out.exists()
+
+
+def test_acquire_into_a_missing_folder_is_refused_up_front(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "nope" / "x.h5"
+    assert main(["acquire", "--mock", "--out", str(out)]) == 2
+    line = _one_line(capsys)
+    assert f"folder {out.parent} does not exist" in line and not out.parent.exists()
+
+
+def test_resume_takes_the_run_file_and_refuses_a_finished_run(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run.h5"
+    assert main(["acquire", "--resume", str(out)]) == 2
+    assert "no run file to resume" in _one_line(capsys)
+    assert main(["acquire", "--mock", "--bench", "engine-rigid", "--points", "0,1,3,4,6,8",
+                 "--length", "0.5", "--out", str(out)]) == 0
+    capsys.readouterr()
+    size = out.stat().st_size
+    assert read_run(out, with_data=False).state == "finished"
+    assert main(["acquire", "--resume", str(out)]) == 2  # the README's form
+    line = _one_line(capsys)
+    assert "is a finished run (6 records): nothing to resume" in line
+    assert out.stat().st_size == size  # the file is not touched
+    assert main(["acquire", "--resume", str(out), "--out", str(tmp_path / "other.h5")]) == 2
+    assert "give the run file once" in _one_line(capsys)
+    assert main(["acquire", "--mock"]) == 2
+    assert "give --out RUN.h5" in _one_line(capsys)
+
+
+def test_a_bug_is_one_line_naming_the_log_file(monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    import app.cli.replay as replay
+
+    def boom(args: object) -> int:
+        raise RuntimeError("something we did not foresee\nsecond line")
+
+    monkeypatch.setattr(replay, "run", boom)
+    assert main(["replay", "x.h5"]) == 1
+    line = _one_line(capsys)
+    assert line.startswith("insitu replay: internal error: RuntimeError: something we did not "
+                           "foresee (details in ")
+    log = Path(line.split("details in ")[1].split(";")[0])
+    assert "Traceback" in log.read_text() and "second line" in log.read_text()
+
+
+def test_piped_output_keeps_every_digit_and_shows_progress(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("COLUMNS", raising=False)
+    uff = tmp_path / "engine.uff"
+    assert main(["simulate", "engine-rigid", "--out", str(uff)]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(uff)]) == 0  # stdout is captured: not a terminal
+    out = capsys.readouterr().out
+    assert "Stiffness" in out and "…" not in out  # no cell cut at 80 columns
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "demo-run.h5").write_bytes(b"")  # the default name is taken: the next one
+    assert main(["demo", "--bench", "engine-rigid", "--length", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("of 18 done)") == 18  # one line per point in a log, not silence
+    assert "run file demo-run-2.h5 kept" in out and "…" not in out
+    assert len(read_run(tmp_path / "demo-run-2.h5", with_data=False).records) == 18
