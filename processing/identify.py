@@ -18,227 +18,92 @@ Two methods on the same data:
 Both honour coherence (lines of an excitation with a response below the
 threshold are dropped), the per-line rank and condition of T, and optional
 physical consistency (``physical=True``).
+
+The work is done in stages, each a function of the prepared problem
+(:func:`processing.problem.prepare`) returning its own result:
+:func:`choose_bands` -> :func:`weigh_lines` -> :func:`fit` -> :func:`check` ->
+:func:`assemble`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-from dataclasses import dataclass, field
-from typing import Any, Literal
+from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import NDArray
 
-from processing._kernels import real_times_complex
 from processing.coherence import coherence_gate
 from processing.data import FRFSet, InputError
-from processing.geometry import (
-    DEFAULT_MAX_COND_T,
-    GeometryError,
-    GeometryReport,
-    check_geometry,
-    excitation_matrix,
-    response_matrix,
-    scaling,
-)
+from processing.geometry import GeometryError, excitation_matrix
 from processing.inertia import InertiaProperties, inertia_properties, mass_matrix
-from processing.massline import MassLineProblem, stack_real
-from processing.modes import rigid_body_modes
+from processing.massline import MassLineFit, MassLineProblem, stack_real
 from processing.physical import constrain_physical
+from processing.problem import IdentifyOptions, Problem, prepare
 from processing.refine import point_offsets
+from processing.results import IdentificationResult, Method
 from processing.rigidity import rigidity_check
 from processing.selection import (
     BandChoice,
-    ElasticPeak,
-    choose_bands,
-    elastic_peaks,
     mode_shape_basis,
     quick_rigid_modes,
-    reconstruction_error,
     select_lines,
 )
+from processing.selection import choose_bands as choose_automatic_bands
 from processing.stiffness import (
+    LineOperators,
     StiffnessMoments,
     dynamic_stiffness,
     fit_stiffness,
     line_operators,
     stiffness_moments,
 )
-from processing.synthesis import SynthesisError, synthesis_error, synthesise
+from processing.synthesis import SynthesisFit, synthesis_error, synthesise
 from processing.windows import correct_dynamic_stiffness
 
-__all__ = ["IdentificationResult", "IdentifyOptions", "identify", "identify_arrays"]
+__all__ = [
+    "Bands",
+    "Checks",
+    "Fit",
+    "IdentificationResult",
+    "IdentifyOptions",
+    "LineWeights",
+    "Method",
+    "assemble",
+    "check",
+    "choose_bands",
+    "fit",
+    "identify",
+    "identify_arrays",
+    "weigh_lines",
+]
 
 log = logging.getLogger(__name__)
 
-Method = Literal["improved", "plain"]
+
+# --- stage 1: bands --------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
-class IdentifyOptions:
-    """Options of :func:`identify`. Bands in Hz; ``None`` chooses them from the data."""
+class Bands:
+    """The mass-line and stiffness bands (Hz) and their lines.
 
-    method: Method = "improved"
-    mass_band: tuple[float, float] | None = None
-    stiffness_band: tuple[float, float] | None = None
-    physical: bool = False
-    #: section 3: keep lines whose reconstruction error is below level x the band mean
-    level: float = 3.0
-    max_cond_T: float = DEFAULT_MAX_COND_T
-    coherence_threshold: float = 0.8
-    max_iter: int = 50
-    tol: float = 1e-10
-    #: improved method: model elastic leakage when elastic modes are seen ("auto") or never
-    leakage: Literal["auto", "off"] = "auto"
-    symmetric: bool = True
-    #: relative FRF noise above which elastic leakage is not modelled
-    leakage_max_noise: float = 0.002
-    #: rounds of response-point location refinement (:mod:`processing.refine`); 0 = off
-    refine_points: int = 0
-    #: bound the automatic mass-line band by the rigidity check (article section 5.1)
-    use_rigidity: bool = True
+    ``leakage`` is True when the elastic modes' leakage into the mass line is
+    modelled (the band may then reach 0.7x the first elastic mode, else 0.5x);
+    ``choice`` holds the evidence of an automatic choice.
+    """
 
-
-@dataclass(frozen=True)
-class IdentificationResult:
-    """Everything identified, with the evidence. All SI, global frame of the input."""
-
-    method: Method
-    theta: NDArray[np.float64]
-    M: NDArray[np.float64]
-    K: NDArray[np.float64]
-    C: NDArray[np.float64]
-    properties: InertiaProperties
     mass_band: tuple[float, float]
     stiffness_band: tuple[float, float]
-    mass_lines: NDArray[np.float64]
-    stiffness_lines: NDArray[np.float64]
-    iterations: int
-    converged: bool
-    geometry: GeometryReport
-    elastic_modes: tuple[ElasticPeak, ...]
-    rigid_modes_hz: NDArray[np.float64]
-    reconstruction_error: NDArray[np.float64]
-    synthesis: SynthesisError
-    coherence_dropped: int
-    coherence_checked: bool
-    coherence_min: float
-    physical_enforced: bool
-    warnings: tuple[str, ...] = ()
-    stiffness_per_line: NDArray[np.complex128] | None = field(default=None, repr=False)
-    #: estimated response-point location errors (n_resp, 3), m, when refined
-    point_corrections: NDArray[np.float64] | None = None
-    #: frequency ranges (f_low, f_high), Hz, of the lines of the mass and stiffness bands
-    #: left out because some FRF's coherence is below ``coherence_threshold``
-    coherence_ranges_hz: tuple[tuple[float, float], ...] = ()
-    coherence_threshold: float = 0.8
-
-    def checks(self) -> dict[str, dict[str, Any]]:
-        """Named pass/fail checks with their figures (result JSON ``checks``)."""
-        p = self.properties
-        rel = self.reconstruction_error
-        return {
-            "geometry": {
-                "pass": self.geometry.ok and self.geometry.cond_T <= DEFAULT_MAX_COND_T,
-                "rank_E": self.geometry.rank_E,
-                "cond_E": self.geometry.cond_E,
-                "rank_T": self.geometry.rank_T,
-                "cond_T": self.geometry.cond_T,
-            },
-            "coherence": {
-                "pass": (not self.coherence_checked) or self.coherence_dropped == 0,
-                "checked": self.coherence_checked,
-                "threshold": self.coherence_threshold,
-                "min_in_mass_band": self.coherence_min,
-                "dropped_lines": self.coherence_dropped,
-                "dropped_ranges_hz": [list(r) for r in self.coherence_ranges_hz],
-            },
-            "rigidity": {
-                "pass": bool(np.max(rel) < 0.1) if rel.size else True,
-                "max_reconstruction_error_in_mass_band": float(np.max(rel)) if rel.size else 0.0,
-                "mean_reconstruction_error_in_mass_band": float(np.mean(rel)) if rel.size else 0.0,
-            },
-            "physical_consistency": {
-                "pass": p.physically_consistent,
-                "positive_definite": p.positive_definite,
-                "triangle_inequality": p.triangle_inequality,
-                "triangle_margin": p.triangle_margin,
-                "enforced": self.physical_enforced,
-            },
-            "reconstruction_error": {
-                "pass": self.synthesis.overall < 0.1,
-                "synthesis_error_overall": self.synthesis.overall,
-                "synthesis_error_max_frf": float(np.max(self.synthesis.per_frf)),
-                "band": list(self.synthesis.band),
-            },
-            "convergence": {"pass": self.converged, "iterations": self.iterations},
-        }
-
-    def to_json(self) -> dict[str, Any]:
-        """The result JSON of ``METHOD.md`` (plus extra keys)."""
-        p = self.properties
-        return {
-            "mass": p.mass,
-            "cog": p.cog.tolist(),
-            "inertia_cog": p.inertia_cog.tolist(),
-            "inertia_origin": p.inertia_origin.tolist(),
-            "principal_moments": p.principal_moments.tolist(),
-            "principal_axes": p.principal_axes.tolist(),
-            "stiffness": self.K.tolist(),
-            "damping": self.C.tolist(),
-            "bands": {"mass_line": list(self.mass_band), "stiffness": list(self.stiffness_band)},
-            "checks": _jsonable(self.checks()),
-            "theta": self.theta.tolist(),
-            "method": self.method,
-            "rigid_modes_hz": self.rigid_modes_hz.tolist(),
-            "elastic_modes": [
-                {"frequency_hz": e.frequency, "damping_ratio": e.damping}
-                for e in self.elastic_modes
-            ],
-            "lines_used": {
-                "mass_line": len(self.mass_lines), "stiffness": len(self.stiffness_lines)
-            },
-            "warnings": list(self.warnings),
-            "response_point_corrections": (None if self.point_corrections is None
-                                           else self.point_corrections.tolist()),
-            "modes": _modes_json(self.M, self.K, self.C),
-        }
-
-
-def _modes_json(M: NDArray[np.float64], K: NDArray[np.float64], C: NDArray[np.float64]
-                ) -> list[dict[str, Any]]:
-    """The six rigid-body modes (``METHOD.md`` key ``modes``); empty when M is not positive
-    definite (no modes exist)."""
-    try:
-        return rigid_body_modes(M, K, C).to_json()
-    except ValueError:
-        return []
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
-
-
-def _noise_level(
-    rel_err: NDArray[np.float64], freq: NDArray[np.float64], peaks: tuple[ElasticPeak, ...],
-    n_r: int,
-) -> float:
-    """Relative FRF noise from the rigid-body reconstruction residual (lower quartile over the
-    lines below a third of the first elastic mode, corrected for the 6 fitted DOFs)."""
-    top = min(p.frequency for p in peaks) / 3 if peaks else freq[-1]
-    sel = freq <= top
-    if n_r <= 6 or not np.any(sel):
-        return 0.0
-    return float(np.percentile(rel_err[sel], 25) * np.sqrt(n_r / (n_r - 6)))
+    in_mass: NDArray[np.bool_]
+    in_stiffness: NDArray[np.bool_]
+    leakage: bool
+    choice: BandChoice | None
+    warnings: tuple[str, ...]
+    #: which bands were chosen and why, in words
+    reason: str = ""
 
 
 def _band_mask(freq: NDArray[np.float64], band: tuple[float, float], what: str) -> (
@@ -258,20 +123,416 @@ def _band_mask(freq: NDArray[np.float64], band: tuple[float, float], what: str) 
     return m
 
 
-def _line_weights(
-    coherence: NDArray[np.float64] | None, threshold: float, T: NDArray[np.float64],
-    max_cond: float, L: float,
-) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Weights (n_exc, n_f): 0 where a column has low coherence; lines where T stays usable."""
-    n_e = T.shape[1]
-    if coherence is None:
-        return np.ones((n_e, 0)), np.ones(0, bool)
-    good = np.all(coherence >= threshold, axis=0)  # (n_e, n_f)
-    Ts = T / scaling(L)[:, None]
-    masked = Ts[None, :, :] * np.moveaxis(good, -1, 0)[:, None, :]  # (n_f, 6, n_e)
-    s = np.linalg.svd(masked, compute_uv=False)
-    ok = (s[:, 5] > 1e-12 * s[:, 0]) & (s[:, 0] <= max_cond * np.maximum(s[:, 5], 1e-300))
-    return good.astype(float), ok
+def choose_bands(problem: Problem, rigid_band_top: float | None = None,
+                 rigid_band_fallback: float | None = None) -> Bands:
+    """The bands given in the options, or chosen from the data (``rigid_band_top``, Hz,
+    bounds an automatic mass line; ``rigid_band_fallback`` when it leaves none)."""
+    opt, peaks, noise = problem.options, problem.peaks, problem.noise
+    # Leakage terms are free per equation entry: on noisy data the regressors left after
+    # eliminating them are dominated by noise and the fit is biased low (errors in
+    # variables). Model the leakage only when the FRF noise, read off the rigid-body
+    # reconstruction residual well below the first elastic mode, is small.
+    leak = (problem.improved and opt.leakage == "auto" and len(peaks) > 0
+            and noise <= opt.leakage_max_noise)
+    warnings: list[str] = []
+    if problem.improved and peaks and not leak:
+        warnings.append(
+            f"elastic leakage not modelled (FRF noise {noise * 100:.2f} % > "
+            f"{opt.leakage_max_noise * 100:g} %): mass line kept to half the elastic mode"
+        )
+    choice: BandChoice | None = None
+    if opt.mass_band is None or opt.stiffness_band is None:
+        clean = problem.clean_lines
+        choice = choose_automatic_bands(problem.freq[clean], problem.X[..., clean], problem.T,
+                                        peaks, elastic_margin=0.7 if leak else 0.5,
+                                        rigid_band_top=rigid_band_top,
+                                        rigid_band_fallback=rigid_band_fallback)
+    mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
+    stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
+    reason = "bands given" if choice is None else (
+        choice.reason if opt.mass_band is None else "mass line given; stiffness band chosen")
+    if choice is not None and choice.relaxed and opt.mass_band is None:
+        warnings.append(choice.reason)
+    return Bands(
+        mass_band=(float(mass_band[0]), float(mass_band[1])),
+        stiffness_band=(float(stiff_band[0]), float(stiff_band[1])),
+        in_mass=_band_mask(problem.freq, mass_band, "mass-line"),
+        in_stiffness=_band_mask(problem.freq, stiff_band, "stiffness"),
+        leakage=leak, choice=choice, warnings=tuple(warnings), reason=reason,
+    )
+
+
+# --- stage 2: weights ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LineWeights:
+    """The lines of each band that enter the fit, and the weight of each column on them.
+
+    ``mass_lines`` / ``stiffness_lines`` (n_f,) select the lines; ``mass`` /
+    ``stiffness`` (n_exc, n_lines) weigh each excitation column on them (0 drops it).
+    The coherence figures cover the lines of both bands.
+    """
+
+    mass_lines: NDArray[np.bool_]
+    stiffness_lines: NDArray[np.bool_]
+    mass: NDArray[np.float64]
+    stiffness: NDArray[np.float64]
+    coherence_dropped: int
+    coherence_min: float
+    coherence_ranges_hz: tuple[tuple[float, float], ...]
+
+
+def weigh_lines(problem: Problem, bands: Bands) -> LineWeights:
+    """Section 3: band lines with a usable T and a reconstruction error under ``level`` x the
+    band's mean; columns of incoherent excitations weigh 0."""
+    opt, coh, colw = problem.options, problem.coherence, problem.col_weights
+    mass_sel = select_lines(problem.rel_err, bands.in_mass & problem.line_ok, opt.level)
+    stiff_sel = bands.in_stiffness & problem.line_ok
+    mb, sb = bands.mass_band, bands.stiffness_band
+    if np.count_nonzero(mass_sel) < 2:
+        raise InputError(
+            f"fewer than 2 usable lines in the mass-line band {mb[0]:g}-{mb[1]:g} Hz "
+            "(coherence, rank or condition of T): widen the band or re-measure"
+        )
+    if np.count_nonzero(stiff_sel) < 2:
+        raise InputError(
+            f"fewer than 2 usable lines in the stiffness band {sb[0]:g}-{sb[1]:g}"
+            " Hz: widen the band or re-measure"
+        )
+    in_any = bands.in_mass | bands.in_stiffness
+    return LineWeights(
+        mass_lines=mass_sel, stiffness_lines=stiff_sel,
+        mass=colw[:, mass_sel], stiffness=colw[:, stiff_sel],
+        coherence_dropped=int(np.count_nonzero(colw[:, in_any] == 0)),
+        coherence_min=float(np.min(coh[..., bands.in_mass])) if coh is not None else 1.0,
+        coherence_ranges_hz=() if coh is None else coherence_gate(  # lines outside pass
+            np.where(in_any, coh, 1.0), problem.freq, opt.coherence_threshold).ranges,
+    )
+
+
+# --- stage 3: fit ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Fit:
+    """The ten inertia parameters and K, C at O, and how they were reached.
+
+    ``normal`` is the 10x10 normal matrix of the last mass-line solve;
+    ``operators`` the per-line operators of eq. 14 on the stiffness band.
+    """
+
+    theta: NDArray[np.float64]
+    K: NDArray[np.float64]
+    C: NDArray[np.float64]
+    iterations: int
+    converged: bool
+    normal: NDArray[np.float64]
+    physical_enforced: bool
+    operators: LineOperators
+    #: how the mass-line model was chosen, in words
+    model_note: str = ""
+
+
+class _StiffnessStep:
+    """K, C for a mass matrix on the stiffness lines, by the rule the problem calls for:
+
+    with an exponential window, eq. 14 per line with the window's pole shift undone,
+    C by least squares (Im P = w C); improved, a direct (symmetric) fit from moments;
+    plain, the article's eq. 14 averaged over lines.
+    """
+
+    def __init__(self, problem: Problem, weights: LineWeights, operators: LineOperators,
+                 stiff_in_band: NDArray[np.bool_]) -> None:
+        self.problem = problem
+        self.w = problem.w[weights.stiffness_lines]
+        self.weights = weights.stiffness
+        self.mean = operators.mean_kc(stiff_in_band)
+        self._moments: StiffnessMoments | None = None
+        self._key: object = None
+
+    def __call__(self, M: NDArray[np.float64], Xs: NDArray[np.complex128]) -> (
+        tuple[NDArray[np.float64], NDArray[np.float64]]
+    ):
+        """K, C (6, 6) for mass matrix M on the (leakage-cleaned) stiffness lines Xs."""
+        p, opt, w = self.problem, self.problem.options, self.w
+        a = p.window_decay
+        if a:
+            s = 1j * w + a
+            P = -(s**2 / w**2)[:, None, None] * dynamic_stiffness(Xs, p.T, w, M)
+            C = np.tensordot(w, P.imag, axes=1) / np.sum(w**2)  # least squares, Im P = w C
+            K = np.mean(P.real, axis=0) - a * C
+            return (0.5 * (K + K.T), 0.5 * (C + C.T)) if opt.symmetric else (K, C)
+        if p.improved:  # moments reused while the same Xs is passed
+            if self._key is not Xs or self._moments is None:
+                self._moments, self._key = stiffness_moments(Xs, p.T, w, self.weights), Xs
+            sf = fit_stiffness(self._moments, p.T, w, M, row_scale=p.row_scale,
+                               symmetric=opt.symmetric)
+            return sf.K, sf.C
+        return self.mean(M)
+
+
+def _leakage_shapes(problem: Problem, bands: Bands) -> list[NDArray[np.complex128]]:
+    """Frequency shapes (all lines) of the modelled leakage: each elastic mode, then w^2."""
+    if not bands.leakage:
+        return []
+    w = problem.w
+    return [*(mode_shape_basis(w, p) for p in problem.peaks), (w / w[-1]) ** 2 + 0j]
+
+
+def _iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
+             step: _StiffnessStep, shapes: list[NDArray[np.complex128]]) -> tuple[
+    MassLineFit, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+    NDArray[np.complex128], int, bool,
+]:
+    """Section 2.2: inertia from the mass line with the stiffness term, K and C from the
+    stiffness band, until theta converges. Returns the last fit, theta, K, C, the
+    cleaned stiffness-line X, the iterations and whether theta converged."""
+    opt, T, a = problem.options, problem.T, problem.window_decay
+    msel, ssel = weights.mass_lines, weights.stiffness_lines
+    Xm, wm = problem.X[..., msel], problem.w[msel]
+    Xs = problem.X[..., ssel]
+    s_m = 1j * wm + a
+    Xcm, Xcs = Xm, Xs
+    K, C, theta = np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(10)
+    fit_ = None
+    for it in range(1, opt.max_iter + 1):
+        if a:  # B = T + K*_m X / w^2 with the windowed K*_m
+            Xf = Xcm.reshape(6, -1)
+            KX = ((K + a * C) @ Xf).reshape(Xm.shape) + 1j * wm * (C @ Xf).reshape(Xm.shape)
+            fit_ = ml.solve(T[:, :, None] - KX / s_m**2 + 0j)
+        else:
+            fit_ = ml.solve_kc(T, K, C, Xcm, wm)
+        new = fit_.theta
+        M = mass_matrix(new)
+        if fit_.leakage is not None:  # B - M X = -M Y b: clean X of the fitted leakage
+            Yk = -np.einsum("ia,aks->iks", np.linalg.inv(M), fit_.leakage)
+            leak = np.einsum("iks,sl->ikl", Yk, np.array(shapes)[ml.shape_index])
+            Xcm, Xcs = Xm - leak[..., msel], Xs - leak[..., ssel]
+        K, C = step(M, Xcs)
+        change = np.max(np.abs(new - theta) / np.maximum(np.abs(new), 1e-12 * abs(new[0])))
+        theta = new
+        if change < opt.tol:
+            return fit_, theta, K, C, Xcs, it, True
+    assert fit_ is not None
+    return fit_, theta, K, C, Xcs, opt.max_iter, False
+
+
+def _mass_line_rhs(problem: Problem, Xm: NDArray[np.complex128], wm: NDArray[np.float64],
+                   K: NDArray[np.float64], C: NDArray[np.float64]) -> NDArray[np.complex128]:
+    """``B = T + K* X / w^2`` on the mass lines (K* as the exponential window shows it)."""
+    a = problem.window_decay
+    s2 = (1j * wm + a) ** 2
+    KX = np.einsum("ab,bel->ael", K + a * C, Xm) + 1j * wm * np.einsum("ab,bel->ael", C, Xm)
+    return problem.T[:, :, None] - KX / s2 + 0j
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    """One mass-line model fitted to the end of the iteration."""
+
+    ml: MassLineProblem
+    fit: MassLineFit
+    theta: NDArray[np.float64]
+    K: NDArray[np.float64]
+    C: NDArray[np.float64]
+    Xs: NDArray[np.complex128]
+    iterations: int
+    converged: bool
+
+
+def _fit_model(problem: Problem, weights: LineWeights, step: _StiffnessStep,
+               shapes: list[NDArray[np.complex128]]) -> _Candidate:
+    """The mass-line model with the given leakage shapes, fitted (plain method without a
+    window: the article's fixed point, solved directly)."""
+    msel, ssel = weights.mass_lines, weights.stiffness_lines
+    ml = MassLineProblem(problem.X[..., msel], weights=weights.mass, row_scale=problem.row_scale,
+                         shapes=np.array([stack_real(s[msel]) for s in shapes]) if shapes
+                         else None)
+    if not problem.improved and not problem.window_decay:
+        # the article's iteration is affine in theta here: its limit is solved directly
+        mean = step.mean
+        fit_ = ml.fixed_point_affine(problem.T, mean.w2, mean.KB, mean.C, problem.w[msel])
+        Xs = problem.X[..., ssel]
+        K, C = step(mass_matrix(fit_.theta), Xs)
+        return _Candidate(ml, fit_, fit_.theta, K, C, Xs, 1, True)
+    fit_, theta, K, C, Xs, it, converged = _iterate(problem, weights, ml, step, shapes)
+    return _Candidate(ml, fit_, theta, K, C, Xs, it, converged)
+
+
+def _halves(weights: LineWeights) -> tuple[LineWeights, LineWeights]:
+    """The mass lines split into their lower and upper halves."""
+    idx = np.flatnonzero(weights.mass_lines)
+    n = idx.size // 2
+    parts = []
+    for sl in (slice(0, n), slice(n, None)):
+        lines = np.zeros_like(weights.mass_lines)
+        lines[idx[sl]] = True
+        parts.append(dataclasses.replace(weights, mass_lines=lines, mass=weights.mass[:, sl]))
+    return parts[0], parts[1]
+
+
+def _spread(problem: Problem, weights: LineWeights, step: _StiffnessStep,
+            shapes: list[NDArray[np.complex128]]) -> float:
+    """How far the estimates from the two halves of the mass line disagree: the largest
+    difference of mass, first moments / L and inertia / L^2, relative to the mass."""
+    L = problem.geometry.length
+    scale = np.array([1.0, *(3 * [1 / L]), *(6 * [1 / L**2])])
+    lo, hi = (_fit_model(problem, w, step, shapes).theta for w in _halves(weights))
+    return float(np.max(np.abs(hi - lo) * scale) / max(abs(lo[0] + hi[0]) / 2, 1e-300))
+
+
+def _upper_residual_chosen(problem: Problem, weights: LineWeights,
+                           step: _StiffnessStep) -> tuple[bool, str]:
+    """Whether the upper residual (a ``w^2`` term per equation entry, for modes above the
+    band) is modelled: when the estimate from the two halves of the mass line agrees
+    better with it than without it (unmodelled residual makes the estimate drift with
+    the band; a residual fitted to noise makes it scatter)."""
+    if np.count_nonzero(weights.mass_lines) < 8:
+        return False, "upper residual not modelled: fewer than 8 mass lines"
+    w = problem.w
+    without = _spread(problem, weights, step, [])
+    with_ = _spread(problem, weights, step, [(w / w[-1]) ** 2 + 0j])
+    use = with_ < without
+    return use, (f"upper residual (w^2 term) {'modelled' if use else 'not modelled'}: "
+                 f"half-band disagreement {with_:.2%} with it, {without:.2%} without")
+
+
+def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
+    """Inertia, K and C: the article's fixed point solved directly (plain, no window), else
+    the iteration of section 2.2; then projected onto consistent inertia if asked.
+
+    Improved method without modelled elastic leakage: the fit with an upper residual (a
+    ``w^2`` term for modes above the band) is kept when the data call for it (BIC).
+    """
+    opt, T = problem.options, problem.T
+    ssel = weights.stiffness_lines
+    ins = bands.in_stiffness
+    ops = line_operators(problem.X[..., ins], T, problem.w[ins])  # eq. 14 operators, per line
+    step = _StiffnessStep(problem, weights, ops, ssel[ins])
+    shapes = _leakage_shapes(problem, bands)
+    best = _fit_model(problem, weights, step, shapes)
+    note = ""
+    if problem.improved and not shapes and opt.leakage == "auto":
+        use, note = _upper_residual_chosen(problem, weights, step)
+        if use:
+            w = problem.w
+            best = _fit_model(problem, weights, step, [(w / w[-1]) ** 2 + 0j])
+    theta, K, C, Xs = best.theta, best.K, best.C, best.Xs
+    enforced = False
+    if opt.physical:
+        theta_c = constrain_physical(theta, best.fit.normal)
+        enforced = not np.array_equal(theta_c, theta)
+        if enforced:
+            theta = theta_c
+            K, C = step(mass_matrix(theta), Xs)
+    return Fit(theta, K, C, best.iterations, best.converged, best.fit.normal, enforced, ops,
+               note)
+
+
+# --- stage 4: checks -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Checks:
+    """What the fitted model says about itself: properties, rigid-body modes (Hz), the fit of
+    its synthesised FRFs, K* per stiffness-band line, and warnings."""
+
+    properties: InertiaProperties
+    rigid_modes_hz: NDArray[np.float64]
+    synthesis: SynthesisFit
+    stiffness_per_line: NDArray[np.complex128]
+    warnings: tuple[str, ...]
+
+
+def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> Checks:
+    """Physical consistency, rigid-body modes, synthesis error over the data up to the top
+    of the mass line, and K* per line (window corrected)."""
+    tau, freq = problem.exponential_tau, problem.freq
+    M, K = mass_matrix(fitted.theta), fitted.K
+    warnings: list[str] = []
+    if tau:
+        warnings.append(f"exponential window (tau = {tau:g} s): its damping was removed from C")
+    props = inertia_properties(fitted.theta)
+    if not props.physically_consistent:
+        warnings.append(
+            "identified inertia is not physically consistent "
+            f"(triangle margin {props.triangle_margin:+.3f}): use --physical or check the data"
+        )
+    try:
+        w2 = scipy.linalg.eigh(0.5 * (K + K.T), M, eigvals_only=True)
+        rigid_hz = np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi)
+    except (np.linalg.LinAlgError, ValueError):
+        used = weights.stiffness_lines | weights.mass_lines
+        rigid_hz = quick_rigid_modes(problem.X[..., used], problem.T, problem.w[used])
+    H_syn = synthesise(freq, problem.E, problem.T, M, K, fitted.C)
+    syn = synthesis_error(freq, problem.H, H_syn, (float(freq[0]), bands.mass_band[1]))
+    Ks_line = fitted.operators.stiffness(M)
+    if tau:
+        Ks_line = np.moveaxis(correct_dynamic_stiffness(
+            np.moveaxis(Ks_line, 0, -1), freq[bands.in_stiffness], tau), -1, 0)
+    return Checks(props, rigid_hz, syn, Ks_line, tuple(warnings))
+
+
+# --- stage 5: results ------------------------------------------------------------------------
+
+
+def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
+             checks: Checks) -> IdentificationResult:
+    """The :class:`IdentificationResult` of the stages."""
+    opt, freq = problem.options, problem.freq
+    return IdentificationResult(
+        method=opt.method,
+        theta=fitted.theta,
+        M=mass_matrix(fitted.theta),
+        K=fitted.K,
+        C=fitted.C,
+        properties=checks.properties,
+        mass_band=bands.mass_band,
+        stiffness_band=bands.stiffness_band,
+        mass_lines=freq[weights.mass_lines],
+        stiffness_lines=freq[weights.stiffness_lines],
+        iterations=fitted.iterations,
+        converged=fitted.converged,
+        geometry=problem.geometry,
+        elastic_modes=problem.peaks,
+        rigid_modes_hz=checks.rigid_modes_hz,
+        reconstruction_error=problem.rel_err[weights.mass_lines],
+        synthesis=checks.synthesis,
+        coherence_dropped=weights.coherence_dropped,
+        coherence_checked=problem.coherence is not None,
+        coherence_min=weights.coherence_min,
+        coherence_ranges_hz=weights.coherence_ranges_hz,
+        coherence_threshold=opt.coherence_threshold,
+        physical_enforced=fitted.physical_enforced,
+        warnings=(*problem.warnings, *bands.warnings, *checks.warnings),
+        stiffness_per_line=checks.stiffness_per_line,
+        band_reason=bands.reason,
+        model_note=fitted.model_note,
+    )
+
+
+# --- entry points ----------------------------------------------------------------------------
+
+
+def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]]:
+    """Top of the rigid band of the rigidity check (article section 5.1), Hz, when below the
+    data's top; the same with the threshold raised to 3x the check's error floor (noise,
+    location or sensor errors), used when the first leaves no mass line; and notes."""
+    fmin = float(frf.freq[frf.freq > 0][0]) if np.any(frf.freq > 0) else 0.0
+    try:
+        rc = rigidity_check(frf, fmin=fmin)
+    except GeometryError:
+        return None, None, []  # under 3 response nodes: the elastic-mode detection bounds it
+    top = float(frf.freq[-1])
+
+    def below_top(band: tuple[float, float] | None) -> float | None:
+        return band[1] if band is not None and band[1] < top else None
+
+    raised = rc.band_at(3 * rc.error_floor(fmin), fmin=fmin)
+    notes = [] if rc.band is not None else [
+        "rigidity check: no rigid band found (check sensor mounting and coordinates)"]
+    return below_top(rc.band), below_top(raised) if raised != rc.band else None, notes
 
 
 def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
@@ -289,22 +550,15 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
     """
     opt = options or IdentifyOptions()
     rigid_top: float | None = None
+    rigid_raised: float | None = None
     notes: list[str] = []
     if opt.use_rigidity and (opt.mass_band is None or opt.stiffness_band is None):
-        try:
-            rc = rigidity_check(frf, fmin=float(frf.freq[frf.freq > 0][0]))
-        except (GeometryError, IndexError):
-            rc = None  # fewer than 3 response nodes: the elastic-mode detection still bounds it
-        if rc is not None:
-            if rc.band is None:
-                notes.append("rigidity check: no rigid band found (check sensor mounting "
-                             "and coordinates)")
-            elif rc.band[1] < frf.freq[-1]:
-                rigid_top = rc.band[1]
+        rigid_top, rigid_raised, notes = _rigid_band_tops(frf)
     tau = frf.meta.get("exponential_tau") if frf.meta else None
     result = identify_arrays(
         frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
         coherence=frf.coherence, options=opt, rigid_band_top=rigid_top,
+        rigid_band_fallback=rigid_raised,
         exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0 else None,
     )
     if notes:
@@ -324,265 +578,68 @@ def identify_arrays(
     options: IdentifyOptions | None = None,
     rigid_band_top: float | None = None,
     exponential_tau: float | None = None,
+    rigid_band_fallback: float | None = None,
 ) -> IdentificationResult:
     """:func:`identify` on plain arrays (shapes as in :class:`FRFSet`).
 
-    ``rigid_band_top`` (Hz) bounds the automatic mass-line band; ``exponential_tau``
-    (s) is the time constant of an exponential window applied to the records.
+    ``rigid_band_top`` (Hz) bounds the automatic mass-line band, ``rigid_band_fallback``
+    (Hz) when the first leaves no mass line; ``exponential_tau`` (s) is the time
+    constant of an exponential window applied to the records.
     """
     opt = options or IdentifyOptions()
     if opt.refine_points > 0:
         return _refined(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs, coherence, opt,
-                        rigid_band_top, exponential_tau)
-    freq = np.asarray(freq, dtype=float)
-    H = np.asarray(H)
-    if H.ndim != 3 or H.shape[-1] != freq.size:
-        raise InputError(f"H must be (n_resp, n_exc, {freq.size}), got {H.shape}")
-    if not np.all(np.isfinite(H)):
-        n_bad = int(np.count_nonzero(~np.isfinite(H)))
-        raise InputError(f"the FRFs hold {n_bad} NaN or infinite values: re-measure or drop them")
-    if not np.all(np.isfinite(freq)) or np.any(np.diff(freq) <= 0):
-        raise InputError("frequencies must be finite and strictly increasing")
-    k0 = int(np.searchsorted(freq, 0.0, side="right"))  # lines at 0 Hz carry no mass line
-    H_all = np.ascontiguousarray(H)
-    freq, H = freq[k0:], H_all[..., k0:]
-    if coherence is not None:
-        coherence = np.asarray(coherence, float)[..., k0:]
-        if not np.all(np.isfinite(coherence)):
-            raise InputError("the coherence holds NaN values: re-measure or drop it")
-    if freq.size < 8:
-        raise InputError(f"only {freq.size} frequency lines: at least 8 are needed")
-    geo = check_geometry(resp_xyz, resp_dirs, exc_xyz, exc_dirs, max_cond_T=1e300)
-    if not geo.ok:
-        raise GeometryError("; ".join(geo.messages))
-    warnings: list[str] = list(geo.messages)
-    if geo.cond_T > opt.max_cond_T:
-        warnings.append(
-            f"cond(T) = {geo.cond_T:.1f} exceeds {opt.max_cond_T:g}: spread the excitations"
-        )
-    E = response_matrix(resp_xyz, resp_dirs)
-    T = excitation_matrix(exc_xyz, exc_dirs)
-    n_r, n_e, n_f = H.shape
-    Ep = np.asarray(np.linalg.pinv(E), dtype=np.float64)
-    X = real_times_complex(Ep, H_all.reshape(n_r, -1)).reshape(6, n_e, -1)[..., k0:]
-    w_all = 2 * np.pi * freq
-    improved = opt.method == "improved"
-    L = geo.length
-    row_scale = 1.0 / scaling(L) if improved else None
-
-    # --- coherence and per-line T checks -------------------------------------------------------
-    colw, line_ok = _line_weights(coherence, opt.coherence_threshold, T, opt.max_cond_T, L)
-    if coherence is None:
-        colw = np.ones((n_e, n_f))
-        line_ok = np.ones(n_f, bool)
-
-    # --- elastic modes and bands -----------------------------------------------------------------
-    _, rel_err = reconstruction_error(H, E, Ep, X)
-    peaks = elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep) if n_r > 6 else ()
-    # Leakage terms are free per equation entry: on noisy data the regressors left after
-    # eliminating them are dominated by noise and the fit is biased low (errors in
-    # variables). Model the leakage only when the FRF noise, read off the rigid-body
-    # reconstruction residual well below the first elastic mode, is small.
-    noise = _noise_level(rel_err, freq, peaks, n_r)
-    use_leak = (improved and opt.leakage == "auto" and len(peaks) > 0
-                and noise <= opt.leakage_max_noise)
-    if improved and peaks and not use_leak:
-        warnings.append(
-            f"elastic leakage not modelled (FRF noise {noise * 100:.2f} % > "
-            f"{opt.leakage_max_noise * 100:g} %): mass line kept to half the elastic mode"
-        )
-    choice: BandChoice | None = None
-    if opt.mass_band is None or opt.stiffness_band is None:
-        # bands from the lines where every FRF is coherent and T stays usable
-        clean = line_ok & np.all(colw > 0, axis=0)
-        if np.count_nonzero(clean) < 8:
-            clean = np.ones(n_f, bool)
-        choice = choose_bands(freq[clean], X[..., clean], T, peaks,
-                              elastic_margin=0.7 if use_leak else 0.5,
-                              rigid_band_top=rigid_band_top)
-    mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
-    stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
-    in_mass = _band_mask(freq, mass_band, "mass-line")
-    in_stiff = _band_mask(freq, stiff_band, "stiffness")
-    mass_sel = select_lines(rel_err, in_mass & line_ok, opt.level)
-    stiff_sel = in_stiff & line_ok
-    if np.count_nonzero(mass_sel) < 2:
-        raise InputError(
-            f"fewer than 2 usable lines in the mass-line band {mass_band[0]:g}-{mass_band[1]:g} Hz "
-            "(coherence, rank or condition of T): widen the band or re-measure"
-        )
-    if np.count_nonzero(stiff_sel) < 2:
-        raise InputError(
-            f"fewer than 2 usable lines in the stiffness band {stiff_band[0]:g}-{stiff_band[1]:g}"
-            " Hz: widen the band or re-measure"
-        )
-    coh_dropped = int(np.count_nonzero(colw[:, in_mass | in_stiff] == 0))
-    coh_min = float(np.min(coherence[..., in_mass])) if coherence is not None else 1.0
-    coh_ranges = () if coherence is None else coherence_gate(  # lines outside the bands pass
-        np.where(in_mass | in_stiff, coherence, 1.0), freq, opt.coherence_threshold).ranges
-
-    Xm, wm, Wm = X[..., mass_sel], w_all[mass_sel], colw[:, mass_sel]
-    Xs, ws, Ws = X[..., stiff_sel], w_all[stiff_sel], colw[:, stiff_sel]
-
-    # leakage shapes (improved method, elastic modes seen)
-    shapes_c: list[NDArray[np.complex128]] = []
-    if use_leak:
-        shapes_c = [mode_shape_basis(w_all, p) for p in peaks]
-        shapes_c.append((w_all / w_all[-1]) ** 2 + 0j)
-    shapes_m = np.array([stack_real(s[mass_sel]) for s in shapes_c]) if shapes_c else None
-
-    # --- iteration (section 2.2) --------------------------------------------------------------
-    K = np.zeros((6, 6))
-    C = np.zeros((6, 6))
-    theta = np.zeros(10)
-    X_clean_m = Xm
-    X_clean_s = Xs
-    converged = False
-    it = 0
-    fit = None
-    s_moments: StiffnessMoments | None = None
-
-    ops = line_operators(X[..., in_stiff], T, w_all[in_stiff])  # eq. 14 operators, per line
-    mean_stiffness = ops.mean_kc(stiff_sel[in_stiff])
-    problem = MassLineProblem(Xm, weights=Wm, row_scale=row_scale, shapes=shapes_m)
-
-    def stiffness_step(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """K, C for the current mass matrix on the current (leakage-cleaned) stiffness lines."""
-        nonlocal s_moments
-        if a_exp:  # per line, undo the window's pole shift, then average (viscous model)
-            P = -(s_s**2 / ws**2)[:, None, None] * dynamic_stiffness(X_clean_s, T, ws, M)
-            C_ = np.tensordot(ws, P.imag, axes=1) / np.sum(ws**2)  # least squares, Im P = w C
-            K_ = np.mean(P.real, axis=0) - a_exp * C_
-            return (0.5 * (K_ + K_.T), 0.5 * (C_ + C_.T)) if opt.symmetric else (K_, C_)
-        if improved:  # direct symmetric fit; moments reused until X_clean_s changes
-            if s_moments is None:
-                s_moments = stiffness_moments(X_clean_s, T, ws, Ws)
-            sf = fit_stiffness(s_moments, T, ws, M, row_scale=row_scale, symmetric=opt.symmetric)
-            return sf.K, sf.C
-        return mean_stiffness(M)  # the article: eq. 14 per line, averaged
-
-    # An exponential window exp(-a t) on force and responses measures H(j w + a): the
-    # stiffness seen is K*_m = -(w^2 / s^2) (K + a C + j w C) with s = j w + a.
-    a_exp = 1.0 / exponential_tau if exponential_tau else 0.0
-    s_s = 1j * ws + a_exp
-    s_m = 1j * wm + a_exp
-    if not improved and not a_exp:
-        # the article's iteration is affine in theta here: its limit is solved directly
-        fit = problem.fixed_point_affine(T, mean_stiffness.w2, mean_stiffness.KB,
-                                         mean_stiffness.C, wm)
-        theta = fit.theta
-        K, C = stiffness_step(mass_matrix(theta))
-        it, converged = 1, True
-    for it in range(1, opt.max_iter + 1) if improved or a_exp else ():  # noqa: B007
-        if a_exp:  # B = T + K*_m X / w^2 with the windowed K*_m
-            Xf = X_clean_m.reshape(6, -1)
-            KX = ((K + a_exp * C) @ Xf).reshape(Xm.shape) + 1j * wm * (C @ Xf).reshape(Xm.shape)
-            fit = problem.solve(T[:, :, None] - KX / s_m**2 + 0j)
-        else:
-            fit = problem.solve_kc(T, K, C, X_clean_m, wm)
-        new = fit.theta
-        M = mass_matrix(new)
-        if fit.leakage is not None:
-            Minv = np.linalg.inv(M)
-            Yk = -np.einsum("ia,aks->iks", Minv, fit.leakage)  # B - M X = -M Y b
-            leak_all = np.einsum("iks,sl->ikl", Yk, np.array(shapes_c)[problem.shape_index])
-            X_clean_m = Xm - leak_all[..., mass_sel]
-            X_clean_s = Xs - leak_all[..., stiff_sel]
-            s_moments = None
-        K, C = stiffness_step(M)
-        change = np.max(np.abs(new - theta) / np.maximum(np.abs(new), 1e-12 * abs(new[0])))
-        theta = new
-        if change < opt.tol:
-            converged = True
-            break
-    assert fit is not None
-    physical_enforced = False
-    if opt.physical:
-        theta_c = constrain_physical(theta, fit.normal)
-        physical_enforced = not np.array_equal(theta_c, theta)
-        if physical_enforced:
-            theta = theta_c
-            K, C = stiffness_step(mass_matrix(theta))
-    M = mass_matrix(theta)
-    if exponential_tau:
-        warnings.append(f"exponential window (tau = {exponential_tau:g} s): its damping "
-                        "was removed from C")
-    props = inertia_properties(theta)
-    if not props.physically_consistent:
-        warnings.append(
-            "identified inertia is not physically consistent "
-            f"(triangle margin {props.triangle_margin:+.3f}): use --physical or check the data"
-        )
-    try:
-        import scipy.linalg
-
-        w2 = scipy.linalg.eigh(0.5 * (K + K.T), M, eigvals_only=True)
-        rigid_hz = np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi)
-    except (np.linalg.LinAlgError, ValueError):
-        rigid_hz = quick_rigid_modes(X[..., stiff_sel | mass_sel], T,
-                                     w_all[stiff_sel | mass_sel])
-    H_syn = synthesise(freq, E, T, M, K, C)
-    syn_band = (float(freq[0]), float(mass_band[1]))
-    syn = synthesis_error(freq, H, H_syn, syn_band)
-    Ks_line = ops.stiffness(M)
-    if exponential_tau:
-        Ks_line = np.moveaxis(correct_dynamic_stiffness(
-            np.moveaxis(Ks_line, 0, -1), freq[in_stiff], exponential_tau), -1, 0)
-    return IdentificationResult(
-        method=opt.method,
-        theta=theta,
-        M=M,
-        K=K,
-        C=C,
-        properties=props,
-        mass_band=(float(mass_band[0]), float(mass_band[1])),
-        stiffness_band=(float(stiff_band[0]), float(stiff_band[1])),
-        mass_lines=freq[mass_sel],
-        stiffness_lines=freq[stiff_sel],
-        iterations=it,
-        converged=converged,
-        geometry=geo,
-        elastic_modes=peaks,
-        rigid_modes_hz=rigid_hz,
-        reconstruction_error=rel_err[mass_sel],
-        synthesis=syn,
-        coherence_dropped=coh_dropped,
-        coherence_checked=coherence is not None,
-        coherence_min=coh_min,
-        coherence_ranges_hz=coh_ranges,
-        coherence_threshold=opt.coherence_threshold,
-        physical_enforced=physical_enforced,
-        warnings=tuple(warnings),
-        stiffness_per_line=Ks_line,
-    )
+                        (rigid_band_top, rigid_band_fallback), exponential_tau)
+    problem = prepare(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs, coherence=coherence,
+                      options=opt, exponential_tau=exponential_tau)
+    bands = choose_bands(problem, rigid_band_top, rigid_band_fallback)
+    weights = weigh_lines(problem, bands)
+    fitted = fit(problem, bands, weights)
+    return assemble(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
 
 
 def _refined(
     freq: NDArray[np.float64], H: NDArray[np.complex128], resp_xyz: NDArray[np.float64],
     resp_dirs: NDArray[np.float64], exc_xyz: NDArray[np.float64], exc_dirs: NDArray[np.float64],
     coherence: NDArray[np.float64] | None, opt: IdentifyOptions,
-    rigid_band_top: float | None, exponential_tau: float | None,
+    rigid_tops: tuple[float | None, float | None], exponential_tau: float | None,
 ) -> IdentificationResult:
-    """Identification alternated ``opt.refine_points`` times with response-point refinement
-    on the mass-line lines (:mod:`processing.refine`)."""
+    """Identification alternated at most ``opt.refine_points`` times with response-point
+    refinement on the mass-line lines (:mod:`processing.refine`).
+
+    A round is kept only when the synthesised FRFs fit the data better than before; the
+    rounds stop when a step moves no point by more than 0.01 mm (converged) or when a
+    step does not improve the fit (the previous locations are kept). The reason is
+    given in the warnings.
+    """
     once = dataclasses.replace(opt, refine_points=0)
 
     def identify_at(xyz: NDArray[np.float64]) -> IdentificationResult:
         return identify_arrays(freq, H, xyz, resp_dirs, exc_xyz, exc_dirs, coherence=coherence,
-                               options=once, rigid_band_top=rigid_band_top,
+                               options=once, rigid_band_top=rigid_tops[0],
+                               rigid_band_fallback=rigid_tops[1],
                                exponential_tau=exponential_tau)
 
-    result = identify_at(np.asarray(resp_xyz, dtype=float))
-    xyz = np.array(resp_xyz, dtype=float)
+    xyz0 = np.asarray(resp_xyz, dtype=float)
+    result, xyz = identify_at(xyz0), xyz0.copy()
     T = excitation_matrix(exc_xyz, exc_dirs)
     freq = np.asarray(freq, dtype=float)
-    for _ in range(opt.refine_points):
+    why = f"the {opt.refine_points} rounds asked for were done"
+    for k in range(1, opt.refine_points + 1):
         lines = np.isin(freq, result.mass_lines)
         w = 2 * np.pi * freq[lines]
         shapes = [mode_shape_basis(w, p) for p in result.elastic_modes]
         shapes.append(np.asarray(w**2, dtype=np.complex128))  # quasi-static, modes above
-        xyz = xyz - point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
-                                  result.M, result.K, result.C, shapes=np.array(shapes))
-        result = identify_at(xyz)
-    return dataclasses.replace(result, point_corrections=np.asarray(resp_xyz, float) - xyz)
-
+        step = point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
+                             result.M, result.K, result.C, shapes=np.array(shapes),
+                             applied=xyz0 - xyz)
+        trial = identify_at(xyz - step)
+        if trial.synthesis.overall >= result.synthesis.overall:
+            why = f"round {k} did not improve the fit of the synthesised FRFs; kept round {k - 1}"
+            break
+        result, xyz = trial, xyz - step
+        if np.max(np.abs(step)) < 1e-5:
+            why = f"converged after {k} rounds (last step under 0.01 mm)"
+            break
+    return dataclasses.replace(result, point_corrections=xyz0 - xyz,
+                               warnings=(*result.warnings, f"point refinement: {why}"))

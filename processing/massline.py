@@ -106,6 +106,7 @@ class MassLineProblem:
         # B enters only through W = sum Bw Xp^T: the projection is symmetric and idempotent,
         # so B needs no projection of its own
         self._Xp = Xr.reshape(6, -1)
+        self._row_scale = None if row_scale is None else np.asarray(row_scale, float)
         s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
         G = self._Xp @ self._Xp.T
         self._MBs = (MASS_BASIS * s2[None, :, None]).reshape(10, 36)
@@ -152,6 +153,17 @@ class MassLineProblem:
             A = np.broadcast_to(Sh @ Sh.T, (n_e, Sh.shape[0], Sh.shape[0]))
             r = np.einsum("ikl,sl->iks", R, Sh)
         return np.asarray(np.linalg.solve(A[None], r[..., None])[..., 0])
+
+    def residual_ss(self, theta: NDArray[np.float64], B: NDArray[np.complexfloating]) -> float:
+        """Weighted, row-scaled sum of squares of ``B - M(theta) X`` left after the leakage
+        shapes (the quantity the least squares minimises)."""
+        n_e = self.shape[1]
+        Bw = self._weighted(B).reshape(6, n_e, -1)
+        if self._Q is not None:
+            Bw = Bw - _project(Bw, self._Q)
+        R = Bw.reshape(6, -1) - mass_matrix(theta) @ self._Xp
+        s2 = np.ones(6) if self._row_scale is None else self._row_scale**2
+        return float(np.sum(s2 * np.sum(R * R, axis=1)))
 
     def solve(self, B: NDArray[np.complexfloating]) -> MassLineFit:
         """Ten parameters from ``M(theta) X_j (+ Z b_j) = B_j``, B broadcastable to X."""

@@ -36,6 +36,7 @@ def point_offsets(
     *,
     shapes: NDArray[np.complex128] | None = None,
     ridge: float = 1e-3,
+    applied: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Estimated location error (n_resp, 3), m, of each response DOF's point.
 
@@ -45,6 +46,10 @@ def point_offsets(
     n_lines) are frequency shapes of elastic leakage (see
     :func:`processing.selection.mode_shape_basis`); a free real multiple of each per
     FRF is eliminated first, so leakage is not taken for a location error.
+    ``applied`` (n_resp, 3), m: corrections already subtracted from the nominal
+    locations; the ridge then holds the total correction (applied + returned), not
+    the step, so repeated rounds settle instead of drifting along what the data
+    do not fix.
     """
     w = 2 * np.pi * np.asarray(freq, dtype=float)
     E = response_matrix(resp_xyz, resp_dirs)
@@ -73,5 +78,10 @@ def point_offsets(
     rr = r2.ravel()
     N = Ar.T @ Ar
     N += ridge * np.mean(np.diag(N)) * np.eye(3 * n_p)
-    e = np.linalg.solve(N, Ar.T @ rr)
+    rhs = Ar.T @ rr
+    if applied is not None:  # ridge on the total: (N + l I) e = A^T r - l c
+        first = np.unique(point, return_index=True)[1]
+        c = np.asarray(applied, float)[first].ravel()
+        rhs = rhs - ridge * np.mean(np.diag(Ar.T @ Ar)) * c
+    e = np.linalg.solve(N, rhs)
     return np.asarray(e.reshape(n_p, 3)[point])

@@ -64,6 +64,20 @@ class RigidityCheck:
         with np.errstate(invalid="ignore"):
             return np.asarray(np.max(np.where(np.isnan(self.error), -np.inf, self.error), axis=0))
 
+    def band_at(self, threshold: float, sustain: int = 3, fmin: float = 0.0) -> (
+        tuple[float, float] | None
+    ):
+        """The rigid band (Hz) for another threshold (see :func:`rigidity_check`)."""
+        worst = self.worst
+        valid = (self.freq >= fmin) & np.isfinite(worst)
+        return _rigid_band(self.freq, worst, valid, threshold, sustain)
+
+    def error_floor(self, fmin: float = 0.0) -> float:
+        """Lower quartile of the worst node's error over the lines (the noise floor)."""
+        worst = self.worst
+        valid = (self.freq >= fmin) & np.isfinite(worst)
+        return float(np.percentile(worst[valid], 25)) if np.any(valid) else 0.0
+
     @property
     def passed(self) -> bool:
         """True when some band at the bottom of the spectrum is rigid."""

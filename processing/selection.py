@@ -20,7 +20,6 @@ import scipy.signal
 from numpy.typing import NDArray
 
 from processing._kernels import real_times_complex, sumsq_columns
-from processing.data import InputError
 from processing.stiffness import line_operators
 
 __all__ = [
@@ -154,13 +153,16 @@ def elastic_peaks(
 
 @dataclass(frozen=True)
 class BandChoice:
-    """Bands chosen from the data, with the evidence used."""
+    """Bands chosen from the data, with the evidence used and the reason, in words."""
 
     mass_band: tuple[float, float]
     stiffness_band: tuple[float, float]
     rigid_mode_max: float
     rigid_modes: NDArray[np.float64]
     elastic: tuple[ElasticPeak, ...]
+    reason: str = ""
+    #: True when a limit (rigidity check or elastic mode) had to be set aside
+    relaxed: bool = False
 
 
 def quick_rigid_modes(
@@ -191,6 +193,18 @@ def quick_rigid_modes(
     return np.sort(np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi))
 
 
+def _mass_line_low(freq: NDArray[np.float64], f_rig: float, f_hi: float,
+                   low_factor: float) -> float | None:
+    """Bottom of the mass line below ``f_hi``: ``low_factor`` (else 1.3) times the highest
+    rigid-body mode, or None when fewer than 3 lines remain."""
+    lo = low_factor * f_rig
+    if lo >= 0.8 * f_hi:
+        lo = 1.3 * f_rig
+    if lo >= 0.9 * f_hi or np.count_nonzero((freq >= lo) & (freq <= f_hi)) < 3:
+        return None
+    return lo
+
+
 def choose_bands(
     freq: NDArray[np.float64],
     X: NDArray[np.complex128],
@@ -198,38 +212,57 @@ def choose_bands(
     elastic: tuple[ElasticPeak, ...],
     *,
     rigid_band_top: float | None = None,
+    rigid_band_fallback: float | None = None,
     mass_low_factor: float = 2.0,
     elastic_margin: float = 0.7,
 ) -> BandChoice:
-    """Automatic mass-line and stiffness bands.
+    """Automatic mass-line and stiffness bands, with the reason.
 
     The mass line starts ``mass_low_factor`` times above the highest rigid-body
-    mode and ends at ``elastic_margin`` times the first elastic mode (whose
-    leakage is modelled) or at the rigidity limit ``rigid_band_top`` or the end
-    of the data. The stiffness band runs from the first line to 1.5 times the
-    highest rigid-body mode (not into the mass line).
+    mode and ends at ``elastic_margin`` times the first elastic mode, or at the
+    rigidity limit ``rigid_band_top``, or at the end of the data. A limit that
+    leaves no mass line above the rigid-body modes is set aside (the rigidity
+    check first, upset by noise or location errors, for ``rigid_band_fallback``,
+    its limit at a threshold above its error floor; then the elastic margin,
+    up to 0.9x the mode) and the reason says so: a band is always returned when
+    the data hold at least 8 lines. The stiffness band runs from the first line to
+    1.5 times the highest rigid-body mode (not into the mass line).
     """
-    f_hi = float(freq[-1])
-    if elastic:
-        f_hi = min(f_hi, elastic_margin * min(p.frequency for p in elastic))
-    if rigid_band_top is not None:
-        f_hi = min(f_hi, rigid_band_top)
-    sel = (freq > 0) & (freq <= f_hi)
-    if np.count_nonzero(sel) < 4:
-        raise InputError(
-            f"no usable lines below {f_hi:.1f} Hz (elastic modes or rigidity limit): "
-            "give --mass-band and --stiffness-band"
-        )
-    fr = quick_rigid_modes(X[..., sel], T, 2 * np.pi * freq[sel])
+    f_end = float(freq[-1])
+    f_el = min(p.frequency for p in elastic) if elastic else None
+    limits: list[tuple[float, str]] = []
+    top = min(f_end, elastic_margin * f_el) if f_el else f_end
+    why = (f"{elastic_margin:g}x the first elastic mode ({f_el:.1f} Hz)" if f_el and top < f_end
+           else "the end of the data")
+    if rigid_band_top is not None and rigid_band_top < top:
+        limits.append((rigid_band_top, "the rigidity check's limit"))
+    if rigid_band_fallback is not None and rigid_band_fallback < top:
+        limits.append((rigid_band_fallback, "the rigidity check's limit at 3x its error floor"))
+    limits.append((top, why))
+    if f_el and 0.9 * f_el < f_end:
+        limits.append((0.9 * f_el, f"0.9x the first elastic mode ({f_el:.1f} Hz)"))
+    limits.append((f_end, "the end of the data"))
+    rig_lines = (freq > 0) & (freq <= limits[0][0])  # rigid modes from below the first limit
+    if np.count_nonzero(rig_lines) < 4:
+        rig_lines = (freq > 0) & (freq <= max(top, float(freq[min(7, freq.size - 1)])))
+    fr = quick_rigid_modes(X[..., rig_lines], T, 2 * np.pi * freq[rig_lines])
     f_rig = float(fr[-1])
-    lo = mass_low_factor * f_rig
-    if lo >= 0.8 * f_hi:
-        lo = 1.3 * f_rig
-    if lo >= 0.9 * f_hi or np.count_nonzero((freq >= lo) & (freq <= f_hi)) < 3:
-        raise InputError(
-            f"no mass line found: the rigid-body modes (up to {f_rig:.1f} Hz) reach the "
-            f"elastic/rigidity limit ({f_hi:.1f} Hz); give --mass-band LO HI"
-        )
+    set_aside: list[str] = []
+    for f_hi, name in limits:
+        lo = _mass_line_low(freq, f_rig, f_hi, mass_low_factor)
+        if lo is not None:
+            break
+        set_aside.append(f"{name} ({f_hi:.1f} Hz)")
+    else:  # the rigid-body modes reach the end of the data: the top third of the lines
+        f_hi, name = f_end, "the end of the data"
+        lo = float(freq[max(0, (2 * freq.size) // 3 - 1)])
+        set_aside.append(f"{mass_low_factor:g}x the highest rigid-body mode")
+    reason = (f"mass line {lo:.1f}-{f_hi:.1f} Hz: from {lo / f_rig:.2g}x the highest "
+              f"rigid-body mode ({f_rig:.1f} Hz) to {name}")
+    if set_aside:
+        reason += ("; set aside, as it leaves no mass line above the rigid-body modes: "
+                   + ", ".join(set_aside))
     s_hi = min(1.5 * f_rig, lo)
     s_lo = float(freq[freq > 0][0])
-    return BandChoice((float(lo), float(f_hi)), (s_lo, float(s_hi)), f_rig, fr, elastic)
+    return BandChoice((float(lo), float(f_hi)), (s_lo, float(s_hi)), f_rig, fr, elastic,
+                      reason, bool(set_aside))

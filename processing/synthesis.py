@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from processing._kernels import sumsq_rows
 
-__all__ = ["SynthesisError", "synthesis_error", "synthesise"]
+__all__ = ["SynthesisFit", "synthesis_error", "synthesise"]
 
 
 def synthesise(
@@ -63,8 +63,8 @@ def _modal_receptance(
 
 
 @dataclass(frozen=True)
-class SynthesisError:
-    """Relative error of synthesised FRFs over a band.
+class SynthesisFit:
+    """How well the FRFs synthesised from M, K, C fit the measured ones over a band.
 
     ``per_frf`` (n_resp, n_exc): ``||H - H_syn|| / ||H||`` over the band's lines;
     ``overall``: the same over all FRFs; ``sum_measured`` and ``sum_synthesised``:
@@ -83,7 +83,8 @@ def synthesis_error(
     H: NDArray[np.complex128],
     H_syn: NDArray[np.complex128],
     band: tuple[float, float],
-) -> SynthesisError:
+) -> SynthesisFit:
+    """:class:`SynthesisFit` of ``H_syn`` against ``H`` (n_resp, n_exc, n_f) over ``band`` (Hz)."""
     sel = (freq >= band[0]) & (freq <= band[1])
     lo, hi = np.flatnonzero(sel)[[0, -1]] if np.any(sel) else (0, -1)
     Hb = H[..., lo : hi + 1]
@@ -91,7 +92,7 @@ def synthesis_error(
     den = sumsq_rows(Hb)
     per = np.sqrt(num / np.where(den > 0, den, np.inf))
     overall = float(np.sqrt(num.sum() / max(den.sum(), 1e-300)))
-    return SynthesisError(
+    return SynthesisFit(
         band,
         per,
         overall,

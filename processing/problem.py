@@ -1,0 +1,228 @@
+"""The prepared identification problem: what every stage of :mod:`processing.identify` reads.
+
+:func:`prepare` checks the input once and computes, once, everything that does not
+depend on the bands: the geometry (E, T and their checks), the rigid-body
+accelerances at O ``X = E^+ H`` (eq. 6), the per-line reconstruction error
+(eqs. 15-16), the elastic modes seen in the residual, the FRF noise level, and the
+coherence weights of each excitation column. The stages that follow (bands,
+weights, fit, checks) take the :class:`Problem` and return their own results.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from processing._kernels import real_times_complex
+from processing.data import InputError
+from processing.geometry import (
+    DEFAULT_MAX_COND_T,
+    GeometryError,
+    GeometryReport,
+    check_geometry,
+    excitation_matrix,
+    response_matrix,
+    scaling,
+)
+from processing.results import Method
+from processing.selection import ElasticPeak, elastic_peaks, reconstruction_error
+
+__all__ = ["IdentifyOptions", "Problem", "prepare"]
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """Options of :func:`processing.identify.identify`. Bands in Hz; ``None`` chooses them."""
+
+    method: Method = "improved"
+    mass_band: tuple[float, float] | None = None
+    stiffness_band: tuple[float, float] | None = None
+    physical: bool = False
+    #: section 3: keep lines whose reconstruction error is below level x the band mean
+    level: float = 3.0
+    max_cond_T: float = DEFAULT_MAX_COND_T
+    coherence_threshold: float = 0.8
+    max_iter: int = 50
+    tol: float = 1e-10
+    #: improved method: model elastic leakage when elastic modes are seen ("auto") or never
+    leakage: Literal["auto", "off"] = "auto"
+    symmetric: bool = True
+    #: relative FRF noise above which elastic leakage is not modelled
+    leakage_max_noise: float = 0.002
+    #: rounds of response-point location refinement (:mod:`processing.refine`); 0 = off
+    refine_points: int = 0
+    #: bound the automatic mass-line band by the rigidity check (article section 5.1)
+    use_rigidity: bool = True
+
+
+@dataclass(frozen=True)
+class Problem:
+    """The identification problem, prepared once (lines above 0 Hz only).
+
+    Attributes
+    ----------
+    options : IdentifyOptions
+    freq, w : (n_f,) line frequencies, Hz and rad/s
+    H : (n_resp, n_exc, n_f) complex accelerances, (m/s^2)/N
+    coherence : (n_resp, n_exc, n_f) or None
+    geometry : GeometryReport
+    E, Epinv : (n_resp, 6), (6, n_resp) response matrix and its pseudo-inverse
+    T : (6, n_exc) generalised unit forces at O
+    X : (6, n_exc, n_f) rigid-body accelerances at O (eq. 6)
+    rel_err : (n_f,) relative rigid-body reconstruction error (eq. 15)
+    peaks : elastic modes seen in the non-rigid residual
+    noise : relative FRF noise read from the reconstruction residual
+    col_weights : (n_exc, n_f) 1, or 0 where some response of that excitation is incoherent
+    line_ok : (n_f,) lines where T restricted to the coherent columns has rank 6 and
+        condition at most ``options.max_cond_T``
+    row_scale : (6,) scale of the equation rows (1/L on moments, improved method) or None
+    exponential_tau : time constant of an exponential window on the records, s, or None
+    warnings : messages of the geometry checks
+    """
+
+    options: IdentifyOptions
+    freq: NDArray[np.float64]
+    w: NDArray[np.float64]
+    H: NDArray[np.complex128]
+    coherence: NDArray[np.float64] | None
+    geometry: GeometryReport
+    E: NDArray[np.float64]
+    Epinv: NDArray[np.float64]
+    T: NDArray[np.float64]
+    X: NDArray[np.complex128]
+    rel_err: NDArray[np.float64]
+    peaks: tuple[ElasticPeak, ...]
+    noise: float
+    col_weights: NDArray[np.float64]
+    line_ok: NDArray[np.bool_]
+    row_scale: NDArray[np.float64] | None
+    exponential_tau: float | None
+    warnings: tuple[str, ...]
+
+    @property
+    def improved(self) -> bool:
+        """True for the improved method, False for the article's plain one."""
+        return self.options.method == "improved"
+
+    @property
+    def window_decay(self) -> float:
+        """Decay rate ``a = 1 / tau`` of the exponential window, 1/s (0 without one)."""
+        return 1.0 / self.exponential_tau if self.exponential_tau else 0.0
+
+    @property
+    def clean_lines(self) -> NDArray[np.bool_]:
+        """(n_f,) lines where every FRF is coherent and T usable (all lines if under 8)."""
+        clean = self.line_ok & np.all(self.col_weights > 0, axis=0)
+        return clean if np.count_nonzero(clean) >= 8 else np.ones(self.freq.size, bool)
+
+
+def _checked_arrays(
+    freq: NDArray[np.float64], H: NDArray[np.complex128],
+    coherence: NDArray[np.float64] | None,
+) -> tuple[NDArray[np.float64], NDArray[np.complex128], NDArray[np.float64] | None, int]:
+    """Validated ``freq``, ``H`` (contiguous, all lines), coherence above 0 Hz, index of 0+ Hz."""
+    freq = np.asarray(freq, dtype=float)
+    H = np.asarray(H)
+    if H.ndim != 3 or H.shape[-1] != freq.size:
+        raise InputError(f"H must be (n_resp, n_exc, {freq.size}), got {H.shape}")
+    if not np.all(np.isfinite(H)):
+        n_bad = int(np.count_nonzero(~np.isfinite(H)))
+        raise InputError(f"the FRFs hold {n_bad} NaN or infinite values: re-measure or drop them")
+    if not np.all(np.isfinite(freq)) or np.any(np.diff(freq) <= 0):
+        raise InputError("frequencies must be finite and strictly increasing")
+    k0 = int(np.searchsorted(freq, 0.0, side="right"))  # lines at 0 Hz carry no mass line
+    if coherence is not None:
+        coherence = np.asarray(coherence, float)[..., k0:]
+        if not np.all(np.isfinite(coherence)):
+            raise InputError("the coherence holds NaN values: re-measure or drop it")
+    if freq.size - k0 < 8:
+        raise InputError(f"only {freq.size - k0} frequency lines: at least 8 are needed")
+    return freq, np.ascontiguousarray(H), coherence, k0
+
+
+def _checked_geometry(
+    resp_xyz: NDArray[np.float64], resp_dirs: NDArray[np.float64],
+    exc_xyz: NDArray[np.float64], exc_dirs: NDArray[np.float64], max_cond_T: float,
+) -> tuple[GeometryReport, list[str]]:
+    """Geometry report (raises :class:`GeometryError` below rank 6) and its warnings."""
+    geo = check_geometry(resp_xyz, resp_dirs, exc_xyz, exc_dirs, max_cond_T=1e300)
+    if not geo.ok:
+        raise GeometryError("; ".join(geo.messages))
+    warnings = list(geo.messages)
+    if geo.cond_T > max_cond_T:
+        warnings.append(
+            f"cond(T) = {geo.cond_T:.1f} exceeds {max_cond_T:g}: spread the excitations"
+        )
+    return geo, warnings
+
+
+def _coherence_weights(
+    coherence: NDArray[np.float64] | None, threshold: float, T: NDArray[np.float64],
+    max_cond: float, L: float, n_f: int,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Weights (n_exc, n_f): 0 where a column has low coherence; lines where T stays usable."""
+    n_e = T.shape[1]
+    if coherence is None:
+        return np.ones((n_e, n_f)), np.ones(n_f, bool)
+    good = np.all(coherence >= threshold, axis=0)  # (n_e, n_f)
+    Ts = T / scaling(L)[:, None]
+    masked = Ts[None, :, :] * np.moveaxis(good, -1, 0)[:, None, :]  # (n_f, 6, n_e)
+    s = np.linalg.svd(masked, compute_uv=False)
+    ok = (s[:, 5] > 1e-12 * s[:, 0]) & (s[:, 0] <= max_cond * np.maximum(s[:, 5], 1e-300))
+    return good.astype(float), ok
+
+
+def noise_level(
+    rel_err: NDArray[np.float64], freq: NDArray[np.float64], peaks: tuple[ElasticPeak, ...],
+    n_r: int,
+) -> float:
+    """Relative FRF noise from the rigid-body reconstruction residual (lower quartile over the
+    lines below a third of the first elastic mode, corrected for the 6 fitted DOFs)."""
+    top = min(p.frequency for p in peaks) / 3 if peaks else freq[-1]
+    sel = freq <= top
+    if n_r <= 6 or not np.any(sel):
+        return 0.0
+    return float(np.percentile(rel_err[sel], 25) * np.sqrt(n_r / (n_r - 6)))
+
+
+def prepare(
+    freq: NDArray[np.float64],
+    H: NDArray[np.complex128],
+    resp_xyz: NDArray[np.float64],
+    resp_dirs: NDArray[np.float64],
+    exc_xyz: NDArray[np.float64],
+    exc_dirs: NDArray[np.float64],
+    *,
+    coherence: NDArray[np.float64] | None,
+    options: IdentifyOptions,
+    exponential_tau: float | None,
+) -> Problem:
+    """Check the input and build the :class:`Problem` (shapes as in :class:`FRFSet`).
+
+    Raises
+    ------
+    InputError, GeometryError
+        With a one-line message naming the problem and what to do.
+    """
+    freq, H_all, coherence, k0 = _checked_arrays(freq, H, coherence)
+    geo, warnings = _checked_geometry(resp_xyz, resp_dirs, exc_xyz, exc_dirs, options.max_cond_T)
+    E = response_matrix(resp_xyz, resp_dirs)
+    T = excitation_matrix(exc_xyz, exc_dirs)
+    n_r, n_e = H_all.shape[:2]
+    Ep = np.asarray(np.linalg.pinv(E), dtype=np.float64)
+    X = real_times_complex(Ep, H_all.reshape(n_r, -1)).reshape(6, n_e, -1)[..., k0:]
+    freq, H = freq[k0:], H_all[..., k0:]
+    colw, line_ok = _coherence_weights(coherence, options.coherence_threshold, T,
+                                       options.max_cond_T, geo.length, freq.size)
+    _, rel_err = reconstruction_error(H, E, Ep, X)
+    peaks = elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep) if n_r > 6 else ()
+    return Problem(
+        options=options, freq=freq, w=2 * np.pi * freq, H=H, coherence=coherence, geometry=geo,
+        E=E, Epinv=Ep, T=T, X=X, rel_err=rel_err, peaks=peaks,
+        noise=noise_level(rel_err, freq, peaks, n_r), col_weights=colw, line_ok=line_ok,
+        row_scale=1.0 / scaling(geo.length) if options.method == "improved" else None,
+        exponential_tau=exponential_tau, warnings=tuple(warnings),
+    )

@@ -1,0 +1,157 @@
+"""The result of an identification: parameters, bands, evidence and checks.
+
+:class:`IdentificationResult` is what :func:`processing.identify.identify` returns;
+``to_json`` writes the result JSON of ``METHOD.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.geometry import DEFAULT_MAX_COND_T, GeometryReport
+from processing.inertia import InertiaProperties
+from processing.modes import rigid_body_modes
+from processing.selection import ElasticPeak
+from processing.synthesis import SynthesisFit
+
+__all__ = ["IdentificationResult", "Method"]
+
+Method = Literal["improved", "plain"]
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Everything identified, with the evidence. All SI, global frame of the input."""
+
+    method: Method
+    theta: NDArray[np.float64]
+    M: NDArray[np.float64]
+    K: NDArray[np.float64]
+    C: NDArray[np.float64]
+    properties: InertiaProperties
+    mass_band: tuple[float, float]
+    stiffness_band: tuple[float, float]
+    mass_lines: NDArray[np.float64]
+    stiffness_lines: NDArray[np.float64]
+    iterations: int
+    converged: bool
+    geometry: GeometryReport
+    elastic_modes: tuple[ElasticPeak, ...]
+    rigid_modes_hz: NDArray[np.float64]
+    reconstruction_error: NDArray[np.float64]
+    synthesis: SynthesisFit
+    coherence_dropped: int
+    coherence_checked: bool
+    coherence_min: float
+    physical_enforced: bool
+    warnings: tuple[str, ...] = ()
+    stiffness_per_line: NDArray[np.complex128] | None = field(default=None, repr=False)
+    #: estimated response-point location errors (n_resp, 3), m, when refined
+    point_corrections: NDArray[np.float64] | None = None
+    #: frequency ranges (f_low, f_high), Hz, of the lines of the mass and stiffness bands
+    #: left out because some FRF's coherence is below ``coherence_threshold``
+    coherence_ranges_hz: tuple[tuple[float, float], ...] = ()
+    coherence_threshold: float = 0.8
+    #: which bands were chosen and why, in words
+    band_reason: str = ""
+    #: how the mass-line model was chosen (upper residual or not), in words
+    model_note: str = ""
+
+    def checks(self) -> dict[str, dict[str, Any]]:
+        """Named pass/fail checks with their figures (result JSON ``checks``)."""
+        p = self.properties
+        rel = self.reconstruction_error
+        return {
+            "geometry": {
+                "pass": self.geometry.ok and self.geometry.cond_T <= DEFAULT_MAX_COND_T,
+                "rank_E": self.geometry.rank_E,
+                "cond_E": self.geometry.cond_E,
+                "rank_T": self.geometry.rank_T,
+                "cond_T": self.geometry.cond_T,
+            },
+            "coherence": {
+                "pass": (not self.coherence_checked) or self.coherence_dropped == 0,
+                "checked": self.coherence_checked,
+                "threshold": self.coherence_threshold,
+                "min_in_mass_band": self.coherence_min,
+                "dropped_lines": self.coherence_dropped,
+                "dropped_ranges_hz": [list(r) for r in self.coherence_ranges_hz],
+            },
+            "rigidity": {
+                "pass": bool(np.max(rel) < 0.1) if rel.size else True,
+                "max_reconstruction_error_in_mass_band": float(np.max(rel)) if rel.size else 0.0,
+                "mean_reconstruction_error_in_mass_band": float(np.mean(rel)) if rel.size else 0.0,
+            },
+            "physical_consistency": {
+                "pass": p.physically_consistent,
+                "positive_definite": p.positive_definite,
+                "triangle_inequality": p.triangle_inequality,
+                "triangle_margin": p.triangle_margin,
+                "enforced": self.physical_enforced,
+            },
+            "reconstruction_error": {
+                "pass": self.synthesis.overall < 0.1,
+                "synthesis_error_overall": self.synthesis.overall,
+                "synthesis_error_max_frf": float(np.max(self.synthesis.per_frf)),
+                "band": list(self.synthesis.band),
+            },
+            "convergence": {"pass": self.converged, "iterations": self.iterations},
+        }
+
+    def to_json(self) -> dict[str, Any]:
+        """The result JSON of ``METHOD.md`` (plus extra keys)."""
+        p = self.properties
+        return {
+            "mass": p.mass,
+            "cog": p.cog.tolist(),
+            "inertia_cog": p.inertia_cog.tolist(),
+            "inertia_origin": p.inertia_origin.tolist(),
+            "principal_moments": p.principal_moments.tolist(),
+            "principal_axes": p.principal_axes.tolist(),
+            "stiffness": self.K.tolist(),
+            "damping": self.C.tolist(),
+            "bands": {"mass_line": list(self.mass_band), "stiffness": list(self.stiffness_band)},
+            "band_choice": self.band_reason,
+            "mass_line_model": self.model_note,
+            "checks": _jsonable(self.checks()),
+            "theta": self.theta.tolist(),
+            "method": self.method,
+            "rigid_modes_hz": self.rigid_modes_hz.tolist(),
+            "elastic_modes": [
+                {"frequency_hz": e.frequency, "damping_ratio": e.damping}
+                for e in self.elastic_modes
+            ],
+            "lines_used": {
+                "mass_line": len(self.mass_lines), "stiffness": len(self.stiffness_lines)
+            },
+            "warnings": list(self.warnings),
+            "response_point_corrections": (None if self.point_corrections is None
+                                           else self.point_corrections.tolist()),
+            "modes": _modes_json(self.M, self.K, self.C),
+        }
+
+
+def _modes_json(M: NDArray[np.float64], K: NDArray[np.float64], C: NDArray[np.float64]
+                ) -> list[dict[str, Any]]:
+    """The six rigid-body modes (``METHOD.md`` key ``modes``); empty when M is not positive
+    definite (no modes exist)."""
+    try:
+        return rigid_body_modes(M, K, C).to_json()
+    except ValueError:
+        return []
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
