@@ -17,8 +17,8 @@ of sqrt(Kii Kjj). The table gives, per family (body shape), per tag and overall,
 and 95th percentile over the scenarios a method answered, and its refusals.
 
 Run: ``.venv/bin/python benchmarks/accuracy.py [--scenarios 200] [--family engine]
-[--jobs 2] [--write-docs]``. BLAS runs single-threaded in every process (set before numpy
-is imported); ``--jobs`` runs scenarios in parallel processes.
+[--jobs 2] [--write-docs] [--json FILE]``. BLAS runs single-threaded in every process (set
+before numpy is imported); ``--jobs`` runs scenarios in parallel processes.
 """
 
 from __future__ import annotations
@@ -158,6 +158,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=2026, help="suite seed (2026)")
     p.add_argument("--write-docs", action="store_true", help=f"write the table to {DOCS}")
     p.add_argument("--verbose", action="store_true", help="print each scenario's errors")
+    p.add_argument("--json", type=Path, metavar="FILE",
+                   help="also write every scenario's errors, bands and refusals here")
     args = p.parse_args(argv)
     specs = [s for s in suite(args.scenarios, args.seed)
              if args.family is None or s.family == args.family]
@@ -185,6 +187,11 @@ def main(argv: list[str] | None = None) -> int:
     refusals = sorted({r["default"]["refused"] for r in rows if "refused" in r["default"]})
     for msg in refusals[:10]:
         console.print(f"  default refusal: {msg}")
+    if args.json:
+        args.json.write_text(json.dumps([{**{k: v for k, v in r.items() if k != "spec"},
+                                          "family": r["spec"].family,
+                                          "tags": list(r["spec"].tags)} for r in rows],
+                                        indent=1, default=float))
     if args.write_docs:
         write_docs(body, rows, worse, both, elapsed, args, refusals)
         console.print(f"written to {DOCS}")
