@@ -200,7 +200,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def write_docs(body: list[list[str]], rows: list[dict[str, Any]], worse: list[str], both: int,
                elapsed: float, args: argparse.Namespace, refusals: list[str]) -> None:
-    cmd = "python benchmarks/accuracy.py " + " ".join(sys.argv[1:])
+    shown = [a for i, a in enumerate(sys.argv[1:])  # the --json file is a local path
+             if a != "--json" and (i == 0 or sys.argv[i] != "--json")]
+    cmd = "python benchmarks/accuracy.py " + " ".join(shown)
     lines = [
         "# Accuracy on the independent reference model",
         "",
