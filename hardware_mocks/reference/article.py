@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from hardware_mocks.reference.kinematics import inertia_tensor, rigid_map
+from hardware_mocks.reference.kinematics import rigid_map
 from hardware_mocks.reference.scenarios import Scenario
 
 __all__ = ["ArticleRefusalError", "ArticleResult", "article_bands", "article_identify",
@@ -185,10 +185,3 @@ def identify_scenario(sc: Scenario) -> ArticleResult:
                             sc.forces.reported_xyz, sc.forces.reported_dirs, mass_band,
                             stiff_band)
 
-
-def inertia_about(theta: ArrayLike, point: ArrayLike) -> NDArray[np.float64]:
-    """Inertia tensor about ``point`` from the ten parameters about O (parallel axes)."""
-    th = np.asarray(theta, dtype=float)
-    c = th[1:4] / th[0]
-    J_cog = mass_matrix_from_theta(th)[3:, 3:] - th[0] * (c @ c * np.eye(3) - np.outer(c, c))
-    return np.asarray(J_cog + inertia_tensor([th[0]], [c], point))

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from hardware_mocks.reference.kinematics import rigid_map
 
-__all__ = ["Mount", "damping_at_origin", "mounts_at_origin"]
+__all__ = ["Mount", "damping_at_origin", "mounts_at_origin", "mounts_toml"]
 
 
 @dataclass(frozen=True)
@@ -79,3 +79,21 @@ def mounts_at_origin(mounts: tuple[Mount, ...]) -> NDArray[np.complex128]:
     """Sum of the mounts' complex 6 x 6 stiffnesses at O (real part K, imaginary part)."""
     out: NDArray[np.complex128] = np.sum([m.stiffness_at_origin() for m in mounts], axis=0)
     return out
+
+
+def mounts_toml(mounts: tuple[Mount, ...], crank_axis: tuple[float, float, float] = (1.0, 0.0, 0.0),
+                ) -> str:
+    """The mounts as the text of a mounts file (``insitu identify --mounts FILE``, TOML).
+
+    Positions in m and axes as rows (u, v, w) in the global frame, full precision; names
+    ``mount 1``, ``mount 2``, ... in order.
+    """
+
+    def vec(v: NDArray[np.float64] | tuple[float, ...]) -> str:
+        return "[" + ", ".join(repr(float(x)) for x in v) + "]"
+
+    lines = [f"crank_axis = {vec(crank_axis)}"]
+    for i, m in enumerate(mounts, 1):
+        lines += ["", "[[mount]]", f'name = "mount {i}"', f"position = {vec(m.position)}",
+                  "axes = [" + ", ".join(vec(row) for row in m.axes) + "]"]
+    return "\n".join(lines) + "\n"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -63,8 +64,8 @@ def test_engine_identified_within_tolerance_and_replay_is_identical(tmp_path: Pa
     assert run.state == "finished" and len(run.records) == len(POINTS)
     assert run.records.accepted.all() and run.records.data.shape[1] == 13
     assert run.frf is not None and np.array_equal(run.frf.H, proc.frf.H)
-    assert run.result == proc.result.to_json() or run.result["mass"] == proc.result.to_json()[
-        "mass"]
+    # the file holds the procedure's result JSON, every key and value (through JSON once)
+    assert run.result == json.loads(json.dumps(proc.result.to_json()))
     frf, result, _ = analyse_run(run)
     assert np.array_equal(frf.H, proc.frf.H)
     assert np.array_equal(frf.coherence, proc.frf.coherence, equal_nan=True)
@@ -73,9 +74,61 @@ def test_engine_identified_within_tolerance_and_replay_is_identical(tmp_path: Pa
 
     out = tmp_path / "replay.json"
     assert main(["replay", str(path), "--out", str(out)]) == 0
-    assert out.read_text().count('"mass"') == 1
+    replayed = json.loads(out.read_text())
+    # the same raw hits give the same identification, to the last bit
+    assert replayed["theta"] == proc.result.theta.tolist()
+    assert replayed["stiffness"] == proc.result.K.tolist()
+    assert replayed["damping"] == proc.result.C.tolist()
+    assert replayed["mass"] == proc.result.properties.mass
 
     # insitu identify takes the run file too (raw hits -> FRFs -> identification)
     ident = tmp_path / "identify.json"
     assert main(["identify", str(path), "--out", str(ident)]) == 0
-    assert json.loads(ident.read_text())["mass"] == json.loads(out.read_text())["mass"]
+    identified = json.loads(ident.read_text())
+    for key in ("theta", "stiffness", "damping", "inertia_cog", "bands"):
+        assert identified[key] == replayed[key], key
+
+
+
+@pytest.fixture(scope="module")
+def noisy_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Any, Any]:
+    """The same run with noisy sensors: 0.01 m/s^2 RMS on every accelerometer and 0.1 N RMS
+    on the force, one hit per point (about 1/15 of a hit's response per line on the mass
+    line). Returns the run file, the procedure's (default) result and the bench model."""
+    path = tmp_path_factory.mktemp("noisy") / "run.h5"
+    plan = plan_for_bench("engine-rigid", points=POINTS, length=1.5)
+    with InProcessBench("engine-rigid", accel_noise=0.01, force_noise=0.1) as bench:
+        proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
+        proc.start()
+        assert proc.wait(60) is RunState.FINISHED, proc.message
+        return path, proc.result, bench.bench.model
+
+
+def _within_noisy_tolerances(mass: float, cog: Any, inertia_cog: Any, K: Any, model: Any) -> None:
+    # a few times the scatter this noise leaves on a fit over a fixed band (measured:
+    # mass 1.4 %, CoG 1.4 mm, K 1.4 % of max |K| with the bands below)
+    truth = inertia_properties(model.theta)
+    assert mass == pytest.approx(truth.mass, rel=0.03)
+    assert_allclose(cog, truth.cog, atol=0.004)  # 4 mm
+    assert_allclose(inertia_cog, truth.inertia_cog, atol=0.06 * np.abs(truth.inertia_cog).max())
+    assert_allclose(K, model.K, atol=0.05 * np.abs(model.K).max())
+
+
+def test_noisy_sensors_with_the_articles_bands(noisy_run: tuple[Path, Any, Any],
+                                               tmp_path: Path) -> None:
+    path, _, model = noisy_run
+    out = tmp_path / "fixed.json"
+    assert main(["identify", str(path), "--mass-band", "60", "150", "--stiffness-band", "1",
+                 "35", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    _within_noisy_tolerances(r["mass"], r["cog"], r["inertia_cog"], r["stiffness"], model)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 12 part 3: with sensor noise the automatic bands "
+                   "go wrong (mass line ~10-400 Hz, stiffness band ~0.7-8 Hz; mass 20 kg or "
+                   "9 kg for 110 kg) where the fixed bands above give 1.4 %")
+def test_noisy_sensors_default(noisy_run: tuple[Path, Any, Any]) -> None:
+    _, result, model = noisy_run
+    assert result is not None
+    p = result.properties
+    _within_noisy_tolerances(p.mass, p.cog, p.inertia_cog, result.K, model)

@@ -6,12 +6,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 
 from app.acquire.analysis import hit_result, margin_samples, point_result
 from app.cli.main import main
 from app.io.frf_h5 import read_frf_h5
 from app.io.runfile import RunWriter
+from app.io.uff import read_frf_uff
 from app.mockbench.bench import plan_for_bench
 from drivers.base import ChannelConfig
 from hardware_mocks.benches import get_bench
@@ -82,9 +83,22 @@ def test_frf_from_run_file_skips_points_without_hits(
     assert_array_equal(frf.H, ref.H[..., keep])
     assert_array_equal(frf.coherence, ref.coherence[..., keep])
     assert frf.meta["excitation"] == "impact" and frf.meta["estimator"] == "H1"
-    # the UFF output of the same
+    # the UFF output of the same: the same FRFs, coherence, DOFs and geometry when read back
+    # (ASCII 58 records keep 12 significant digits)
     assert main(["frf", str(path), "--out", str(tmp_path / "frf.uff")]) == 2
-    capsys.readouterr()
+    cap = capsys.readouterr()
+    assert "2 bad run(s) skipped, exit status 2" in cap.out
+    back = read_frf_uff(tmp_path / "frf.uff")
+    assert_allclose(back.freq, frf.freq, rtol=1e-6)
+    assert_allclose(back.H, frf.H, rtol=1e-11, atol=1e-11 * np.abs(frf.H).max())
+    assert back.coherence is not None and frf.coherence is not None
+    assert_allclose(back.coherence, frf.coherence, rtol=1e-11, atol=1e-12)
+    assert_array_equal(back.resp_nodes, frf.resp_nodes)
+    assert_array_equal(back.exc_nodes, frf.exc_nodes)
+    assert_allclose(back.resp_dirs, frf.resp_dirs, atol=1e-12)
+    assert_allclose(back.exc_dirs, frf.exc_dirs, atol=1e-12)
+    assert_allclose(back.resp_xyz, frf.resp_xyz, atol=1e-9)
+    assert_allclose(back.exc_xyz, frf.exc_xyz, atol=1e-9)
 
 
 def test_identify_tells_a_run_file_from_an_frf_file(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import tomllib
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -14,7 +16,7 @@ from hardware_mocks.reference.kinematics import (
     theta_from_masses,
 )
 from hardware_mocks.reference.measurement import h1_with_noise, sensor_channels
-from hardware_mocks.reference.mounts import Mount
+from hardware_mocks.reference.mounts import Mount, mounts_toml
 from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
 from hardware_mocks.reference.system import ReferenceSystem
 
@@ -83,6 +85,15 @@ def test_one_inclined_spring_at_origin():
     K = mount.stiffness_at_origin()
     assert_allclose(K.real, k * np.outer(g, g), rtol=1e-12, atol=1e-9)
     assert_allclose(K.imag, 0.1 * k * np.outer(g, g), rtol=1e-12, atol=1e-9)
+
+
+def test_mounts_file_text_round_trips(engine):
+    parsed = tomllib.loads(mounts_toml(engine.mounts, crank_axis=(0.0, 1.0, 0.0)))
+    assert parsed["crank_axis"] == [0.0, 1.0, 0.0]
+    assert len(parsed["mount"]) == len(engine.mounts) == 3
+    for m, entry in zip(engine.mounts, parsed["mount"], strict=True):
+        assert np.array_equal(entry["position"], m.position)
+        assert np.array_equal(entry["axes"], m.axes)
 
 
 def test_rotation_is_proper_and_small_angle():
