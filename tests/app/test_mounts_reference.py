@@ -1,0 +1,130 @@
+"""Mount rates, modes and decoupling against the independent reference model (issue 16).
+
+The body is the reference model's lattice on its own inclined mounts; its FRFs go through a
+UFF file and ``insitu identify --mounts`` as a user runs it. The truth (each mount's rates,
+M and K at O) comes from ``hardware_mocks.reference`` alone, and the modes and the energy
+decoupling of that truth are computed here with scipy, not with ``processing``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from app.cli.main import main
+from app.io.uff import write_frf_uff
+from hardware_mocks.reference.mounts import mounts_toml
+from hardware_mocks.reference.scenarios import Scenario, ScenarioSpec, build_scenario
+from processing.data import FRFSet, Geometry
+from processing.modes import rigid_body_modes
+
+
+def _identify(sc: Scenario, tmp_path: Path, mounts: str) -> tuple[int, dict[str, Any] | None]:
+    ids, xyz = sc.geometry()
+    frf = FRFSet(freq=sc.freq, H=sc.H, resp_nodes=sc.sensors.ids,
+                 resp_dirs=sc.sensors.reported_dirs, exc_nodes=sc.forces.ids,
+                 exc_dirs=sc.forces.reported_dirs, geometry=Geometry(ids, xyz),
+                 coherence=sc.coherence)
+    uff, toml, out = tmp_path / "t.uff", tmp_path / "mounts.toml", tmp_path / "r.json"
+    write_frf_uff(uff, frf, binary=True)
+    toml.write_text(mounts)
+    code = main(["identify", str(uff), "--mounts", str(toml), "--out", str(out)])
+    return code, json.loads(out.read_text()) if code == 0 else None
+
+
+def _rates(sc: Scenario) -> np.ndarray:
+    return np.array([m.rates for m in sc.mounts])
+
+
+def _stiff(seed: int, shape: str, noise: float = 0.0, damping: str = "viscous") -> Scenario:
+    return build_scenario(ScenarioSpec(seed=seed, shape=shape, n_sensors=4, n_forces=12,
+                                       n_mounts=4, noise=noise, elastic_ratio=None,
+                                       damping=damping))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("seed", "shape"), [(1, "block"), (2, "engine"), (3, "gearbox")])
+@pytest.mark.parametrize(("damping", "rtol"), [("viscous", 0.001), ("hysteretic", 0.15)])
+def test_rates_noise_free(seed: int, shape: str, damping: str, rtol: float,
+                          tmp_path: Path) -> None:
+    """Viscous mounts (the K + jwC the identification fits): rates to 0.1 %. Hysteretic
+    mounts (rubber): the fit's viscous model biases K by up to 0.6 % of sqrt(Kii Kjj),
+    which the rate fit amplifies on the softest rates (measured up to 12.9 %)."""
+    sc = _stiff(seed, shape, damping=damping)
+    code, r = _identify(sc, tmp_path, mounts_toml(sc.mounts))
+    assert code == 0 and r is not None
+    got = np.array([m["rates"] for m in r["mounts"]])
+    ok = np.array([m["identifiable"] for m in r["mounts"]])
+    true = _rates(sc)
+    assert ok.all()  # four turned mounts: every rate determined
+    np.testing.assert_allclose(got, true, rtol=rtol)
+
+
+def test_modes_and_decoupling_of_the_true_system() -> None:
+    sc = _stiff(4, "engine")
+    t = sc.truth
+    M, K = np.asarray(t.M), np.asarray(t.K).real
+    ours = rigid_body_modes(M, K)
+    w2, phi = scipy.linalg.eigh(K, M)  # the reference, computed here
+    f = np.sqrt(np.maximum(w2, 0)) / (2 * np.pi)
+    np.testing.assert_allclose(ours.frequency_hz, f, rtol=1e-3)
+    np.testing.assert_allclose(f, np.sort(sc.rigid_modes_hz), rtol=1e-3)
+    for k in range(6):
+        a, b = ours.shapes[:, k], phi[:, k]  # columns, at O
+        cos = abs(a @ M @ b) / np.sqrt((a @ M @ a) * (b @ M @ b))
+        assert cos > 1 - 1e-3, (k, cos)
+    # kinetic-energy decoupling at the CoG, written out: psi = [v_G; rot] = S q,
+    # M_G = diag(m, m, m, J_G); fraction of dof j in mode k: psi_j (M_G psi)_j / psi' M_G psi
+    c = np.asarray(t.cog)
+    S = np.eye(6)
+    S[:3, 3:] = -np.array([[0, -c[2], c[1]], [c[2], 0, -c[0]], [-c[1], c[0], 0]])
+    MG = np.zeros((6, 6))
+    MG[:3, :3] = t.mass * np.eye(3)
+    MG[3:, 3:] = np.asarray(t.inertia_cog)
+    for k in range(6):
+        psi = S @ phi[:, k]
+        e = psi * (MG @ psi) / (psi @ MG @ psi)
+        np.testing.assert_allclose(ours.energy[:, k], e, atol=1e-3)
+
+
+def test_rates_at_noise_within_their_stated_uncertainty(tmp_path: Path) -> None:
+    z = []
+    for seed in range(6):
+        sc = _stiff(10 + seed, ("block", "engine", "gearbox")[seed % 3], noise=0.015)
+        code, r = _identify(sc, tmp_path, mounts_toml(sc.mounts))
+        assert code == 0 and r is not None
+        got = np.array([m["rates"] for m in r["mounts"]])
+        std = np.array([m["std"]["rates"] for m in r["mounts"]])
+        ok = np.array([m["identifiable"] for m in r["mounts"]])
+        z += list((np.abs(got - _rates(sc)) / std)[ok])
+    z = np.array(z)
+    # measured: 72 % of the rates within their 95 % interval, all within 4.4 std: the std
+    # from the rate fit's residual alone is too small by about 1.5-2x (the identification
+    # does not pass K's own uncertainty on yet); these bounds guard against getting worse
+    assert np.mean(z < 1.96) >= 0.65, np.round(np.sort(z), 2)
+    assert np.mean(z < 3.0) >= 0.85, np.round(np.sort(z), 2)
+    assert np.max(z) < 6.0, np.round(np.sort(z), 2)
+
+
+def test_undetermined_geometry_flagged_and_refused(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    sc = _stiff(5, "block")
+    # the same body, with a mounts file that puts three mounts on one line along x: their
+    # x rates are seen only as a sum, the six others are determined
+    text = "crank_axis = [1.0, 0.0, 0.0]\n" + "".join(
+        f'[[mount]]\nname = "m{i}"\nposition = [{x}, 0.05, -0.1]\n'
+        "axes = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n"
+        for i, x in enumerate((-0.2, 0.0, 0.2)))
+    code, r = _identify(sc, tmp_path, text)
+    assert code == 0 and r is not None
+    flags = np.array([m["identifiable"] for m in r["mounts"]])
+    assert not flags[:, 0].any() and flags[:, 1:].all()
+    # eight mounts, 24 rates for 21 entries of K: nothing determined, one line, exit 2
+    many = mounts_toml(tuple(sc.mounts) * 2)
+    code, _ = _identify(sc, tmp_path, many)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "mount" in err[0]
