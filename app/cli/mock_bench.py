@@ -21,7 +21,7 @@ from types import FrameType
 from typing import Any
 
 from app.cli.common import UserError
-from app.mockbench import bench_names, unavailable
+from app.mockbench import bench_names
 
 FE_RATES = (256, 512, 1024, 2048, 4096)
 HAMMER_RATES = (1024, 2048, 4096, 8192, 16384)
@@ -55,6 +55,8 @@ def _write_atomically(path: Path, text: str) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.accel_noise < 0 or args.force_noise < 0:
         raise UserError("--accel-noise and --force-noise must be >= 0")
+    from app.mockbench import unavailable
+
     if why := unavailable():
         raise UserError(why)
     from hardware_mocks.bench_process import MockBench

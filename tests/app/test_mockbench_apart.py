@@ -10,7 +10,12 @@ from pathlib import Path
 
 import pytest
 
+import app.cli.acquire
+import app.cli.demo
+import app.cli.mock_bench  # imported before the patch below, as in a whole test session
 import app.mockbench
+import app.mockbench.bench
+import hardware_mocks.bench_process
 from app.cli.main import main
 
 _NO_PTY = """
@@ -47,6 +52,12 @@ def test_unavailable_without_openpty(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_mock_verbs_refuse_in_one_line(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setattr(app.mockbench, "unavailable", lambda: "no pseudo-terminals here")
+
+    def started(*_: object, **__: object) -> None:
+        raise AssertionError("a mock bench was started")
+
+    monkeypatch.setattr(app.mockbench.bench, "InProcessBench", started)
+    monkeypatch.setattr(hardware_mocks.bench_process, "MockBench", started)
     for argv in (["acquire", "--mock", "--out", str(tmp_path / "run.h5")], ["mock-bench"],
                  ["demo"]):
         assert main(argv) == 2
