@@ -11,24 +11,34 @@ For each sample rate and sample type, on the same samples (120 s by default):
   in going first, second and third on each block as it is generated, so that the
   host's slower spells, and a block already read by another, hit them alike;
 - (a) scipy: a per-channel loop of ``scipy.signal.csd`` / ``welch`` on the whole recording;
-- (b) pyFRF (if installed): ``pyFRF.FRF(..., window='hann').get_H1()`` on the whole recording.
+- (b) pyFRF (if installed): ``pyFRF.FRF(..., window='hann').get_H1()`` on the whole recording;
+- ``--against REV``: the accumulator of git revision REV (its ``processing/spectral.py`` and
+  ``processing/_welch_kernel.py``, imported from a temporary folder), taking turns with ours
+  on each block as the floors do; its sums are compared with ours bit for bit.
 
 Peak memory is measured in a fresh child process per method (resident-set high-water mark
 above the child's baseline). Results are compared with (a) element by element.
 
-Run: ``.venv/bin/python benchmarks/frf.py`` (``--duration 20`` for a quick look).
+Run: ``.venv/bin/python benchmarks/frf.py`` (``--duration 20`` for a quick look);
+``--write-docs`` writes the table, with the date, machine and command, to
+``docs/benchmarks.md``.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
+import importlib
 import itertools
 import json
 import os
+import platform
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import rocket_fft  # noqa: F401  (scipy.fft inside numba)
@@ -45,10 +55,12 @@ from processing.spectral import SpectralAccumulator, h1
 N_RESP = 24
 NPERSEG = 8192
 GROUP = 4  # the floor's segments per rfft call
-#: the order of the floors (0: scipy, 1: rocket-fft) and ours (2) on a block, every one in
-#: turn: each goes first as often, and after each of the others as often (what read a block
-#: before, on which core, changes what the next one pays: about 10 % here)
-ORDERS = tuple(itertools.permutations(range(3)))
+#: the order of the floors (0: scipy, 1: rocket-fft), ours (2) and the revision compared
+#: (3, with --against) on a block, every one in turn: each goes first as often, and after
+#: each of the others as often (what read a block before, on which core, changes what the
+#: next one pays)
+ORDERS = {k: tuple(itertools.permutations(range(k))) for k in (3, 4)}
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def blocks(fs: float, duration: float, block_s: float, dtype: str, seed: int = 0) -> Iterator[
@@ -114,6 +126,24 @@ class Floor:
         return time.perf_counter() - t0
 
 
+def accumulator_of(rev: str) -> type:
+    """``SpectralAccumulator`` of git revision ``rev``, imported from a temporary folder."""
+    sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", rev], check=True,
+                         capture_output=True, text=True).stdout.strip()
+    folder = Path(tempfile.gettempdir()) / "insitu-frf-against" / sha
+    pkg = folder / f"rev_{sha}"
+    pkg.mkdir(parents=True, exist_ok=True)
+    (pkg / "__init__.py").write_text("")
+    for name in ("spectral", "_welch_kernel"):
+        text = subprocess.run(["git", "-C", str(ROOT), "show", f"{sha}:processing/{name}.py"],
+                              check=True, capture_output=True, text=True).stdout
+        (pkg / f"{name}.py").write_text(text.replace("processing._welch_kernel",
+                                                     f"rev_{sha}._welch_kernel"))
+    sys.path.insert(0, str(folder))
+    importlib.import_module(f"rev_{sha}._welch_kernel").compile_ahead()
+    return importlib.import_module(f"rev_{sha}.spectral").SpectralAccumulator  # type: ignore[no-any-return]
+
+
 def run_ours(fs: float, duration: float, block_s: float, dtype: str, workers: int):
     """Ours alone (the memory child, and the spectra compared with scipy's)."""
     acc = SpectralAccumulator(fs, NPERSEG, workers=workers)
@@ -123,31 +153,40 @@ def run_ours(fs: float, duration: float, block_s: float, dtype: str, workers: in
     return sp, h1(sp)
 
 
-def run_paired(fs: float, duration: float, block_s: float, dtype: str, workers: int):
-    """Ours and the floors on each block as it is generated, taking turns in every order
-    (``ORDERS``), so that a slower spell of the shared host (seconds long on this VM) and a
-    block already read hit them alike.
+def run_paired(fs: float, duration: float, block_s: float, dtype: str, workers: int,
+               against: type | None = None):
+    """Ours (and the revision compared), and the floors on each block as it is generated,
+    taking turns in every order (``ORDERS``), so that a slower spell of the shared host and
+    a block already read hit them alike.
 
-    Returns (floor with scipy's rfft s, floor with rocket-fft's s, ours s, spectra, H1);
-    ours includes reading the spectra and H1.
+    Returns (floor with scipy's rfft s, floor with rocket-fft's s, ours s, the revision's
+    s or None, whether its sums equal ours bit for bit); ours and the revision's include
+    reading the spectra and H1.
     """
-    acc = SpectralAccumulator(fs, NPERSEG, workers=workers)
+    accs = [SpectralAccumulator(fs, NPERSEG, workers=workers)]
+    if against is not None:
+        accs.append(against(fs, NPERSEG, workers=workers))
     floor = Floor(dtype)
-    t = [0.0, 0.0, 0.0]  # floor scipy, floor rocket, ours
+    t = [0.0, 0.0, 0.0, 0.0]  # floor scipy, floor rocket, ours, the revision's
+    orders = ORDERS[2 + len(accs)]
     for i, b in enumerate(blocks(fs, duration, block_s, dtype)):
         floor.next_block(b)
-        for which in ORDERS[i % len(ORDERS)]:
+        for which in orders[i % len(orders)]:
             if which < 2:
                 t[which] += floor.transform(which)
             else:
                 t0 = time.perf_counter()
-                acc.update(b)
-                t[2] += time.perf_counter() - t0
-    t0 = time.perf_counter()
-    sp = acc.spectra()
-    H = h1(sp)
-    t[2] += time.perf_counter() - t0
-    return t[0], t[1], t[2], sp, H
+                accs[which - 2].update(b)
+                t[which] += time.perf_counter() - t0
+    sps = []
+    for k, acc in enumerate(accs):
+        t0 = time.perf_counter()
+        sps.append(acc.spectra())
+        h1(sps[-1])
+        t[2 + k] += time.perf_counter() - t0
+    same = all(np.array_equal(getattr(sps[0], f), getattr(sps[-1], f))
+               for f in ("Sff", "Sfx", "Sxx"))
+    return t[0], t[1], t[2], (t[3] if against else None), same
 
 
 def run_scipy(x: np.ndarray, fs: float):
@@ -183,7 +222,7 @@ def _rss_mb(field: str = "VmRSS") -> float:
 
 
 def child(method: str, fs: float, duration: float, block_s: float, dtype: str,
-          workers: int, repeat: int) -> None:
+          workers: int, repeat: int, against: str | None = None) -> None:
     """Run one method in this (fresh) process; print its peak memory above baseline, MB,
     or for ``times`` the floor's and our times of ``repeat`` paired runs, s."""
     if method == "times":
@@ -192,10 +231,13 @@ def child(method: str, fs: float, duration: float, block_s: float, dtype: str,
         # and our freed arrays went back to the system and came back page by page (the
         # floor measured up to 1.8x slower, ours 1.4x): see in_child for the settings
         compile_ahead()
-        run_paired(fs, min(duration, 20.0), block_s, dtype, workers)
-        runs = [run_paired(fs, duration, block_s, dtype, workers)[:3] for _ in range(repeat)]
+        other = accumulator_of(against) if against else None
+        run_paired(fs, min(duration, 20.0), block_s, dtype, workers, other)
+        runs = [run_paired(fs, duration, block_s, dtype, workers, other)
+                for _ in range(repeat)]
         print(json.dumps({"scipy": [r[0] for r in runs], "rocket": [r[1] for r in runs],
-                          "ours": [r[2] for r in runs]}))
+                          "ours": [r[2] for r in runs], "against": [r[3] for r in runs],
+                          "identical": all(r[4] for r in runs)}))
         return
     x = None
     if method in ("scipy", "pyfrf"):
@@ -217,6 +259,8 @@ def in_child(method: str, fs: float, args: argparse.Namespace, dtype: str) -> di
     cmd = [sys.executable, __file__, "--child", method, "--rate", str(fs), "--dtype", dtype,
            "--duration", str(args.duration), "--block", str(args.block),
            "--workers", str(args.workers), "--repeat", str(args.repeat)]
+    if args.against and method == "times":
+        cmd += ["--against", args.against]
     env = dict(os.environ)
     if method == "times":  # glibc keeps freed memory (no page faults for the next arrays)
         env.update(MALLOC_MMAP_THRESHOLD_=str(1 << 26), MALLOC_TRIM_THRESHOLD_=str(1 << 28))
@@ -238,6 +282,94 @@ def rel_err(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a[m] - b[m]) / np.abs(b[m])))
 
 
+COLUMNS = ("rate", "dtype", "floor ms scipy", "floor ms rocket", "ours ms", "ours/floor",
+           "ours/scipy floor", "real time", "(a) scipy ms", "(a)/ours", "(b) pyFRF ms",
+           "(b)/ours", "ours MB", "(a) MB", "(b) MB", "max rel. diff to (a)")
+AGAINST = ("against ms", "ours/against", "identical sums")
+NOTE = (
+    "ours/floor: median (range) over the runs, ours and the floors taking turns on each block, "
+    "against the faster floor of the run (ours/scipy floor: against scipy's); ms: best run. "
+    "floor: bare rfft of the same segments, one core, groups of {group} segments x 25 "
+    "channels, with scipy.fft.rfft and with the same pocketfft compiled into numba "
+    "(rocket-fft, which ours calls); real time: recording length / our time; MB: peak "
+    "resident memory above the process baseline (fresh process); float32 is transformed in "
+    "single precision, so its difference to scipy (which also works in single precision) is "
+    "at float32 level. against: the accumulator of the revision given, taking turns with "
+    "ours; ours/against: median (range) of the runs' ratios; identical sums: its Sff, Sfx, "
+    "Sxx equal ours bit for bit in every run."
+)
+
+
+def measure(fs: float, dtype: str, args: argparse.Namespace) -> list[str]:
+    """One row of the table: ``fs`` Hz, ``dtype`` samples."""
+    # timed in a fresh process: the references' gigabytes must not weigh on the next row
+    times = in_child("times", fs, args, dtype)
+    if times is None:
+        raise SystemExit(f"timing {fs:g} Hz {dtype} failed")
+    t_ours = min(times["ours"])
+    ours, f_scipy, f_rocket = (np.array(times[k]) for k in ("ours", "scipy", "rocket"))
+    sp, H = run_ours(fs, args.duration, args.block, dtype, args.workers)
+    mem_ours = peak_memory("ours", fs, args, dtype)
+    t_a = t_b = mem_a = mem_b = None
+    diff = "-"
+    if not args.no_references:
+        x = whole(fs, args.duration, args.block, dtype)
+        t_a, Pff, Pfx, Pxx = run_scipy(x, fs)
+        diff = f"{max(rel_err(sp.Sfx[0], Pfx), rel_err(sp.Sxx, Pxx), rel_err(sp.Sff[0, 0].real, Pff), rel_err(H[:, 0], Pfx / Pff)):.1e}"  # noqa: E501
+        del x
+        mem_a = peak_memory("scipy", fs, args, dtype)
+        if args.pyfrf:
+            x = whole(fs, args.duration, args.block, dtype)
+            try:
+                t_b = run_pyfrf(x, fs)
+            except Exception as err:  # a reference failing is reported, not fatal
+                print(f"pyFRF failed: {err}", file=sys.stderr)
+            del x
+            mem_b = peak_memory("pyfrf", fs, args, dtype) if t_b else None
+
+    def ms(t: float | None) -> str:
+        return "-" if t is None else f"{1e3 * t:.0f}"
+
+    def ratio(t: float | None) -> str:
+        return "-" if t is None else f"{t / t_ours:.1f}x"
+
+    def mb(m: float | None) -> str:
+        return "-" if m is None else f"{m:.0f}"
+
+    def spread(r: np.ndarray) -> str:
+        return f"{np.median(r):.2f} ({r.min():.2f}-{r.max():.2f})"
+
+    row = [f"{fs / 1000:g} kHz", dtype, ms(f_scipy.min()), ms(f_rocket.min()), ms(t_ours),
+           spread(ours / np.minimum(f_scipy, f_rocket)), spread(ours / f_scipy),
+           f"{args.duration / t_ours:.0f}x", ms(t_a), ratio(t_a), ms(t_b), ratio(t_b),
+           mb(mem_ours), mb(mem_a), mb(mem_b), diff]
+    if args.against:
+        other = np.array(times["against"])
+        row += [ms(other.min()), spread(ours / other), "yes" if times["identical"] else "NO"]
+    return row
+
+
+def write_docs(path: Path, title: str, columns: tuple[str, ...], rows: list[list[str]],
+               note: str) -> None:
+    """The table as markdown in ``path``, with the date, the machine and the command."""
+    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo")
+                if line.startswith("model name")), platform.processor()) if Path(
+        "/proc/cpuinfo").exists() else platform.processor()
+    lines = [
+        "# Benchmarks", "",
+        "Written by `benchmarks/frf.py --write-docs`; run it again to refresh this page.", "",
+        f"## {title}", "",
+        f"- date: {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC",
+        f"- machine: {cpu}, {os.cpu_count()} cores, {platform.system()} "
+        f"{platform.release()}, Python {platform.python_version()}",
+        f"- command: `{' '.join(['.venv/bin/python', 'benchmarks/frf.py', *sys.argv[1:]])}`",
+        f"- load average (1 min) when written: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores",
+        "", "| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns),
+        *("| " + " | ".join(r) + " |" for r in rows), "", note, "",
+    ]
+    path.write_text("\n".join(lines))
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--duration", type=float, default=120.0, help="recording length, s")
@@ -247,92 +379,44 @@ def main() -> int:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--repeat", type=int, default=5, help="runs (floor and ours taking turns)")
     p.add_argument("--no-references", action="store_true", help="skip scipy and pyFRF")
+    p.add_argument("--against", metavar="REV", help="also time the accumulator of git REV")
+    p.add_argument("--write-docs", action="store_true", help="write docs/benchmarks.md")
     p.add_argument("--child", help=argparse.SUPPRESS)
     p.add_argument("--rate", type=float, help=argparse.SUPPRESS)
     p.add_argument("--dtype", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
         child(args.child, args.rate, args.duration, args.block, args.dtype, args.workers,
-              args.repeat)
+              args.repeat, args.against)
         return 0
     try:
         import pyFRF  # noqa: F401
 
-        have_pyfrf = not args.no_references
+        args.pyfrf = not args.no_references
         pyfrf_note = ""
     except ImportError:
-        have_pyfrf = False
+        args.pyfrf = False
         pyfrf_note = "pyFRF is not installed: (b) not measured (pip install pyFRF)"
 
-    console = Console(width=200)
-    table = Table(title=f"H1 spectra, 1 force + {N_RESP} accelerations, {args.duration:g} s, "
-                        f"nperseg {NPERSEG}, 50 % overlap, ours with {args.workers} threads")
-    for col in ("rate", "dtype", "floor ms scipy", "floor ms rocket", "ours ms",
-                "ours/floor", "ours/scipy floor", "real time",
-                "(a) scipy ms", "(a)/ours", "(b) pyFRF ms", "(b)/ours", "ours MB", "(a) MB",
-                "(b) MB", "max rel. diff to (a)"):
-        table.add_column(col, justify="right")
+    console = Console(width=260)
+    title = (f"H1 spectra, 1 force + {N_RESP} accelerations, {args.duration:g} s, "
+             f"nperseg {NPERSEG}, 50 % overlap, ours with {args.workers} threads")
+    columns = COLUMNS + (AGAINST if args.against else ())
+    rows = []
     for fs in args.rates:
         for dtype in args.dtypes:
-            # timed in a fresh process: the references' gigabytes must not weigh on the next row
-            times = in_child("times", fs, args, dtype)
-            if times is None:
-                raise SystemExit(f"timing {fs:g} Hz {dtype} failed")
-            t_ours = min(times["ours"])
-            ours, f_scipy, f_rocket = (np.array(times[k]) for k in ("ours", "scipy", "rocket"))
-            pairs = ours / np.minimum(f_scipy, f_rocket)  # each run, its own (faster) floor
-            pairs_scipy = ours / f_scipy
-            sp, H = run_ours(fs, args.duration, args.block, dtype, args.workers)
-            mem_ours = peak_memory("ours", fs, args, dtype)
-            t_a = t_b = mem_a = mem_b = None
-            diff = "-"
-            if not args.no_references:
-                x = whole(fs, args.duration, args.block, dtype)
-                t_a, Pff, Pfx, Pxx = run_scipy(x, fs)
-                diff = f"{max(rel_err(sp.Sfx[0], Pfx), rel_err(sp.Sxx, Pxx), rel_err(sp.Sff[0, 0].real, Pff), rel_err(H[:, 0], Pfx / Pff)):.1e}"  # noqa: E501
-                del x
-                mem_a = peak_memory("scipy", fs, args, dtype)
-                if have_pyfrf:
-                    x = whole(fs, args.duration, args.block, dtype)
-                    try:
-                        t_b = run_pyfrf(x, fs)
-                    except Exception as err:  # a reference failing is reported, not fatal
-                        pyfrf_note = f"pyFRF failed: {err}"
-                    del x
-                    mem_b = peak_memory("pyfrf", fs, args, dtype) if t_b else None
-
-            def ms(t: float | None) -> str:
-                return "-" if t is None else f"{1e3 * t:.0f}"
-
-            def ratio(t: float | None, ref: float = t_ours) -> str:
-                return "-" if t is None else f"{t / ref:.1f}x"
-
-            def mb(m: float | None) -> str:
-                return "-" if m is None else f"{m:.0f}"
-
-            def spread(r: np.ndarray) -> str:
-                return f"{np.median(r):.2f} ({r.min():.2f}-{r.max():.2f})"
-
-            table.add_row(f"{fs / 1000:g} kHz", dtype, ms(f_scipy.min()), ms(f_rocket.min()),
-                          ms(t_ours), spread(pairs), spread(pairs_scipy),
-                          f"{args.duration / t_ours:.0f}x",
-                          ms(t_a), ratio(t_a), ms(t_b), ratio(t_b), mb(mem_ours), mb(mem_a),
-                          mb(mem_b), diff)
+            rows.append(measure(fs, dtype, args))
             console.print(f"done {fs:g} Hz {dtype}", style="dim")
+    table = Table(title=title)
+    for col in columns:
+        table.add_column(col, justify="right")
+    for row in rows:
+        table.add_row(*row)
     console.print(table)
-    console.print(
-        "ours/floor: median (range) over the runs, ours and the floors taking turns on each "
-        "block, against the faster floor of the run (ours/scipy floor: against scipy's); "
-        "ms: best run. floor: bare rfft of the same segments, one core, groups of "
-        f"{GROUP} segments x 25 channels, with scipy.fft.rfft and with the same pocketfft "
-        "compiled into numba (rocket-fft, which ours calls); real time: recording length / "
-        "our time; "
-        "MB: peak resident memory above the process baseline (fresh process); float32 is "
-        "transformed in single precision, so its difference to scipy (which also works in "
-        "single precision) is at float32 level."
-    )
-    if pyfrf_note:
-        console.print(pyfrf_note, style="bold yellow")
+    note = NOTE.format(group=GROUP) + (f" {pyfrf_note}." if pyfrf_note else "")
+    console.print(note)
+    if args.write_docs:
+        write_docs(ROOT / "docs" / "benchmarks.md", title, columns, rows, note)
     return 0
 
 

@@ -42,7 +42,7 @@ from app.report.figures import configure
 def _mock_source(hit_every: float = 0.5) -> tuple[BlockSource, Callable[[], None]]:
     """26 real channels from the mock devices (see the module doc), a hit every
     ``hit_every`` s; returns the source and a function that stops the mocks."""
-    from app.acquire.mockbench import InProcessBench
+    from app.mockbench.bench import InProcessBench
     from drivers.base import AcquisitionFrontEnd
     from drivers.registry import create_device
     from drivers.station import parse_station

@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.errors import DeviceError
+from drivers.stream import SampleBuffer
 
 if TYPE_CHECKING:
     from drivers.station import DeviceConfig
@@ -51,6 +52,7 @@ __all__ = [
     "DeviceState",
     "ExcitationDevice",
     "StreamHealth",
+    "StreamingFrontEnd",
     "TimeBlock",
     "Waveform",
 ]
@@ -402,6 +404,36 @@ class AcquisitionFrontEnd(Device):
 
     @abstractmethod
     def _read_block_internal(self, n_samples: int, timeout: float) -> TimeBlock: ...
+
+
+class StreamingFrontEnd(AcquisitionFrontEnd):
+    """A front end whose reader thread streams samples into a :class:`~drivers.stream.SampleBuffer`.
+
+    The base owns the buffer (``self._buffer``: the backend's reader thread appends to it,
+    resets it at start and stores its failure in it), reads blocks out of it, and gives the
+    timing pairs from which :mod:`drivers.sync` fits the device clock.
+
+    Parameters
+    ----------
+    name, channels, fs : as :class:`AcquisitionFrontEnd`
+    stall_timeout : float
+        Seconds without any sample after which a read raises DeviceTimeoutError.
+    """
+
+    def __init__(self, name: str, channels: Sequence[ChannelConfig], fs: float, *,
+                 stall_timeout: float = 0.5) -> None:
+        super().__init__(name, channels, fs)
+        self.stall_timeout = stall_timeout
+        self._buffer = SampleBuffer(len(self.channels), name)
+
+    def clock_pairs(self) -> list[tuple[float, int]]:
+        """(host arrival time, s; samples received) per frame or block, for :mod:`drivers.sync`."""
+        return self._buffer.pairs()
+
+    def _read_block_internal(self, n_samples: int, timeout: float) -> TimeBlock:
+        data, first, missing, ovl = self._buffer.take(n_samples, timeout, self.stall_timeout)
+        return TimeBlock(data, self.fs, self.channels, first, None, missing,
+                         tuple(self.channels[i].name for i in sorted(ovl)))
 
 
 class Waveform(enum.Enum):

@@ -39,7 +39,7 @@ import cantools
 import numpy as np
 from cantools.database.can import Database
 
-from drivers.base import AcquisitionFrontEnd, ChannelConfig, StreamHealth, TimeBlock
+from drivers.base import ChannelConfig, StreamHealth, StreamingFrontEnd
 from drivers.errors import (
     DeviceError,
     DeviceInitializationError,
@@ -47,7 +47,7 @@ from drivers.errors import (
     ProtocolError,
 )
 from drivers.station import CanTransportConfig, DeviceConfig
-from drivers.stream import ReaderThread, SampleBuffer
+from drivers.stream import ReaderThread
 from drivers.transports import CanLink
 
 __all__ = ["FULL_SCALE", "CanFrontEnd", "FrameLayout", "load_dbc"]
@@ -81,7 +81,7 @@ class FrameLayout:
         self.signals = [[f"S{k}C{j}" for j in range(self.per_group)] for k in range(self.samples)]
 
 
-class CanFrontEnd(AcquisitionFrontEnd):
+class CanFrontEnd(StreamingFrontEnd):
     """Driver of the FE-16 CAN accelerometer front end.
 
     Parameters
@@ -109,7 +109,7 @@ class CanFrontEnd(AcquisitionFrontEnd):
                  bus: can.BusABC | None = None, bus_kwargs: dict[str, Any] | None = None,
                  frame: str = "fd", reply_timeout: float = 0.5,
                  stall_timeout: float = 0.5) -> None:
-        super().__init__(name, channels, fs)
+        super().__init__(name, channels, fs, stall_timeout=stall_timeout)
         if frame not in ("fd", "classic"):
             raise ValueError(f"{name}: frame must be 'fd' or 'classic', got {frame!r}")
         for ch in self.channels:
@@ -118,7 +118,6 @@ class CanFrontEnd(AcquisitionFrontEnd):
                                  f"supported; choose 1, 5 or 10 V")
         self.layout = FrameLayout(frame == "fd")
         self.reply_timeout = reply_timeout
-        self.stall_timeout = stall_timeout
         self.db = load_dbc()
         self._msg_cmd = self.db.get_message_by_frame_id(ID_CMD)
         self._decoders = {m.frame_id: m for m in self.db.messages}
@@ -127,7 +126,6 @@ class CanFrontEnd(AcquisitionFrontEnd):
         self._rows = np.array([ch.input for ch in self.channels])
         self._scale = np.array([ch.range_v / FULL_SCALE * 1000.0 / ch.sensitivity
                                 for ch in self.channels])
-        self._buffer = SampleBuffer(len(self.channels), name)
         self._acks: queue.Queue[tuple[int, int]] = queue.Queue()
         self._reader = ReaderThread(name)
         self.serial_number = 0
@@ -341,12 +339,3 @@ class CanFrontEnd(AcquisitionFrontEnd):
             if len(got) == n_groups:
                 flush(t_rx)
                 pending = False
-
-    def _read_block_internal(self, n_samples: int, timeout: float) -> TimeBlock:
-        data, first, missing, ovl = self._buffer.take(n_samples, timeout, self.stall_timeout)
-        return TimeBlock(data, self.fs, self.channels, first, None, missing,
-                         tuple(self.channels[i].name for i in sorted(ovl)))
-
-    def clock_pairs(self) -> list[tuple[float, int]]:
-        """(host arrival time, samples received) per block, for :mod:`drivers.sync`."""
-        return self._buffer.pairs()

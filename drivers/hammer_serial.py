@@ -39,7 +39,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from drivers.base import AcquisitionFrontEnd, ChannelConfig, StreamHealth, TimeBlock
+from drivers.base import ChannelConfig, StreamHealth, StreamingFrontEnd
 from drivers.errors import (
     DeviceError,
     DeviceInitializationError,
@@ -47,7 +47,7 @@ from drivers.errors import (
     ProtocolError,
 )
 from drivers.station import DeviceConfig, SerialTransportConfig
-from drivers.stream import ReaderThread, SampleBuffer
+from drivers.stream import ReaderThread
 from drivers.transports import SerialLink
 
 __all__ = ["FULL_SCALE", "HammerFrame", "SerialHammer", "decode_frames", "encode_command"]
@@ -130,7 +130,7 @@ def decode_frames(buf: bytearray) -> tuple[list[HammerFrame], int, int]:
             return frames, bad, skipped
 
 
-class SerialHammer(AcquisitionFrontEnd):
+class SerialHammer(StreamingFrontEnd):
     """Driver of the HD-1 hammer digitiser.
 
     Parameters
@@ -158,7 +158,7 @@ class SerialHammer(AcquisitionFrontEnd):
     def __init__(self, name: str, url: str, channels: Sequence[ChannelConfig], fs: float, *,
                  baudrate: int = 921600, sample_width: int = 32, reply_timeout: float = 0.5,
                  stall_timeout: float = 0.5) -> None:
-        super().__init__(name, channels, fs)
+        super().__init__(name, channels, fs, stall_timeout=stall_timeout)
         if sample_width not in (16, 32):
             raise ValueError(f"{name}: sample_width must be 16 or 32, got {sample_width}")
         range_mv = round(self.channels[0].range_v * 1000)
@@ -168,9 +168,7 @@ class SerialHammer(AcquisitionFrontEnd):
         self._range_mv = range_mv
         self.sample_width = sample_width
         self.reply_timeout = reply_timeout
-        self.stall_timeout = stall_timeout
         self._link = SerialLink(url, baudrate, name)
-        self._buffer = SampleBuffer(1, name)
         self._reader = ReaderThread(name)
         self._ended = threading.Event()
         self._leftover = bytearray()
@@ -288,12 +286,3 @@ class SerialHammer(AcquisitionFrontEnd):
         except Exception as err:  # the thread must never die silently
             logger.exception("%s: reader thread failed", self.name)
             self._buffer.fail(err)
-
-    def _read_block_internal(self, n_samples: int, timeout: float) -> TimeBlock:
-        data, first, missing, ovl = self._buffer.take(n_samples, timeout, self.stall_timeout)
-        return TimeBlock(data, self.fs, self.channels, first, None, missing,
-                         tuple(self.channels[i].name for i in sorted(ovl)))
-
-    def clock_pairs(self) -> list[tuple[float, int]]:
-        """(host arrival time, samples received) per frame, for :mod:`drivers.sync`."""
-        return self._buffer.pairs()

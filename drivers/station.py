@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drivers.base import QUANTITY_UNITS, ChannelConfig
+from drivers.base import QUANTITY_UNITS, ChannelConfig, Quantity
 from drivers.errors import one_line
 
 __all__ = [
@@ -172,9 +172,10 @@ def _channel(ctx: _Ctx, raw: object, key: str) -> ChannelConfig:
     t = ctx.table(raw, key)
     ctx.unknown(t, _CHANNEL_KEYS, key)
     name = ctx.string(t, "name", key)
-    quantity = ctx.string(t, "quantity", key)
-    if quantity not in QUANTITY_UNITS:
-        raise ctx.fail(f"{key}.quantity", f"{quantity!r} is not one of {', '.join(QUANTITY_UNITS)}")
+    text = ctx.string(t, "quantity", key)
+    if text not in QUANTITY_UNITS:
+        raise ctx.fail(f"{key}.quantity", f"{text!r} is not one of {', '.join(QUANTITY_UNITS)}")
+    quantity: Quantity = "force" if text == "force" else "acceleration"
     inp = ctx.number(t, "input", key, positive=False, integer=True)
     if inp < 0:
         raise ctx.fail(f"{key}.input", f"must be >= 0, got {inp}")
@@ -194,8 +195,7 @@ def _channel(ctx: _Ctx, raw: object, key: str) -> ChannelConfig:
                 or not any(direction)):
             raise ctx.fail(f"{key}.direction", f"must be a non-zero [x, y, z], got {direction!r}")
         direction = tuple(float(x) for x in direction)
-    return ChannelConfig(name, inp, quantity, float(sens), iepe,  # type: ignore[arg-type]
-                         float(rng), node, direction)
+    return ChannelConfig(name, inp, quantity, float(sens), iepe, float(rng), node, direction)
 
 
 def _transport(ctx: _Ctx, raw: object, key: str) -> SerialTransportConfig | CanTransportConfig:

@@ -24,21 +24,40 @@ from __future__ import annotations
 import json
 import socket
 import threading
+import tomllib
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any
-
-from drivers.station import StationConfig, load_station
+from typing import Any, Protocol
 
 __all__ = ["BenchControl", "BenchControlError", "control_address"]
+
+
+class StationLike(Protocol):
+    """What :func:`control_address` reads of a station (a ``drivers.station.StationConfig``
+    has both): its ``[extra]`` table and where it comes from."""
+
+    @property
+    def extra(self) -> Mapping[str, Any]: ...
+    @property
+    def source(self) -> str: ...
+
+
+@dataclass(frozen=True)
+class _StationFile:
+    """A station file's ``[extra]`` table, read here with :mod:`tomllib` (the mock does not
+    use the drivers' station parser)."""
+
+    source: str
+    extra: Mapping[str, Any] = field(default_factory=dict)
 
 
 class BenchControlError(RuntimeError):
     """The mock bench refused a request or could not be reached (one-line message)."""
 
 
-def control_address(station: StationConfig) -> tuple[str, int]:
+def control_address(station: StationLike) -> tuple[str, int]:
     """Host and port of the control channel named in a station's ``[extra.mock_bench]`` table.
 
     Raises :class:`BenchControlError` (one line) when the station has none, as a real
@@ -81,7 +100,13 @@ class BenchControl:
     @classmethod
     def from_station(cls, path: str | Path, *, timeout: float = 3.0) -> BenchControl:
         """Connect to the bench whose station file (``insitu mock-bench``) is ``path``."""
-        host, port = control_address(load_station(path))
+        p = Path(path)
+        try:
+            extra = tomllib.loads(p.read_text(encoding="utf-8")).get("extra", {})
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
+            raise BenchControlError(f"{p}: cannot read the station file: {err}") from err
+        table = extra if isinstance(extra, Mapping) else {}
+        host, port = control_address(_StationFile(str(p), table))
         return cls(host, port, timeout=timeout)
 
     def request(self, **fields: Any) -> dict[str, Any]:

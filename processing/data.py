@@ -108,6 +108,33 @@ class FRFSet:
         object.__setattr__(self, "exc_dirs", ed / np.linalg.norm(ed, axis=1, keepdims=True))
         object.__setattr__(self, "coherence", coh)
 
+    def select_lines(self, fmax: float | None = None) -> FRFSet:
+        """The set on its lines above 0 Hz and up to ``fmax`` Hz (every line above 0 Hz when
+        None), where accelerance and coherence are defined; NaN coherence counts as 0 (it
+        fails the coherence gate). Returns ``self`` when nothing changes.
+
+        Parameters
+        ----------
+        fmax : highest line kept, Hz (the usable band of a measurement is fs / 2.56, where
+            the front ends' anti-alias filters start to shape the data:
+            :meth:`anti_alias_fmax`)
+        """
+        keep = self.freq > 0
+        if fmax is not None:
+            keep &= self.freq <= fmax
+        coh = self.coherence
+        if np.all(keep) and (coh is None or np.all(np.isfinite(coh))):
+            return self
+        if coh is not None:
+            coh = np.nan_to_num(coh[..., keep])
+        return FRFSet(self.freq[keep], self.H[..., keep], self.resp_nodes, self.resp_dirs,
+                      self.exc_nodes, self.exc_dirs, self.geometry, coh, dict(self.meta))
+
+    def anti_alias_fmax(self) -> float:
+        """fs / 2.56, Hz, for a set whose last line is the Nyquist frequency fs / 2 (a
+        measured spectrum): above it the front ends' anti-alias filters shape the data."""
+        return float(self.freq[-1] / 1.28)
+
     @property
     def resp_xyz(self) -> NDArray[np.float64]:
         return self.geometry.coordinates(self.resp_nodes, "response")

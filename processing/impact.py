@@ -24,7 +24,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -265,6 +265,33 @@ def process_impacts(
     >>> process_impacts(x, fs, s, force_accept=True).verdicts[0].reason[:20]
     'accepted by override'
     """
+    x, names, full_scale = _checked_input(data, fs, force_channel, channel_names, ranges,
+                                          max_averages)
+    hits = _Hits.find(x, fs, settings, force_channel, full_scale)
+    verdicts, accepted = _verdicts(hits, names, fs, force_accept, max_averages)
+    for v in verdicts:
+        if v.reason:
+            log.info("hit %d at sample %d %s", v.index, v.trigger,
+                     v.reason if v.accepted else f"rejected: {v.reason}")
+    L, pre = settings.record_length, settings.pretrigger
+    freq = np.asarray(np.fft.rfftfreq(L, 1.0 / fs), dtype=np.float64)
+    meta: dict[str, object] = {"fs": float(fs), "record_length": L, "pretrigger": pre}
+    if not accepted.any():
+        return ImpactResult(freq, None, None, tuple(verdicts), None, estimator, settings.exp_tau,
+                            meta)
+    windows = _windows(hits, accepted, fs, settings, force_channel, force_accept)
+    sp = record_spectra(hits.rec[accepted], fs, windows, references=(force_channel,))
+    H, coh = frf(sp, estimator)
+    meta["n_averages"] = int(accepted.sum())
+    return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta)
+
+
+def _checked_input(data: ArrayLike, fs: float, force_channel: int,
+                   channel_names: Sequence[str] | None, ranges: ArrayLike | None,
+                   max_averages: int | None) -> tuple[NDArray[Any], list[str],
+                                                      NDArray[np.float64] | None]:
+    """The recording (n_ch, n), the channel names and the full-scale ranges (or None), checked
+    (:func:`process_impacts`'s parameters); InputError naming what is wrong."""
     x = np.asarray(data)
     if x.ndim != 2 or x.shape[0] < 2:
         raise InputError(f"impact data must have shape (n_ch >= 2, n_samples), got {x.shape}")
@@ -274,55 +301,92 @@ def process_impacts(
         raise InputError(f"sample rate must be positive, got {fs}")
     if max_averages is not None and max_averages < 1:
         raise InputError(f"max_averages must be at least 1 (or None), got {max_averages}")
-    n_ch, n = x.shape
+    n_ch = x.shape[0]
     if not 0 <= force_channel < n_ch:
         raise InputError(f"force channel {force_channel} out of range for {n_ch} channels")
     names = [f"channel {i}" for i in range(n_ch)] if channel_names is None else list(channel_names)
     if len(names) != n_ch:
         raise InputError(f"{len(names)} channel names for {n_ch} channels")
-    rng_arr = None
+    full_scale = None
     if ranges is not None:
-        rng_arr = np.asarray(ranges, dtype=float).ravel()
-        if rng_arr.size != n_ch or np.any(rng_arr <= 0):
+        full_scale = np.asarray(ranges, dtype=float).ravel()
+        if full_scale.size != n_ch or np.any(full_scale <= 0):
             raise InputError(f"ranges must be {n_ch} positive full-scale values")
-    L, pre = settings.record_length, settings.pretrigger
-    sign = 1.0 if settings.slope == "rising" else -1.0
+    return x, names, full_scale
 
-    triggers = find_triggers(x[force_channel], settings)
-    starts = triggers - pre
-    complete = (starts >= 0) & (starts + L <= n)
-    ok_starts = starts[complete]
-    # records (n_hit, n_ch, L) of the complete hits, one fancy-indexing gather
-    rec = x[:, ok_starts[:, None] + np.arange(L)].transpose(1, 0, 2).astype(float)
-    g = sign * rec[:, force_channel]
-    peak_force = g.max(axis=-1) if rec.shape[0] else np.zeros(0)
-    first_above, fall, rerise = _pulse_edges(g, settings.double_hit_ratio)
-    double = rerise < L
-    clipped = _max_run_at_peak(rec, settings.clip_samples)  # (n_hit, n_ch)
-    if rng_arr is not None:
-        over = np.abs(rec).max(axis=-1) >= 0.99 * rng_arr
-    else:
-        over = np.zeros_like(clipped)
 
+@dataclass(frozen=True)
+class _Hits:
+    """The hits of a recording: every trigger and its record start (samples), whether the
+    record is complete, and for the complete ones (n_hit rows) the records (n_hit, n_ch, L),
+    the force with the slope's sign ``g``, its peak (N), the pulse edges (see
+    :func:`_pulse_edges`), and the checks: double hit, clipped and overloaded channels."""
+
+    triggers: NDArray[np.int64]
+    starts: NDArray[np.int64]
+    complete: NDArray[np.bool_]
+    rec: NDArray[np.float64]
+    g: NDArray[np.float64]
+    peak_force: NDArray[np.float64]
+    first_above: NDArray[np.int64]
+    fall: NDArray[np.int64]
+    rerise: NDArray[np.int64]
+    double: NDArray[np.bool_]
+    clipped: NDArray[np.bool_]
+    over: NDArray[np.bool_]
+
+    @classmethod
+    def find(cls, x: NDArray[Any], fs: float, settings: ImpactSettings, force_channel: int,
+             full_scale: NDArray[np.float64] | None) -> _Hits:
+        L, pre = settings.record_length, settings.pretrigger
+        sign = 1.0 if settings.slope == "rising" else -1.0
+        triggers = find_triggers(x[force_channel], settings)
+        starts = triggers - pre
+        complete = (starts >= 0) & (starts + L <= x.shape[1])
+        ok_starts = starts[complete]
+        # records (n_hit, n_ch, L) of the complete hits, one fancy-indexing gather
+        rec = x[:, ok_starts[:, None] + np.arange(L)].transpose(1, 0, 2).astype(float)
+        g = sign * rec[:, force_channel]
+        peak_force = g.max(axis=-1) if rec.shape[0] else np.zeros(0)
+        first_above, fall, rerise = _pulse_edges(g, settings.double_hit_ratio)
+        clipped = _max_run_at_peak(rec, settings.clip_samples)  # (n_hit, n_ch)
+        if full_scale is not None:
+            over = np.abs(rec).max(axis=-1) >= 0.99 * full_scale
+        else:
+            over = np.zeros_like(clipped)
+        return cls(triggers, starts, complete, rec, g, peak_force, first_above, fall, rerise,
+                   rerise < L, clipped, over)
+
+
+def _reasons(hits: _Hits, k: int, names: Sequence[str], fs: float) -> list[str]:
+    """What the checks found on complete record ``k`` (empty if nothing)."""
+    reasons = []
+    if hits.over[k].any():
+        ch = names[int(np.argmax(hits.over[k]))]
+        reasons.append(f"overload on {ch} (peak at or above 99 % of its range)")
+    elif hits.clipped[k].any():
+        ch = names[int(np.argmax(hits.clipped[k]))]
+        reasons.append(f"overload on {ch} (clipped: flat top at its peak)")
+    if hits.double[k]:
+        dt = (hits.rerise[k] - hits.first_above[k]) / fs * 1e3
+        reasons.append(f"double hit (second impact {dt:.1f} ms after the first)")
+    return reasons
+
+
+def _verdicts(hits: _Hits, names: Sequence[str], fs: float, force_accept: bool,
+              max_averages: int | None) -> tuple[list[HitVerdict], NDArray[np.bool_]]:
+    """One verdict per trigger, and which complete records are averaged."""
     verdicts: list[HitVerdict] = []
-    accepted = np.zeros(ok_starts.size, dtype=bool)  # per complete record
+    accepted = np.zeros(int(hits.complete.sum()), dtype=bool)  # per complete record
     k = n_used = 0
-    for i, (trig, start, comp) in enumerate(zip(triggers, starts, complete, strict=True)):
+    for i, (trig, start, comp) in enumerate(zip(hits.triggers, hits.starts, hits.complete,
+                                                strict=True)):
         if not comp:
             where = "start" if start < 0 else "end"
             verdicts.append(HitVerdict(i, int(trig), int(start), float("nan"), False,
                                        f"record incomplete: it runs past the {where} of the data"))
             continue
-        reasons = []
-        if over[k].any():
-            ch = names[int(np.argmax(over[k]))]
-            reasons.append(f"overload on {ch} (peak at or above 99 % of its range)")
-        elif clipped[k].any():
-            ch = names[int(np.argmax(clipped[k]))]
-            reasons.append(f"overload on {ch} (clipped: flat top at its peak)")
-        if double[k]:
-            dt = (rerise[k] - first_above[k]) / fs * 1e3
-            reasons.append(f"double hit (second impact {dt:.1f} ms after the first)")
+        reasons = _reasons(hits, k, names, fs)
         ok = force_accept or not reasons
         reason = "; ".join(reasons)
         if force_accept and reasons:
@@ -331,40 +395,36 @@ def process_impacts(
             ok, reason = False, f"not used: the first {max_averages} accepted hits are averaged"
         accepted[k] = ok
         n_used += ok
-        verdicts.append(HitVerdict(i, int(trig), int(start), float(peak_force[k]),
+        verdicts.append(HitVerdict(i, int(trig), int(start), float(hits.peak_force[k]),
                                    bool(accepted[k]), reason))
         k += 1
-    for v in verdicts:
-        if v.reason:
-            log.info("hit %d at sample %d %s", v.index, v.trigger,
-                     v.reason if v.accepted else f"rejected: {v.reason}")
+    return verdicts, accepted
 
-    freq = np.asarray(np.fft.rfftfreq(L, 1.0 / fs), dtype=np.float64)
-    meta: dict[str, object] = {"fs": float(fs), "record_length": L, "pretrigger": pre}
-    if not accepted.any():
-        return ImpactResult(freq, None, None, tuple(verdicts), None, estimator, settings.exp_tau,
-                            meta)
-    rec_a = rec[accepted]
-    windows = np.ones((rec_a.shape[0], n_ch, L))
+
+def _windows(hits: _Hits, accepted: NDArray[np.bool_], fs: float, settings: ImpactSettings,
+             force_channel: int, force_accept: bool) -> NDArray[np.float64]:
+    """The windows (n_acc, n_ch, L) of the accepted records: the exponential window on every
+    channel if any, times the force window on the force channel (its stop and taper from the
+    pulse, or ``settings.force_window``; an accepted double hit's spans the last impact)."""
+    n_acc, n_ch, L = int(accepted.sum()), hits.rec.shape[1], settings.record_length
+    windows = np.ones((n_acc, n_ch, L))
     if settings.exp_tau is not None:
         windows *= exponential_window(L, fs, settings.exp_tau)
     if settings.force_window is not None:
-        stop = np.full(rec_a.shape[0], pre + round(settings.force_window * fs))
+        stop = np.full(n_acc, settings.pretrigger + round(settings.force_window * fs))
         taper = np.zeros_like(stop)
     else:
-        width = np.maximum(fall[accepted] - first_above[accepted], 1)
-        stop = fall[accepted] + width
+        fall, first_above = hits.fall[accepted], hits.first_above[accepted]
+        width = np.maximum(fall - first_above, 1)
+        stop = fall + width
         taper = width
         if force_accept:  # an accepted double hit: the window spans the last impact too
-            g_a = g[accepted]
+            g_a = hits.g[accepted]
             above = g_a > settings.double_hit_ratio * g_a.max(axis=-1, keepdims=True)
             last = L - 1 - np.argmax(above[:, ::-1], axis=-1)
-            stop = np.where(double[accepted], np.maximum(stop, last + 2 * width), stop)
+            stop = np.where(hits.double[accepted], np.maximum(stop, last + 2 * width), stop)
     windows[:, force_channel] *= force_window(L, np.minimum(stop, L), taper)
-    sp = record_spectra(rec_a, fs, windows, references=(force_channel,))
-    H, coh = frf(sp, estimator)
-    meta["n_averages"] = int(accepted.sum())
-    return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta)
+    return windows
 
 
 def merge_results(results: Sequence[ImpactResult]) -> ImpactResult:

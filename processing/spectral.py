@@ -11,7 +11,7 @@ windowed (periodic Hann by default). Time is the last axis of every input.
 samples not yet consumed, so a live display, a long recording and a replay all
 go through the same code. Every complete segment is used as soon as it is in,
 each value summed over the segments in order, so the result is bit for bit the
-same whatever the block sizes and the number of worker threads.
+same whatever the block sizes and the number of threads.
 
 Several references (shakers) give ``H = G_xf G_ff^-1`` per line and the
 multiple coherence of each response.
@@ -20,42 +20,22 @@ multiple coherence of each response.
 from __future__ import annotations
 
 import itertools
-import queue
 import threading
-import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
+import numba
 import numpy as np
 import scipy.fft
 import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
-from processing._welch_kernel import (
-    DONE,
-    PATIENCE,
-    TIMED_OUT,
-    accumulate,
-    scratch,
-    work_block,
-)
+from processing import _welch_kernel as _kernel
 
-__all__ = [
-    "ESTIMATORS",
-    "CrossSpectra",
-    "SpectralAccumulator",
-    "SpectralError",
-    "coherence",
-    "combine",
-    "frf",
-    "h1",
-    "h2",
-    "hv",
-    "ordinary_coherence",
-    "record_spectra",
-    "welch_spectra",
-]
+__all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError", "coherence",
+           "combine", "frf", "h1", "h2", "hv", "ordinary_coherence", "record_spectra",
+           "welch_spectra"]
 
 #: names accepted by :func:`frf`
 ESTIMATORS = ("H1", "H2", "Hv")
@@ -63,108 +43,12 @@ ESTIMATORS = ("H1", "H2", "Hv")
 Scaling = Literal["density", "spectrum"]
 #: summed (Sff, Sfx, Sxx) of some segments
 _Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64]]
-#: a block as :func:`processing._welch_kernel.work_block` takes it: the samples, the tail's
-#: store and the other store, n_tail, need, n_seg, n_head, nperseg, step, group
-_Block = tuple[NDArray[Any], NDArray[Any], NDArray[Any], int, int, int, int, int, int, int]
-
-
-#: pocketfft transforms this many segments at once (SIMD lanes: 4 in single precision, 2 in
-#: double); a call's transforms beyond a multiple of it are done one by one, about three
-#: times slower each: rows per call are kept to multiples of it where they can be
-_LANES = 4
-
-
-@dataclass(frozen=True)
-class _Share:
-    """The channels one worker thread transforms and sums: ``runs`` of adjacent rows
-    ``(lo, hi)``, none of them a reference. The first worker also transforms the
-    references, once for all workers: ``lead`` is then the rows of its first FFT call,
-    the references and a few rows after them (``(lo, hi)``, a multiple of ``_LANES`` rows
-    where there are enough: the others get the references' spectra early), or None when
-    the references are not adjacent (a call each)."""
-
-    runs: tuple[tuple[int, int], ...]
-    lead: tuple[int, int] | None = None
-
-    @classmethod
-    def split(cls, n_ch: int, refs: tuple[int, ...], parts: int) -> list[_Share]:
-        """At most ``parts`` workers with about as many rows each, the first one counting
-        the references; it is the calling thread. The others take multiples of
-        ``_LANES`` rows (12 and 13 of 25 rows for two workers: no transform outside the
-        lanes but in the first worker's last call). Workers left without a row are
-        dropped (not the first)."""
-        others = [r for r in range(n_ch) if r not in set(refs)]
-        each = round(n_ch / parts / _LANES) * _LANES
-        if each == 0 or each * (parts - 1) > len(others):  # few rows: as many each
-            each = n_ch // parts
-        bounds = [0, *(max(0, len(others) - (parts - 1 - k) * each) for k in range(parts - 1)),
-                  len(others)]
-        out = []
-        for k, (a, b) in enumerate(itertools.pairwise(bounds)):
-            rows = others[a:b]
-            if not rows and k:
-                continue
-            cuts = [i for i in range(1, len(rows)) if rows[i] != rows[i - 1] + 1]
-            out.append(cls(tuple((rows[i], rows[j - 1] + 1)
-                                 for i, j in itertools.pairwise([0, *cuts, len(rows)])
-                                 if j > i)))
-        if refs == tuple(range(refs[0], refs[0] + len(refs))):
-            # the first call: the references and a few rows after them, a multiple of the
-            # lanes, so that the other workers have the references' spectra early
-            after = refs[-1] + 1
-            hi = next((h for lo, h in out[0].runs if lo == after), after)
-            cut = min(hi, after + (-len(refs)) % _LANES)
-            runs = tuple(run for run in out[0].runs if run[0] != after)
-            out[0] = cls(((cut, hi), *runs) if cut < hi else runs, (refs[0], cut))
-        return out
-
-    def n_max(self, n_ref: int, first: bool) -> int:
-        """Most rows in one of its FFT calls."""
-        lead = (self.lead[1] - self.lead[0] if self.lead else n_ref) if first else 0
-        return max([hi - lo for lo, hi in self.runs] + [lead])
-
-
-@dataclass(frozen=True)
-class _Plan:
-    """A share as :func:`processing._welch_kernel.work_block` takes it (int64 arrays):
-    ``own``, the runs of rows ``(lo, hi)`` it checks and whose samples it keeps; ``runs``,
-    those it transforms in calls of their own; ``lead``, the first worker's call with the
-    references, ``(-1, -1)`` if none."""
-
-    own: NDArray[np.int64]
-    runs: NDArray[np.int64]
-    lead: NDArray[np.int64]
-
-    @classmethod
-    def of(cls, share: _Share, refs: tuple[int, ...], first: bool) -> _Plan:
-        def runs(pairs: Sequence[tuple[int, int]]) -> NDArray[np.int64]:
-            return np.array(pairs, np.int64).reshape(-1, 2)
-
-        head: list[tuple[int, int]] = []
-        if first:
-            head = [share.lead] if share.lead else [(r, r + 1) for r in refs]
-        return cls(runs(head + list(share.runs)), runs(share.runs),
-                   np.array(share.lead if first and share.lead else (-1, -1), np.int64))
-
-
-@dataclass(frozen=True)
-class _Scratch:
-    """One worker's buffers, allocated once and reused (fresh memory costs a page fault per
-    4 kB on first touch): windowed samples (a window applied in time only: else empty)
-    and the kernel's scratch (see :func:`processing._welch_kernel.accumulate`)."""
-
-    buf: NDArray[np.floating]
-    fg: NDArray[np.float64]
-    x: NDArray[np.float64]
 
 
 class SpectralError(ValueError):
     """Bad spectral-analysis parameters or data; the message names the value and what is allowed."""
 
 
-# ----------------------------------------------------------------------------------------------
-# result
-# ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CrossSpectra:
     """Averaged one-sided spectra between reference (force) and response channels.
@@ -192,27 +76,19 @@ class CrossSpectra:
     resp_channels: tuple[int, ...]
 
     def __post_init__(self) -> None:
-        freq = np.asarray(self.freq, dtype=float).ravel()
-        Sff = np.asarray(self.Sff, dtype=np.complex128)
-        Sfx = np.asarray(self.Sfx, dtype=np.complex128)
-        Sxx = np.asarray(self.Sxx, dtype=np.float64)
-        n_f = freq.size
-        n_ref, n_resp = len(self.ref_channels), len(self.resp_channels)
-        for name, arr, shape in (
-            ("Sff", Sff, (n_ref, n_ref, n_f)),
-            ("Sfx", Sfx, (n_ref, n_resp, n_f)),
-            ("Sxx", Sxx, (n_resp, n_f)),
-        ):
+        object.__setattr__(self, "freq", np.asarray(self.freq, dtype=float).ravel())
+        n_f, n_ref, n_resp = self.freq.size, len(self.ref_channels), len(self.resp_channels)
+        for name, dtype, shape in (("Sff", np.complex128, (n_ref, n_ref, n_f)),
+                                   ("Sfx", np.complex128, (n_ref, n_resp, n_f)),
+                                   ("Sxx", np.float64, (n_resp, n_f))):
+            arr = np.asarray(getattr(self, name), dtype=dtype)
             if arr.shape != shape:
                 raise SpectralError(f"{name} has shape {arr.shape}, expected {shape}")
+            object.__setattr__(self, name, arr)
         if n_ref < 1:
             raise SpectralError("at least one reference channel is needed")
         if self.n_averages < 0:
             raise SpectralError(f"n_averages must be >= 0, got {self.n_averages}")
-        object.__setattr__(self, "freq", freq)
-        object.__setattr__(self, "Sff", Sff)
-        object.__setattr__(self, "Sfx", Sfx)
-        object.__setattr__(self, "Sxx", Sxx)
         object.__setattr__(self, "ref_channels", tuple(int(c) for c in self.ref_channels))
         object.__setattr__(self, "resp_channels", tuple(int(c) for c in self.resp_channels))
 
@@ -244,9 +120,6 @@ def combine(a: CrossSpectra, b: CrossSpectra) -> CrossSpectra:
     )
 
 
-# ----------------------------------------------------------------------------------------------
-# estimators
-# ----------------------------------------------------------------------------------------------
 def _solve_refs(sp: CrossSpectra, rhs: NDArray[np.complex128]) -> NDArray[np.complex128]:
     """``Sff^-1 rhs`` per line, (n_ref, k, n_f) -> (n_ref, k, n_f); NaN where Sff is singular."""
     if sp.n_ref == 1:
@@ -362,9 +235,6 @@ def frf(
     return H, coh
 
 
-# ----------------------------------------------------------------------------------------------
-# accumulation
-# ----------------------------------------------------------------------------------------------
 def _channel_roles(
     n_ch: int, references: Sequence[int], responses: Sequence[int] | None
 ) -> tuple[tuple[int, ...], tuple[int, ...]]:
@@ -394,6 +264,9 @@ def _spectra_sums(P: NDArray[np.float64], Q: NDArray[np.float64], refs: tuple[in
 
 #: the window of spectra already windowed in time
 _NO_TAPS = np.ones(1)
+#: one compiled parallel call at a time: numba's fallback thread pool (without OpenMP or
+#: TBB) aborts the process when two threads launch parallel work at once
+_LAUNCH = threading.Lock()
 #: the most lines a window may spread over to be applied in frequency
 _MAX_TAPS = 8
 
@@ -401,11 +274,8 @@ _MAX_TAPS = 8
 def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """The window as a short convolution in frequency, ``rfft(win)[:M + 1] / n``, when it is
     a periodic cosine sum of at most ``_MAX_TAPS`` terms to 1e-13 of its peak (Hann, Hamming,
-    Blackman, flat top, rectangular, as :func:`scipy.signal.get_window` gives them); else None.
-
-    Applied in frequency, such a window and the mean removal cost nothing more than the
-    products (see :mod:`processing._welch_kernel`), and the FFT reads the samples in place.
-    """
+    Blackman, flat top, rectangular, as :func:`scipy.signal.get_window` gives them); else None
+    (the window is then applied to the samples)."""
     n = win.size
     W = np.fft.rfft(win) / n
     M = int(np.flatnonzero(np.abs(W) > 1e-13 * np.abs(W).max())[-1])
@@ -420,99 +290,12 @@ def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
     return taps
 
 
-def _interleaved(Z: NDArray[np.complexfloating]) -> NDArray[np.floating]:
-    """Real view ``(re, im, re, im, ...)`` of spectra contiguous along their last axis."""
-    return Z.view(Z.real.dtype)
-
-
 def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
     scale = np.full(n_f, 2.0 / norm)
     scale[0] = 1.0 / norm
     if nfft % 2 == 0:
         scale[-1] = 1.0 / norm
     return scale
-
-
-class _Crew:
-    """Threads that run ``fn(k)`` beside the calling thread's ``fn(0)``: the only threads
-    of ``processing``. numpy, pocketfft and the kernels release the GIL, so the
-    workers, each on its own channels, run on all cores. A crew belongs to one
-    accumulator: its workers wait for each other (flags in
-    :func:`processing._welch_kernel.work_block`), which tasks queued behind another
-    accumulator's could not.
-
-    Each thread takes its tasks from a queue of its own and reports to a common one
-    (``queue.SimpleQueue``, in C: a round trip costs half a ``ThreadPoolExecutor``'s,
-    measured 65 us against 130-160 us on this virtual machine, paid at every block).
-    The threads hold no reference to the accumulator between tasks; :meth:`close`
-    (called when the accumulator is collected) ends them.
-    """
-
-    def __init__(self, n_threads: int) -> None:
-        self.size = n_threads
-        self._pending = 0
-        self.lost = False
-        self._tasks: list[queue.SimpleQueue[tuple[Callable[[int], int], int] | None]] = [
-            queue.SimpleQueue() for _ in range(n_threads)]
-        self._done: queue.SimpleQueue[BaseException | None] = queue.SimpleQueue()
-        for k, tasks in enumerate(self._tasks):
-            threading.Thread(target=self._serve, args=(tasks, self._done), daemon=True,
-                             name=f"spectral-{k + 1}").start()
-
-    @staticmethod
-    def _serve(tasks: queue.SimpleQueue[tuple[Callable[[int], int], int] | None],
-               done: queue.SimpleQueue[BaseException | None]) -> None:
-        while (task := tasks.get()) is not None:
-            fn, k = task
-            del task
-            try:
-                fn(k)
-            except BaseException as exc:  # handed to the calling thread, raised there
-                done.put(exc)
-            else:
-                done.put(None)
-            del fn
-
-    def run(self, fn: Callable[[int], int], workers: int, grace: float) -> int:
-        """``fn(0)`` on this thread, ``fn(k)`` for ``k`` in ``1:workers`` on the crew's
-        (``workers - 1 <= size``); returns what ``fn(0)`` returns. When that is DONE,
-        every worker is done with what they share (``fn(0)`` waits for that itself,
-        without a wake-up through the system) and their own returns are collected at the
-        next run. Otherwise, or if ``fn(0)`` raised, waits for them all and raises the
-        first error; after TIMED_OUT (a worker did not come), for ``grace`` seconds only:
-        a worker still out then is left behind, with the arrays it holds, and the crew
-        is ``lost`` (closed; make another)."""
-        self._collect()
-        for k in range(1, workers):
-            self._tasks[k - 1].put((fn, k))
-        self._pending = workers - 1
-        try:
-            code = fn(0)
-        except BaseException:
-            self._collect()  # never return while another thread may still write
-            raise
-        if code != DONE:
-            self._collect(grace if code == TIMED_OUT else None)
-        return code
-
-    def _collect(self, timeout: float | None = None) -> None:
-        """Wait for the workers' returns still pending (at most ``timeout`` s: then the
-        crew is lost); raise the first error."""
-        errors = []
-        try:
-            while self._pending:
-                if (err := self._done.get(timeout=timeout)) is not None:
-                    errors.append(err)
-                self._pending -= 1
-        except queue.Empty:
-            self.lost = True
-            self.close()
-        if errors:
-            raise errors[0]
-
-    def close(self) -> None:
-        for tasks in self._tasks:
-            tasks.put(None)
 
 
 class SpectralAccumulator:
@@ -537,41 +320,26 @@ class SpectralAccumulator:
     scaling : {'density', 'spectrum'}
         Unit**2/Hz or unit**2, as in scipy.
     group : int, optional
-        Most segments transformed together (one FFT call for up to ``group`` segments
-        of all the worker's channels); by default 16 for float32 samples, 4 for float64
-        (the fastest on the benchmark). Results are independent of
-        it (the FFT of a segment does not depend on the others in its call; tested).
-    workers : int
-        Threads sharing the channels (1, or 2 on a 2-core machine): each one checks,
-        transforms and multiplies every segment of its own channels; the calling thread
-        also transforms the references, once for all.
+        Most segments of a channel per FFT call (default 16 for float32 samples, 4 else).
+    workers : int, optional
+        Threads sharing the channels, at most (and by default) numba's
+        ``NUMBA_NUM_THREADS`` (the number of cores unless set).
 
     Notes
     -----
-    Float32 samples are transformed in single precision (complex64 FFT), anything
-    else in double precision; the products are formed and summed in float64
-    (:mod:`processing._welch_kernel`, compiled by numba on first use and cached).
-    Segments are taken as :func:`scipy.signal.csd` takes them: from the first
-    sample on, every ``nperseg - noverlap`` samples, trailing samples that do not
-    fill a segment unused. A window that is a short cosine sum (Hann, Hamming,
-    Blackman, flat top, rectangular) is applied in frequency, as a convolution over
-    ``2 M + 1`` lines, and the mean removal by zeroing the un-windowed spectrum's
-    line 0: the FFT reads the samples where they are and no pass windows them; any
-    other window is applied to the samples. Each value is summed over the segments
-    in order: the same bits whatever the block boundaries and the number of workers.
+    Float32 samples are transformed in single precision, anything else in double; the
+    products are formed and summed in float64 (:mod:`processing._welch_kernel`). Segments
+    are taken as :func:`scipy.signal.csd` takes them: from the first sample on, every
+    ``nperseg - noverlap`` samples; trailing samples that do not fill a segment wait for
+    the next block. A window that is a short cosine sum (Hann, Hamming, Blackman, flat
+    top, rectangular) is applied in frequency, as a convolution over ``2 M + 1`` lines,
+    and the mean removal by zeroing the un-windowed spectrum's line 0; any other window
+    is applied to the samples. Each value is summed over the segments in order: the same
+    bits whatever the block boundaries, ``group`` and ``workers`` (tested).
 
-    Memory: two buffers of ``2 nperseg`` samples per channel taking turns holding
-    the unconsumed tail (less than ``nperseg`` samples per channel, plus the start of
-    the next block, less than ``nperseg``: about two segments' samples are copied per
-    block), the
-    sums (``3 * n_ch * nperseg`` values for one reference), the references' spectra
-    handed between workers (``group * nperseg`` values per reference and group of the
-    largest block), and per worker its scratch (the windowed references; windowed
-    samples for a window applied in time), all allocated once and reused (fresh memory
-    costs a page fault per 4 kB on first touch); the spectra of each FFT call
-    (``group * nperseg`` values per channel of the call) come and go. Measured with 25
-    channels, nperseg 8192, 1 s blocks at 51.2 kHz, two workers: under 100 MB
-    (``benchmarks/frf.py``).
+    Memory: two buffers of ``2 nperseg`` samples per channel holding the samples not yet
+    consumed, the sums (``3 n_ch nperseg`` values for one reference), the references'
+    spectra of up to 65 segments, and each FFT call's spectra (``group nperseg`` values).
 
     Examples
     --------
@@ -598,7 +366,7 @@ class SpectralAccumulator:
         responses: Sequence[int] | None = None,
         scaling: Scaling = "density",
         group: int | None = None,
-        workers: int = 1,
+        workers: int | None = None,
     ) -> None:
         if not np.isfinite(fs) or fs <= 0:
             raise SpectralError(f"sample rate must be positive, got {fs}")
@@ -612,48 +380,38 @@ class SpectralAccumulator:
             raise SpectralError(f"detrend must be 'constant' or False, got {detrend!r}")
         if scaling not in ("density", "spectrum"):
             raise SpectralError(f"scaling must be 'density' or 'spectrum', got {scaling!r}")
-        if (group is not None and group < 1) or workers < 1:
+        if (group is not None and group < 1) or (workers is not None and workers < 1):
             raise SpectralError(f"group and workers must be >= 1, got {group}, {workers}")
-        if isinstance(window, (str, tuple)):
-            win = np.asarray(scipy.signal.get_window(window, nperseg), dtype=float)
-        else:
-            win = np.asarray(window, dtype=float)
+        win = np.asarray(scipy.signal.get_window(window, nperseg)
+                         if isinstance(window, (str, tuple)) else window, dtype=float)
         if win.shape != (nperseg,):
             raise SpectralError(f"window has shape {win.shape}, expected ({nperseg},)")
-        self.fs = float(fs)
-        self.nperseg = nperseg
-        self.noverlap = noverlap
+        self.fs, self.nperseg, self.noverlap = float(fs), nperseg, noverlap
         self.step = nperseg - noverlap
-        self.window = win
-        self.detrend = detrend
-        self.scaling: Scaling = scaling
+        self.window, self.detrend, self.scaling = win, detrend, scaling
         self._group = None if group is None else int(group)
-        self.workers = int(workers)
+        most = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+        self.workers = most if workers is None else min(int(workers), most)
         self._references = tuple(int(r) for r in references)
-        self._crew: _Crew | None = None
-        self._patience = PATIENCE  # spins before a thread gives up waiting for another
-        self._grace = 5.0  # s the calling thread then waits for it to come back
         self._responses = None if responses is None else tuple(int(r) for r in responses)
+        # the window in frequency (taps; the mean removed by zero_dc), or on the samples
+        # (the mean removed on the lines dc_bins of its spectrum): see add_block
         self._taps = _cosine_taps(win)
+        self._zero_dc = self._taps is not None and detrend == "constant"
         W = np.fft.rfft(win)
-        self._dc_bins = np.flatnonzero(np.abs(W) > 1e-12 * np.abs(W[0]))
-        self._dc_values = W[self._dc_bins]
+        time_dc = self._taps is None and detrend == "constant"
+        bins = np.flatnonzero((np.abs(W) > 1e-12 * np.abs(W[0])) & time_dc)
+        self._dc_bins, self._dc_values = bins, W[bins]
         self.freq = np.asarray(np.fft.rfftfreq(nperseg, 1.0 / fs), dtype=np.float64)
         self.reset()
 
-    # -- state ---------------------------------------------------------------------------------
     def reset(self) -> None:
         """Forget every sample and average (keeps the parameters)."""
-        self._broken = ""  # why blocks are refused until the next reset, if they are
         self._tail: NDArray[np.floating] | None = None
         self._dtype: np.dtype[np.floating] | None = None
-        self._n_ch = 0
+        self._n_ch = self._n_seg = self._n_samples = 0
         self._refs: tuple[int, ...] = ()
         self._resps: tuple[int, ...] = ()
-        self._shares: list[_Share] = []
-        self._n_seg = 0
-        self._n_samples = 0
-        self._scratch: list[_Scratch] = []
 
     @property
     def n_averages(self) -> int:
@@ -662,9 +420,7 @@ class SpectralAccumulator:
 
     @property
     def group(self) -> int:
-        """Most segments per FFT call: as given, else the fastest measured
-        (``benchmarks/frf.py``; the sums are read and written once per call): 16 for
-        float32 samples, 4 for anything else."""
+        """Most segments of a channel per FFT call."""
         if self._group is not None:
             return self._group
         return 16 if self._dtype == np.float32 else 4
@@ -674,59 +430,29 @@ class SpectralAccumulator:
         """Samples per channel received so far."""
         return self._n_samples
 
-    # -- work ----------------------------------------------------------------------------------
     def _first_block(self, block: NDArray[np.generic]) -> None:
         self._n_ch = n_ch = block.shape[0]
-        self._refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
-        dtype: np.dtype[np.floating] = np.dtype(np.float32 if block.dtype == np.float32
-                                                 else np.float64)
-        self._dtype = dtype
+        refs, self._resps = _channel_roles(n_ch, self._references, self._responses)
+        self._refs, n_ref, n_f = refs, len(refs), self.freq.size
+        dtype = self._dtype = np.dtype(np.float32 if block.dtype == np.float32 else np.float64)
         # two buffers taking turns holding the tail (a prefix of the first): fewer than
         # nperseg samples, and fewer than nperseg appended to it (see update)
         self._stores = [np.empty((n_ch, 2 * self.nperseg), dtype) for _ in range(2)]
         self._tail = self._stores[0][:, :0]
-        self._shares = _Share.split(n_ch, self._refs, self.workers)
-        self._plans = [_Plan.of(share, self._refs, k == 0) for k, share in enumerate(self._shares)]
-        self._whole = _Plan.of(_Share(((0, n_ch),)), (), False)  # checks a block, one worker
-        n_threads = len(self._shares) - 1
-        if n_threads and (self._crew is None or n_threads > self._crew.size):
-            if self._crew is not None:  # threads of its own, ended when the accumulator goes
-                self._crew.close()
-            self._crew = _Crew(n_threads)
-            weakref.finalize(self, self._crew.close)
-        # what the workers take: the window in frequency (taps) or in time (win, with the
-        # mean removal on the window's lines dc_bins), the sums (see processing._welch_kernel,
-        # rows written by one worker each), and each worker's scratch
-        self._ref_array = np.array(self._refs, np.int64)
-        in_freq = self._taps is not None
-        self._taps_k = self._taps if self._taps is not None else _NO_TAPS
-        self._zero_dc = in_freq and self.detrend == "constant"
-        self._win_t = np.empty(0, dtype) if in_freq else self.window.astype(dtype)
-        time_dc = not in_freq and self.detrend == "constant"
-        self._dc_k = np.asarray(self._dc_bins if time_dc else [], np.int64)
-        self._dc_v = np.asarray(self._dc_values if time_dc else [], np.complex128)
-        n_f, G, N = self.freq.size, self.group, self.nperseg
-        self._P = np.zeros((2 * len(self._refs), n_ch, n_f))
-        self._Q = np.zeros((n_ch, n_f))
-        self._scratch = [
-            _Scratch(np.empty(0 if in_freq else share.n_max(len(self._refs), k == 0) * G * N,
-                              dtype), *scratch(G, len(self._refs), n_f))
-            for k, share in enumerate(self._shares)]
-        self._zref = np.empty((0, len(self._refs) * G * n_f), np.result_type(dtype, np.complex64))
-
-    def _work(self, worker: int, plans: list[_Plan], block: _Block,
-              flags: NDArray[np.int64]) -> int:
-        """Worker ``worker``'s share of a block (``plans[worker]``), in one compiled call
-        that holds no GIL (:func:`processing._welch_kernel.work_block`)."""
-        plan, sc = plans[worker], self._scratch[worker]
-        return int(work_block(*block, plan.own, plan.runs, plan.lead, self._ref_array,
-                              self._taps_k, self._zero_dc, self._win_t, self._dc_k, self._dc_v,
-                              self._P, self._Q, sc.fg, sc.x, sc.buf, self._zref, flags, worker,
-                              len(plans)))
+        rest = [c for c in range(n_ch) if c not in refs]  # in runs of adjacent rows (add_block)
+        cuts = [i for i in range(1, len(rest)) if rest[i] != rest[i - 1] + 1 or i % 4 == 0]
+        self._runs = np.array([(r, r + 1) for r in refs] + [
+            (rest[a], rest[b - 1] + 1) for a, b in itertools.pairwise([0, *cuts, len(rest)])])
+        self._ref_of = np.full(n_ch, -1)  # each row's index among the references
+        self._ref_of[list(refs)] = np.arange(n_ref)
+        self._win = np.empty(0, dtype) if self._taps is not None else self.window.astype(dtype)
+        self._P, self._Q = np.zeros((2 * n_ref, n_ch, n_f)), np.zeros((n_ch, n_f))
+        self._zr = np.empty((n_ref, _kernel.BATCH + 1, 2 * n_f), dtype)  # scratch of add_block
+        self._fg = np.empty((_kernel.BATCH + 1, 2 * n_ref, n_f))
 
     def _admit(self, block: ArrayLike) -> NDArray[np.floating]:
-        """``block`` as the workers take it (checked; converted to the accumulator's sample
-        type, and copied if read-only: compiled for writeable samples, never written)."""
+        """``block`` checked, as the kernel takes it (the accumulator's sample type, and
+        writeable: copied if not, never written)."""
         arr = np.asarray(block)
         if arr.ndim != 2:
             raise SpectralError(f"a block must have shape (n_channels, n_samples), got {arr.shape}")
@@ -743,68 +469,43 @@ class SpectralAccumulator:
         """Add a block of samples (n_ch, n); any n, including 0. Float32 stays float32.
 
         Raises :class:`SpectralError` for a block of another shape or type, or with a NaN
-        or infinite sample (nothing of it is added); and, once a worker thread stopped
-        answering, for this block and every block until :meth:`reset`.
+        or infinite sample (nothing of it is added).
         """
-        # a block as the last one (the usual case) is taken as it is: every Python step here
-        # is paid at each block, several times its usual cost after the transforms
-        if self._broken:
-            raise SpectralError(self._broken)
-        arr = block
-        if not (type(arr) is np.ndarray and self._tail is not None and arr.dtype == self._dtype
-                and arr.ndim == 2 and arr.shape[0] == self._n_ch and arr.flags.writeable):
-            arr = self._admit(block)
+        arr = self._admit(block)
         assert self._tail is not None
         n_tail, n_new = self._tail.shape[-1], arr.shape[-1]
-        step, N, G = self.step, self.nperseg, self.group
+        step, N = self.step, self.nperseg
+        if n_new > _kernel.BATCH * step:  # in parts of at most BATCH + 1 segments, once checked
+            if not _kernel.all_finite(arr):
+                raise SpectralError("block contains NaN or infinite samples; nothing was added")
+            for k in range(0, n_new, _kernel.BATCH * step):
+                self.update(arr[:, k : k + _kernel.BATCH * step])
+            return
         avail = n_tail + n_new
         n_seg = 0 if avail < N else (avail - N) // step + 1  # every complete segment
-        # segments starting in the tail are views of it, once the block's first samples they
-        # need are appended to it (all of the block if no segment is complete: less than a
-        # segment is copied per block); the others are views of the block
+        # segments starting in the tail are read there once the block's first samples they
+        # need are appended to it (all of it if no segment is complete); the others in place
         n_head = min(n_seg, -(-n_tail // step))
-        if n_seg == 0:
-            need = n_new
-        else:
-            need = max(0, (n_head - 1) * step + N - n_tail) if n_head else 0
-        n_groups = -(-n_head // G) + -(-(n_seg - n_head) // G)
-        if n_groups > self._zref.shape[0]:  # the references' spectra handed over, per group
-            self._zref = np.empty((n_groups, self._zref.shape[1]), self._zref.dtype)
-        # one worker, on this thread, for a block that completes no segment (a check and a copy)
-        plans = self._plans if n_seg else [self._whole]
-        n_w = len(plans)
-        flags = np.zeros(2 * n_w + 2 + n_groups, np.int64)  # see work_block
-        flags[-1] = self._patience
-        work: _Block = (arr, self._stores[0], self._stores[1], n_tail, need, n_seg, n_head, N,
-                        step, G)
-
-        def job(worker: int) -> int:
+        need = n_new if n_seg == 0 else (max(0, (n_head - 1) * step + N - n_tail) if n_head else 0)
+        with _LAUNCH:
+            threads = numba.get_num_threads()
+            numba.set_num_threads(self.workers)
+            chunk = numba.set_parallel_chunksize(1)  # the runs handed out one at a time
             try:
-                return self._work(worker, plans, work, flags)
-            except BaseException:
-                flags[n_w] = 1  # the others stop waiting and add nothing more
-                raise
-
-        if n_w == 1 or self._crew is None:
-            code = job(0)
-        else:
-            code = self._crew.run(job, n_w, self._grace)
-        # the block's code is the highest of every worker's (work_block); a worker's error
-        # was raised above, so STOPPED here means a non-finite sample
-        if code == TIMED_OUT:
-            if self._crew is not None and self._crew.lost:
-                self._crew = None  # another is made at the next first block
-            self._broken = ("a spectral worker thread stopped answering; the sums may be "
-                            "incomplete: reset() and feed the samples again")
-            raise SpectralError(self._broken)
-        if code != DONE:
+                finite = _kernel.add_block(
+                    arr, self._stores[0], self._stores[1], n_tail, need, n_seg, n_head, N, step,
+                    self.group, self._runs, self._ref_of,
+                    _NO_TAPS if self._taps is None else self._taps, self._zero_dc, self._win,
+                    self._dc_bins, self._dc_values, self._P, self._Q, self._zr, self._fg)
+            finally:
+                numba.set_parallel_chunksize(chunk)
+                numba.set_num_threads(threads)
+        if not finite:
             raise SpectralError("block contains NaN or infinite samples; nothing was added")
         self._n_samples += n_new
-        if n_seg == 0:
-            self._tail = self._stores[0][:, : n_tail + n_new]
-            return
-        self._n_seg += n_seg
-        self._stores.reverse()
+        if n_seg:
+            self._n_seg += n_seg
+            self._stores.reverse()
         self._tail = self._stores[0][:, : avail - n_seg * step]
 
     def spectra(self) -> CrossSpectra:
@@ -831,17 +532,10 @@ class SpectralAccumulator:
         )
 
 
-def welch_spectra(
-    data: ArrayLike,
-    fs: float,
-    nperseg: int,
-    noverlap: int | None = None,
-    **kwargs: object,
-) -> CrossSpectra:
-    """One-shot :class:`SpectralAccumulator`: spectra of ``data`` (n_ch, n) at ``fs`` Hz.
-
-    Keyword arguments are those of :class:`SpectralAccumulator`.
-    """
+def welch_spectra(data: ArrayLike, fs: float, nperseg: int, noverlap: int | None = None,
+                  **kwargs: object) -> CrossSpectra:
+    """Spectra of ``data`` (n_ch, n) at ``fs`` Hz by a one-shot :class:`SpectralAccumulator`
+    (keyword arguments: its own)."""
     acc = SpectralAccumulator(fs, nperseg, noverlap, **kwargs)  # type: ignore[arg-type]
     acc.update(data)
     return acc.spectra()
@@ -857,22 +551,12 @@ def record_spectra(
 ) -> CrossSpectra:
     """Spectra averaged over separate records (hits, bursts, periods), no overlap, no detrend.
 
-    Parameters
-    ----------
-    records : (n_rec, n_ch, n) array
-        One record per hit/burst/period, all channels.
-    fs : float
-        Sample rate, Hz.
-    windows : array broadcastable to (n_rec, n_ch, n), optional
-        Windows (force and exponential windows): one for all, one per channel
-        (n_ch, n) or one per record and channel; rectangular by default.
-    references, responses : channel indices, as for :class:`SpectralAccumulator`.
-
-    Returns
-    -------
-    CrossSpectra
-        Scaled as energy densities ``2 conj(X) Y / (fs n)`` (one-sided); with
-        transients only ratios (FRFs, coherence) are meaningful.
+    ``records`` (n_rec, n_ch, n): one record per hit/burst/period, all channels, sampled at
+    ``fs`` Hz; ``windows`` (broadcastable to the records: one for all, one per channel or
+    one per record and channel; rectangular by default): the force and exponential
+    windows; ``references``, ``responses``: as for :class:`SpectralAccumulator`. Scaled as
+    energy densities ``2 conj(X) Y / (fs n)`` (one-sided): with transients only ratios
+    (FRFs, coherence) are meaningful.
     """
     rec = np.asarray(records)
     if rec.ndim != 3:
@@ -896,8 +580,10 @@ def record_spectra(
     Z = np.ascontiguousarray(scipy.fft.rfft(x, axis=-1, overwrite_x=True).swapaxes(0, 1))
     n_f = Z.shape[-1]
     P, Q = np.zeros((2 * len(refs), n_ch, n_f)), np.zeros((n_ch, n_f))
-    accumulate(_interleaved(Z[list(refs)]), _interleaved(Z), n, _NO_TAPS, False, 0, P, Q,
-               *scratch(n_rec, len(refs), n_f))
+    fg, buf = np.empty((n_rec, 2 * len(refs), n_f)), np.empty(max(_kernel.CHUNK, 2 * n_f))
+    for a, r in enumerate(refs):
+        _kernel.window_ref(Z[r].view(x.dtype), n, _NO_TAPS, False, a, fg, buf)
+    _kernel.accumulate(fg, Z.view(x.dtype), n, _NO_TAPS, False, 0, P, Q, buf)
     Sff, Sfx, Sxx = _spectra_sums(P, Q, refs, resps)
     freq = np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64)
     scale = _onesided_scale(freq.size, n, fs * n) / n_rec

@@ -4,7 +4,8 @@ Public API (stable; the GUI builds on it):
 
 - plans: :class:`TestPlan`, :class:`ExcitationPoint`, :class:`ResponsePoint`,
   :class:`RecordSettings`, :class:`ShakerSettings`, :func:`load_plan`, :func:`parse_plan`,
-  :class:`PlanError`, :func:`plan_for_bench`;
+  :class:`PlanError` (the built-in benches' plans and the in-process mock bench are in
+  :mod:`app.mockbench`, kept apart with the simulators);
 - procedures: :class:`HammerProcedure` and :class:`ShakerProcedure` (``start``, ``pause``,
   ``resume``, ``stop``, ``accept_hit``, ``reject_hit``, ``clear_override``, ``add_note``,
   ``wait``; both report through the same events and write the same run file; a shaker
@@ -13,14 +14,12 @@ Public API (stable; the GUI builds on it):
   ``on_paused``, ``on_resumed``, ``on_error``, ``on_finished``, and ``on_samples`` with a
   :class:`SampleBlock` after every read, for live traces), :class:`HitRecord`,
   :class:`PointFRF`, :class:`Progress`, :class:`RunState`;
-- the in-process mock bench :class:`InProcessBench` (front end, hammer, shaker, operators);
 - replay: :func:`analyse_run`; overrides of a stored run: :func:`override_run`.
 """
 
 from app.acquire.analysis import analyse_run
 from app.acquire.events import HitRecord, Listener, PointFRF, Progress, RunState, SampleBlock
 from app.acquire.hammer import HammerProcedure
-from app.acquire.mockbench import InProcessBench, plan_for_bench
 from app.acquire.overrides import OverrideOutcome, override_run
 from app.acquire.plan import (
     ExcitationPoint,
@@ -39,7 +38,6 @@ __all__ = [
     "ExcitationPoint",
     "HammerProcedure",
     "HitRecord",
-    "InProcessBench",
     "Listener",
     "OverrideOutcome",
     "PlanError",
@@ -57,5 +55,4 @@ __all__ = [
     "load_plan",
     "override_run",
     "parse_plan",
-    "plan_for_bench",
 ]

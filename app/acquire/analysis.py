@@ -9,7 +9,7 @@ same FRFs and the same identification, bit for bit.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,9 +27,9 @@ from processing.impact import (
     process_impacts,
 )
 
-__all__ = ["RunAnalysis", "analyse_blocks", "analyse_records", "analyse_run",
-           "check_identifiable", "frfset", "hit_result", "host_timed", "impact_settings",
-           "margin_samples", "point_result", "run_frfs"]
+__all__ = ["PointColumn", "RecordAnalysis", "RunAnalysis", "analyse_blocks", "analyse_records",
+           "analyse_run", "check_identifiable", "frfset", "hit_result", "host_timed",
+           "impact_settings", "margin_samples", "point_result", "run_frfs"]
 
 
 def margin_samples(fs: float) -> int:
@@ -74,11 +74,45 @@ def frfset(plan: TestPlan, points: Sequence[ImpactResult], geometry: Geometry,
 def identify_frfs(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
     """The identification of a run's FRFs, on the lines above 0 Hz and up to fs / 2.56
     (above it the front ends' anti-alias filters shape the data)."""
-    keep = (frf.freq > 0) & (frf.freq <= frf.freq[-1] / 1.28)
-    coh = None if frf.coherence is None else np.nan_to_num(frf.coherence[..., keep])
-    cut = FRFSet(frf.freq[keep], frf.H[..., keep], frf.resp_nodes, frf.resp_dirs,
-                 frf.exc_nodes, frf.exc_dirs, frf.geometry, coh, dict(frf.meta))
-    return identify(cut, options or IdentifyOptions())
+    return identify(frf.select_lines(frf.anti_alias_fmax()), options or IdentifyOptions())
+
+
+class PointColumn(Protocol):
+    """A point's averaged FRF column: :class:`~processing.impact.ImpactResult` (hits) or
+    :class:`~app.acquire.blocks.BlockResult` (shaker blocks).
+
+    ``freq`` Hz; ``H`` (n_resp, 1, n_f) accelerance, (m/s^2)/N, and ``coherence`` (n_resp,
+    1, n_f), None when no record is accepted; ``n_accepted`` records averaged.
+    """
+
+    @property
+    def freq(self) -> NDArray[np.float64]: ...
+    @property
+    def H(self) -> NDArray[np.complex128] | None: ...
+    @property
+    def coherence(self) -> NDArray[np.float64] | None: ...
+    @property
+    def n_accepted(self) -> int: ...
+
+
+class RecordAnalysis(Protocol):
+    """What a run's analysis offers, record by record: :class:`RunAnalysis` (hammer hits)
+    and :class:`~app.acquire.blocks.BlockAnalysis` (shaker blocks).
+
+    :meth:`add` a stored record to point ``point`` (its result, or None when it has lost
+    samples), :meth:`set_used` its verdict in force, :meth:`n_used` the records a point
+    averages, :meth:`point` its averaged column (the first ``max_averages`` used records).
+    """
+
+    plan: TestPlan
+    names: tuple[str, ...]
+    ranges: NDArray[np.float64] | None
+
+    def add(self, hit_id: int, point: int, data: NDArray[np.float64],
+            override: str = "") -> object: ...
+    def set_used(self, hit_id: int, used: bool) -> None: ...
+    def n_used(self, point: int) -> int: ...
+    def point(self, point: int, max_averages: int | None = None) -> PointColumn | None: ...
 
 
 class RunAnalysis:
@@ -167,7 +201,7 @@ def analyse_blocks(run: RunData) -> tuple[TestPlan, BlockAnalysis]:
 
 
 def analyse_run(run: RunData, options: IdentifyOptions | None = None) -> (
-    tuple[FRFSet, IdentificationResult, Any]
+    tuple[FRFSet, IdentificationResult, RecordAnalysis]
 ):
     """Recompute every verdict, the FRFs and the identification from a run file's raw records.
 
@@ -188,7 +222,8 @@ def check_identifiable(run: RunData) -> None:
         raise InputError(f"{run.path}: not identified: {host_timed(dev, ref)}")
 
 
-def run_frfs(run: RunData, max_averages: int | None = None) -> tuple[FRFSet, Any]:
+def run_frfs(run: RunData, max_averages: int | None = None
+             ) -> tuple[FRFSet, RecordAnalysis]:
     """The FRFs of a run's stored records (every point needs an accepted record) and the
     analysis they come from; :func:`analyse_run` without the identification. With
     ``max_averages``, each point averages only its first used records."""
@@ -199,12 +234,13 @@ def run_frfs(run: RunData, max_averages: int | None = None) -> tuple[FRFSet, Any
         cols = [blocks.point(j, max_averages) for j in range(len(splan.excitations))]
         return shaker_frfset(splan, cols, run.geometry, resp_nodes, resp_dirs), blocks
     plan, ana = analyse_records(run)
-    points: list[Any] = [ana.point(j, max_averages) for j in range(len(plan.excitations))]
+    points = [ana.point(j, max_averages) for j in range(len(plan.excitations))]
     for j, r in enumerate(points):
         if r is None:
             raise InputError(f"{run.path}: excitation {plan.excitations[j].label} has no "
                              "accepted hit: resume the run (insitu acquire --resume)")
-    return frfset(plan, points, run.geometry, resp_nodes, resp_dirs), ana
+    return frfset(plan, [r for r in points if r is not None], run.geometry, resp_nodes,
+                  resp_dirs), ana
 
 
 def host_timed(force_device: str, frontend: str) -> str:

@@ -85,6 +85,8 @@ class HammerProcedure(RecordingProcedure):
         ``identify=False`` records such FRFs anyway.
     """
 
+    analysis: RunAnalysis
+
     def __init__(self, plan: TestPlan | None, station: StationConfig, path: str | Path, *,
                  listeners: Iterable[Any] = (), resume: bool = False,
                  device_options: Mapping[str, Mapping[str, Any]] | None = None,

@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any
 
 import numpy as np
 
-from app.acquire.analysis import identify_frfs
+from app.acquire.analysis import RecordAnalysis, identify_frfs
 from app.acquire.events import HitRecord, PointFRF, Progress
 from app.acquire.plan import PlanError, TestPlan
 from app.acquire.procedure import Procedure
@@ -39,7 +38,8 @@ class RecordingProcedure(Procedure):
 
     plan: TestPlan
     station: StationConfig
-    analysis: Any  # RunAnalysis (hammer) or BlockAnalysis (shaker)
+    analysis: RecordAnalysis  # RunAnalysis (hammer) or BlockAnalysis (shaker)
+    ref_name: str  # the front end of the responses
     hits: list[HitRecord]
     point_index: int
     writer: RunWriter | None

@@ -84,6 +84,8 @@ class ShakerProcedure(RecordingProcedure):
         Watchdog time armed on an SG-1, s (the worker beats after every 0.1 s read).
     """
 
+    analysis: BlockAnalysis
+
     record_word = "block"
 
     def __init__(self, plan: TestPlan | None, station: StationConfig, path: str | Path, *,

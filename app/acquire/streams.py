@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from drivers.base import AcquisitionFrontEnd, TimeBlock
+from drivers.base import AcquisitionFrontEnd, StreamingFrontEnd, TimeBlock
 from drivers.errors import SyncError
 from drivers.sync import ClockFit, align, check_alignment, fit_clock, signal_delay
 
@@ -117,6 +117,11 @@ class HitStreams:
         self.ref, self.force_dev = ref, force_dev
         self.samples = samples
         self.separate = force_dev is not ref
+        if self.separate and not (isinstance(ref, StreamingFrontEnd)
+                                  and isinstance(force_dev, StreamingFrontEnd)):
+            raise ValueError(f"{force_dev.name} and {ref.name}: a separate force device is "
+                             "aligned by the clocks of streaming front ends only: record the "
+                             "force on the front end instead")
         self.sync_row = sync_row if self.separate else None
         self.resp_rows = resp_rows
         self.force_row = force_row
@@ -181,11 +186,12 @@ class HitStreams:
         self._searched = (self._force if self.separate else self._ref).end
 
     def _fits(self) -> tuple[ClockFit, ClockFit]:
-        fits = {self.ref.name: fit_clock(self.ref.clock_pairs(), self.ref.fs),  # type: ignore[attr-defined]
-                self.force_dev.name: fit_clock(self.force_dev.clock_pairs(),  # type: ignore[attr-defined]
-                                               self.force_dev.fs)}
+        ref, force = self.ref, self.force_dev
+        assert isinstance(ref, StreamingFrontEnd) and isinstance(force, StreamingFrontEnd)
+        fits = {ref.name: fit_clock(ref.clock_pairs(), ref.fs),
+                force.name: fit_clock(force.clock_pairs(), force.fs)}
         check_alignment(fits)
-        return fits[self.ref.name], fits[self.force_dev.name]
+        return fits[ref.name], fits[force.name]
 
     def next_trigger(self) -> int | None:
         """Device sample index (of the force stream) of the next trigger, or None yet."""

@@ -26,23 +26,25 @@ import argparse
 import contextlib
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from app.acquire import HammerProcedure, InProcessBench, Listener, load_plan, plan_for_bench
+from app.acquire import HammerProcedure, Listener, load_plan
 from app.acquire.events import HitRecord, RunState
 from app.acquire.events import Progress as RunProgress
 from app.acquire.overrides import override_run, parse_override
 from app.acquire.plan import TestPlan, parse_plan
-from app.acquire.procedure import Procedure
+from app.acquire.recording import RecordingProcedure
 from app.acquire.shaker import ShakerProcedure
 from app.cli.common import UserError
 from app.io.runfile import read_run
 from drivers.station import StationConfig, load_station
-from hardware_mocks.bench_control import BenchControl, BenchControlError, control_address
-from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator, check_points
+
+if TYPE_CHECKING:  # the mock bench is imported by --mock and --mock-operator only
+    from app.mockbench.bench import InProcessBench
+    from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator
 
 #: what a pause that waits for the operator to attach the shaker says first
 ATTACH = "attach the shaker"
@@ -104,6 +106,8 @@ def add_parser(sub: Any) -> None:
 
 
 def _mock_plan(args: argparse.Namespace) -> TestPlan:
+    from app.mockbench.bench import plan_for_bench
+
     pts = [int(x) for x in args.points.split(",")] if args.points else None
     if args.method == "shaker":
         fs = 1024.0
@@ -113,8 +117,20 @@ def _mock_plan(args: argparse.Namespace) -> TestPlan:
     return plan_for_bench(args.bench, points=pts, hits=args.hits, length=args.length)
 
 
+def _in_process_bench(name: str, fs: float) -> InProcessBench:
+    """The built-in mock bench ``name`` in this process (front end at ``fs`` Hz); one line
+    where it cannot run."""
+    from app.mockbench import unavailable
+
+    if why := unavailable():
+        raise UserError(f"--mock: {why}")
+    from app.mockbench.bench import InProcessBench
+
+    return InProcessBench(name, fs_frontend=fs)
+
+
 def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Namespace,
-               bench: InProcessBench | None) -> Procedure:
+               bench: InProcessBench | None) -> RecordingProcedure:
     method = plan.method if plan is not None else read_run(args.out, with_data=False).method
     if method == "shaker":
         return ShakerProcedure(plan, station, args.out, resume=args.resume,
@@ -127,6 +143,9 @@ def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Nam
 def _remote_operator(station: StationConfig, plan: TestPlan, stack: contextlib.ExitStack
                      ) -> RemoteOperator | RemoteShakerOperator:
     """The simulated operator of the mock bench process ``station`` connects to."""
+    from hardware_mocks.bench_control import BenchControl, BenchControlError, control_address
+    from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator, check_points
+
     try:
         host, port = control_address(station)
         control = stack.enter_context(BenchControl(host, port))
@@ -144,9 +163,9 @@ def _remote_operator(station: StationConfig, plan: TestPlan, stack: contextlib.E
     return operator
 
 
-def _check_rate(proc: Procedure, plan: TestPlan, station: StationConfig) -> None:
+def _check_rate(proc: RecordingProcedure, plan: TestPlan, station: StationConfig) -> None:
     """A mock bench's front end runs at its station's ``fs``: refuse another plan rate now."""
-    fs = station.devices[proc.ref_name].fs  # type: ignore[attr-defined]
+    fs = station.devices[proc.ref_name].fs
     if fs is not None and fs != plan.record.fs:
         raise UserError(f"{plan.source}: record.fs is {plan.record.fs:g} Hz but the mock "
                         f"bench's front end runs at {fs:g} Hz: make them equal (insitu "
@@ -242,7 +261,7 @@ def run(args: argparse.Namespace) -> int:
             known = plan if plan is not None or not args.resume else parse_plan(
                 read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan")
             fs = known.record.fs if known is not None else 1024.0
-            bench = stack.enter_context(InProcessBench(args.bench, fs_frontend=fs))
+            bench = stack.enter_context(_in_process_bench(args.bench, fs))
             station = bench.station
             if plan is None and not args.resume:
                 plan = _mock_plan(args)
@@ -253,10 +272,10 @@ def run(args: argparse.Namespace) -> int:
         proc = _procedure(plan, station, args, bench)
         operator = None
         if args.mock_operator:
-            _check_rate(proc, proc.plan, station)  # type: ignore[attr-defined]
-            operator = _remote_operator(station, proc.plan, stack)  # type: ignore[attr-defined]
+            _check_rate(proc, proc.plan, station)
+            operator = _remote_operator(station, proc.plan, stack)
             proc.add_listener(operator)
-        n = len(proc.plan.excitations)  # type: ignore[attr-defined]
+        n = len(proc.plan.excitations)
         gave_up = ""
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
@@ -280,11 +299,11 @@ def run(args: argparse.Namespace) -> int:
                 proc.wait()
     if gave_up:
         raise UserError(f"{gave_up}; the run stopped, {_kept(args.out)}")
-    hits: list[HitRecord] = proc.hits  # type: ignore[attr-defined]
+    hits: list[HitRecord] = proc.hits
     if proc.state is not RunState.FINISHED:
         raise UserError(f"run {proc.state.value}: {proc.message}; {_kept(args.out)}")
     console.print(f"{len(hits)} records, run written to {args.out}")
-    result = proc.result  # type: ignore[attr-defined]
+    result = proc.result
     if result is not None:
         from app.cli.summary import print_result
 

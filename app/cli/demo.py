@@ -42,9 +42,14 @@ def add_parser(sub: Any) -> None:
 
 
 def _acquire(args: argparse.Namespace, console: Console) -> int:
-    from app.acquire import HammerProcedure, InProcessBench, plan_for_bench
+    from app.acquire import HammerProcedure
     from app.acquire.events import RunState
     from app.cli.acquire import _Bars
+    from app.mockbench import unavailable
+
+    if why := unavailable():
+        raise UserError(f"{why} (insitu demo --frf-only identifies simulated FRFs)")
+    from app.mockbench.bench import InProcessBench, plan_for_bench
 
     name = "engine" if args.bench == "engine" else args.bench
     if args.out is not None and args.out.exists():

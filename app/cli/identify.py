@@ -20,16 +20,11 @@ from typing import Any
 
 from rich.console import Console
 
-from app.acquire.analysis import analyse_run
 from app.cli.common import UserError
-from app.cli.frf import add_processing_arguments, frfset_from_time_uff
+from app.cli.frf import add_processing_arguments, open_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
-from app.io.frf_h5 import FORMAT as FRF_FORMAT
-from app.io.frf_h5 import h5_format, read_frf_h5
 from app.io.mounts import MountsFile, load_mounts
-from app.io.runfile import read_run
-from app.io.uff import read_frf_uff
-from app.io.uff_time import uff_holds_time_data
+from app.pipeline import TIME_UFF, detect_format
 from app.report.mount_system import mount_system
 from processing.data import FRFSet
 from processing.identify import IdentificationResult, IdentifyOptions, identify
@@ -64,8 +59,9 @@ def add_mount_arguments(p: Any) -> None:
     """``--mounts``, ``--excitation-hz``, ``--loss-factor-hz`` (also used by ``report``)."""
     g = p.add_argument_group("mount system (modes are always reported)")
     g.add_argument("--mounts", type=Path, metavar="TOML",
-                   help="mounts file (crank_axis, [[mount]] name/position/axes, METHOD.md): "
-                        "individual mount rates and loss factors, torque roll axis")
+                   help="mounts file (crank_axis, [[mount]] name/position/axes; "
+                        "docs/conventions.md): individual mount rates and loss factors, "
+                        "torque roll axis")
     g.add_argument("--excitation-hz", type=float, metavar="F",
                    help="excitation frequency (e.g. idle firing order), Hz: each mode's "
                         "frequency ratio, isolation margin (ratio / sqrt 2) and transmissibility")
@@ -101,27 +97,18 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
 def run(args: argparse.Namespace) -> int:
     if args.refine_points < 0:
         raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
+    settings = settings_from(args)  # every option checked before any file is read
     args.mounts_file = mounts_from(args)
-    if args.file.suffix.lower() in (".h5", ".hdf5") and h5_format(args.file) == FRF_FORMAT:
-        frf = read_frf_h5(args.file)
-        return _report(args, frf, identify(frf, options_from(args)))
-    if args.file.suffix.lower() in (".h5", ".hdf5"):  # a run file: raw hits -> FRFs -> result
-        data = read_run(args.file)
-        if len(data.records) == 0:
-            raise UserError(f"{args.file}: the run holds no hit yet")
-        frf, result, _ = analyse_run(data, options_from(args))
-        if args.mounts_file is None and data.mounts is not None:
-            print(f"{args.file}: using the run file's mounts table ({len(data.mounts.mounts)} "
-                  "mounts)")
-            check_mounts(data.mounts.mounts)
-            args.mounts_file = data.mounts
-        return _report(args, frf, result)
-    if uff_holds_time_data(args.file):
+    fmt = detect_format(args.file)
+    if fmt == TIME_UFF:
         print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")
-        frf, n_bad = frfset_from_time_uff(args.file, args)
-        return max(_report(args, frf, identify(frf, options_from(args))), 2 if n_bad else 0)
-    frf = read_frf_uff(args.file)
-    return _report(args, frf, identify(frf, options_from(args)))
+    frf, n_bad = open_and_show(args, settings, fmt)
+    stored = frf.meta.get("mounts")
+    if args.mounts_file is None and isinstance(stored, MountsFile):
+        print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")
+        check_mounts(stored.mounts)
+        args.mounts_file = stored
+    return max(_report(args, frf, identify(frf, options_from(args))), 2 if n_bad else 0)
 
 
 def _report(args: argparse.Namespace, frf: FRFSet, result: IdentificationResult) -> int:

@@ -15,6 +15,7 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any, NoReturn
 
 from app.cli.common import UserError
 
@@ -26,8 +27,15 @@ VERBS = ("identify", "simulate", "demo", "frf", "mock-bench", "acquire", "replay
          "gui", "report")
 
 
+class _Parser(argparse.ArgumentParser):
+    """A usage mistake is one line naming the option and where the help is, exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="insitu",
         description="In situ identification of inertia parameters and mount stiffness from FRFs.",
     )
@@ -45,6 +53,18 @@ class _OneLine(logging.Formatter):
     def format(self, record: logging.LogRecord) -> str:
         text = f"{record.levelname} {record.name}: {record.getMessage()}"
         return text.splitlines()[0] if text else text
+
+
+class _Stderr(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is when a record comes (a test may swap it)."""
+
+    @property
+    def stream(self) -> Any:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: Any) -> None:
+        pass
 
 
 class _Tracebacks(logging.Filter):
@@ -80,7 +100,7 @@ def _configure_logging(verbose: bool) -> tuple[_Errors, Path | None]:
         if getattr(h, "_insitu", False):
             root.removeHandler(h)
             h.close()
-    term = logging.StreamHandler(sys.stderr)
+    term = _Stderr()
     term.setLevel(logging.DEBUG if verbose else logging.WARNING)
     term.setFormatter(_OneLine())
     term.addFilter(_Tracebacks())

@@ -21,8 +21,7 @@ from types import FrameType
 from typing import Any
 
 from app.cli.common import UserError
-from hardware_mocks.bench_process import MockBench
-from hardware_mocks.benches import BENCHES
+from app.mockbench import bench_names, unavailable
 
 FE_RATES = (256, 512, 1024, 2048, 4096)
 HAMMER_RATES = (1024, 2048, 4096, 8192, 16384)
@@ -33,7 +32,7 @@ def add_parser(sub: Any) -> None:
                        description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--station", type=Path, help="also write the station file here")
-    p.add_argument("--bench", choices=sorted(BENCHES), default="engine", help="built-in bench")
+    p.add_argument("--bench", choices=bench_names(), default="engine", help="built-in bench")
     p.add_argument("--fe-rate", type=int, choices=FE_RATES, default=1024,
                    help="front-end sampling rate in the station file, Hz")
     p.add_argument("--hammer-rate", type=int, choices=HAMMER_RATES, default=4096,
@@ -56,6 +55,10 @@ def _write_atomically(path: Path, text: str) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.accel_noise < 0 or args.force_noise < 0:
         raise UserError("--accel-noise and --force-noise must be >= 0")
+    if why := unavailable():
+        raise UserError(why)
+    from hardware_mocks.bench_process import MockBench
+
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:

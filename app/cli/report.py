@@ -1,4 +1,9 @@
-"""``insitu report RUN.h5|FRF.uff [--out report.html]``: the test report, without a GUI."""
+"""``insitu report FILE [--out report.html]``: the test report, without a GUI.
+
+FILE is any file ``insitu identify`` reads: a run file (a finished run's stored FRFs), an
+FRF file (``.h5``), a UFF file of FRFs or of time records (FRFs computed with the
+default time-data settings of ``insitu frf``; a bad run is reported and left out).
+"""
 
 from __future__ import annotations
 
@@ -11,9 +16,10 @@ from app.cli.common import UserError
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("report", help="write the HTML report of a run or a UFF FRF file",
+    p = sub.add_parser("report", help="write the HTML report of a run, an FRF file or a UFF file",
                        description=__doc__)
-    p.add_argument("file", type=Path, help="run file (.h5) or UFF FRF file (.uff)")
+    p.add_argument("file", type=Path,
+                   help="run file or FRF file (.h5), UFF file of FRFs or time records (.uff)")
     p.add_argument("--out", type=Path, help="HTML file (default: FILE with .html)")
     p.add_argument("--physical", action="store_true",
                    help="constrain the inertia to physically consistent values")
@@ -25,8 +31,10 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.cli.frf import show_reports
+    from app.pipeline import OpenError
     from app.report.analysis import analyse
-    from app.report.sources import load_frfs
+    from app.report.sources import open_source
     from processing.identify import IdentifyOptions
 
     if not args.file.is_file():
@@ -40,7 +48,13 @@ def run(args: argparse.Namespace) -> int:
     mounts = load_mounts(args.mounts) if args.mounts is not None else None
     if mounts is not None:
         check_mounts(mounts.mounts)
-    a = analyse(load_frfs(args.file), IdentifyOptions(physical=args.physical), args.file.name)
+    try:
+        frf, reports, _ = open_source(args.file)
+    except OpenError as err:
+        show_reports(args, err.reports)
+        raise
+    show_reports(args, reports)
+    a = analyse(frf, IdentifyOptions(physical=args.physical), args.file.name)
     # figures are drawn by Qt off screen: no display needed
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6 import QtWidgets
@@ -51,6 +65,9 @@ def run(args: argparse.Namespace) -> int:
     html = build_report(a, f"In situ identification report: {args.file.name}", mounts,
                         args.excitation_hz)
     out.write_text(html, encoding="utf-8")
+    if a.result is None:  # the report still shows the FRFs and checks
+        raise UserError(f"{args.file.name}: identification failed: {a.error}; the report of "
+                        f"the FRFs and checks is in {out}")
     print(a.summary())
     print(f"report written to {out}")
-    return 0 if a.result is not None else 1
+    return 0

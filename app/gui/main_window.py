@@ -19,13 +19,14 @@ from app.gui.views.results import ResultsView
 from app.gui.views.station import StationView
 from app.gui.widgets import MessageBar
 from app.gui.worker import TaskRunner
+from app.pipeline import SUFFIXES
 from app.report.analysis import Analysis
-from app.report.sources import FRF_SUFFIXES, RUN_SUFFIXES
 
 __all__ = ["MainWindow"]
 
-_OPEN_FILTER = (f"FRFs or run ({' '.join('*' + s for s in FRF_SUFFIXES + RUN_SUFFIXES)});;"
-                "UFF FRF file (*.uff *.unv);;Run file (*.h5 *.hdf5);;All files (*)")
+_OPEN_FILTER = (f"FRFs, time records or run ({' '.join('*' + s for s in SUFFIXES)});;"
+                "UFF file of FRFs or time records (*.uff *.unv);;"
+                "Run file or FRF file (*.h5 *.hdf5);;All files (*)")
 
 
 class MainWindow(QtWidgets.QMainWindow):
@@ -82,9 +83,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.station_view.start()
         self._restore()
         if self.station_view.station is None:
+            mock = "" if self.station_view.mock_unavailable else "use the built-in mock bench or "
             self.messages.show_message(
-                "info", "No station yet: use the built-in mock bench or open a station file "
-                "(Station tab), or open recorded FRFs (File > Open)")
+                "info", f"No station yet: {mock}open a station file (Station tab), or open "
+                "recorded FRFs (File > Open)")
 
     def _add_acquisition_views(self, station: Path | None) -> None:
         """The Station tab (first) and the Acquisition view (added after the plan)."""
@@ -122,7 +124,8 @@ class MainWindow(QtWidgets.QMainWindow):
             self.open_file(Path(name))
 
     def open_file(self, path: Path) -> None:
-        """Open a UFF FRF file or a run file and replay it through the views."""
+        """Open any file the command line reads (UFF FRFs or time records, a run file, an
+        FRF file) and replay it through the views."""
         self.settings.setValue("last_data", str(path))
         self.session.open_file(path)
 

@@ -14,8 +14,9 @@ from PySide6 import QtCore
 
 from app.gui.worker import TaskRunner
 from app.io.mounts import MountsFile
+from app.pipeline import FORMATS, RunReport
 from app.report.analysis import Analysis, analyse
-from app.report.sources import load_frfs
+from app.report.sources import open_source
 from processing.data import FRFSet
 from processing.identify import IdentifyOptions
 
@@ -49,6 +50,7 @@ class Session(QtCore.QObject):
         self.frf: FRFSet | None = None
         self.source = ""
         self.path: Path | None = None
+        self.format: str | None = None  # the file's format (app.pipeline.FORMATS), if any
         self.analysis: Analysis | None = None
         self.options = IdentifyOptions()
         self.mounts: MountsFile | None = None
@@ -57,14 +59,19 @@ class Session(QtCore.QObject):
         runner.failed.connect(self._on_failed)
 
     def open_file(self, path: str | Path) -> None:
-        """Load a UFF FRF file or a run file in the background; data_changed follows."""
+        """Load any file the command line reads (UFF FRFs or time records, a run file, an
+        FRF file: :func:`app.report.sources.open_source`) in the background; data_changed
+        follows."""
         p = Path(path)
         self.message.emit("info", f"opening {p.name} …")
-        self.runner.submit("session.load", lambda: (p, load_frfs(p)))
+        self.runner.submit("session.load", lambda: (p, *open_source(p)))
 
-    def set_frf(self, frf: FRFSet, source: str, path: Path | None = None) -> None:
-        """Make ``frf`` the current data and analyse it with automatic bands."""
-        self.frf, self.source, self.path = frf, source, path
+    def set_frf(self, frf: FRFSet, source: str, path: Path | None = None,
+                fmt: str | None = None) -> None:
+        """Make ``frf`` the current data and analyse it with automatic bands.
+
+        ``fmt`` is the format of the file at ``path`` (:data:`app.pipeline.FORMATS`)."""
+        self.frf, self.source, self.path, self.format = frf, source, path, fmt
         self._generation += 1
         self.analysis = None
         self.options = replace(self.options, mass_band=None, stiffness_band=None)
@@ -94,11 +101,11 @@ class Session(QtCore.QObject):
     def _on_done(self, key: str, result: object) -> None:
         if key == "session.load":
             assert isinstance(result, tuple)
-            path, frf = result
-            self.message.emit("info", f"opened {path.name}")
+            path, frf, reports, fmt = result
+            self.message.emit(*_opened(path, reports, fmt))
             if isinstance(frf.meta.get("mounts"), MountsFile):  # a run file's mounts table
                 self.set_mounts(frf.meta["mounts"])
-            self.set_frf(frf, path.name, path)
+            self.set_frf(frf, path.name, path, fmt)
         elif key == "session.analysis":
             assert isinstance(result, tuple)
             gen, result = result
@@ -116,3 +123,12 @@ class Session(QtCore.QObject):
             self.message.emit("error", f"cannot open the file: {message}")
         elif key == "session.analysis":
             self.message.emit("error", f"analysis failed: {message}")
+
+
+def _opened(path: Path, reports: list[RunReport], fmt: str) -> tuple[str, str]:
+    """The message bar's (level, text) for a file opened: what it was, what was left out."""
+    left_out = [r.message for r in reports if r.skipped]
+    if not left_out:
+        return "info", f"opened {path.name} ({FORMATS[fmt]})"
+    return "warning", (f"opened {path.name}; {len(left_out)} run(s) or column(s) left out: "
+                       + "; ".join(left_out))

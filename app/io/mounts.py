@@ -1,4 +1,4 @@
-"""The mounts file (``insitu identify FILE --mounts mounts.toml``), format of ``METHOD.md``::
+"""The mounts file (``insitu identify FILE --mounts mounts.toml``; docs/conventions.md)::
 
     crank_axis = [1.0, 0.0, 0.0]        # unit vector, global frame (for the torque roll axis)
     [[mount]]

@@ -351,7 +351,7 @@ class RunWriter:
                 _array(g, "exc_dirs", frf.exc_dirs, "1")
                 _array(g, "n_averages", np.asarray(frf.meta.get("n_averages", []), int), "1")
             if result is not None:
-                _text(f, "result", dict(result), "SI, see METHOD.md")
+                _text(f, "result", dict(result), "SI, see docs/conventions.md")
         self.close()
 
     def close(self) -> None:

@@ -3,7 +3,7 @@
 A file holds dataset 164 (units, optional: SI when absent), dataset 15 or 2411 (nodes,
 with 2420 coordinate systems where a node refers to one) and one dataset 58 record of
 function type 4 (FRF) per response DOF x reference DOF; coherence records (type 6)
-are optional. See ``METHOD.md``, "FRF input: Universal File Format".
+are optional. See ``docs/conventions.md``.
 
 Reading gives SI accelerance (m/s^2)/N in the global frame: velocity (ordinate type
 11) and displacement (8) FRFs are converted, units follow dataset 164 and the

@@ -1,6 +1,6 @@
 """UFF time records (dataset 58, function type 1): read and write measurement runs.
 
-Contract (``METHOD.md``, "Time-data input"): one record per channel per run; the
+Contract (``docs/conventions.md``, time-data input): one record per channel per run; the
 records of one run share the load case number (record 6 field 4); the force record
 is the one with ordinate type 13 and its node/direction are the run's excitation
 DOF; the other records are accelerations (ordinate type 12) at their node/direction.
@@ -263,7 +263,7 @@ def read_time_uff(
     if not records:
         raise InputError(
             f"{p.name} has no time records (dataset 58 with function type 1): "
-            "export time data, or read FRF files with read_frf_uff"
+            "give a file of time records, or give an FRF file to insitu identify"
         )
     groups: dict[int, list[tuple[int, Dataset]]] = {}
     for i, ds in records:

@@ -18,26 +18,13 @@ from processing.geometry import GeometryReport, check_geometry
 from processing.identify import IdentificationResult, IdentifyOptions, identify
 from processing.rigidity import RigidityCheck, rigidity_check
 
-__all__ = ["Analysis", "analyse", "message_of", "positive_lines"]
+__all__ = ["Analysis", "analyse", "message_of"]
 
 
 def message_of(err: BaseException) -> str:
     """One line for the operator: the exception's message, or its type when it has none."""
     text = " ".join(str(err).split())
     return text or type(err).__name__
-
-
-def positive_lines(frf: FRFSet) -> FRFSet:
-    """``frf`` without its 0 Hz (and negative) lines, where accelerance and coherence are
-    undefined; NaN coherence elsewhere counts as 0 (fails the gate)."""
-    keep = frf.freq > 0
-    coh = frf.coherence
-    if np.all(keep) and (coh is None or np.all(np.isfinite(coh))):
-        return frf
-    if coh is not None:
-        coh = np.nan_to_num(coh[..., keep])
-    return FRFSet(frf.freq[keep], frf.H[..., keep], frf.resp_nodes, frf.resp_dirs,
-                  frf.exc_nodes, frf.exc_dirs, frf.geometry, coh, dict(frf.meta))
 
 
 @dataclass(frozen=True)
@@ -103,7 +90,7 @@ def analyse(frf: FRFSet, options: IdentifyOptions | None = None, source: str = "
     110.0...
     """
     opt = options or IdentifyOptions()
-    frf = positive_lines(frf)
+    frf = frf.select_lines()  # f > 0: accelerance and coherence defined
     geometry: GeometryReport | None
     try:
         geometry = check_geometry(frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,

@@ -3,7 +3,7 @@
 :func:`mount_system` takes an :class:`~processing.identify.IdentificationResult` and,
 optionally, the mounts file; it returns the modes (always), the isolation against an
 excitation frequency, the individual mount rates and the torque roll axis (with mounts),
-their result-JSON keys (``METHOD.md``: ``modes``, ``mounts``, ``torque_roll_axis``) and the
+their result-JSON keys (docs/conventions.md: ``modes``, ``mounts``, ``torque_roll_axis``) and the
 text rows of their tables. Pure computation, no Qt.
 """
 

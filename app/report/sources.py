@@ -1,20 +1,26 @@
-"""Open the FRFs a report or the GUI replays: a UFF FRF file or a recorded run file."""
+"""Open the FRFs a report or the GUI shows: any file the command line reads.
+
+A thin view over :func:`app.pipeline.open_frfs`: the GUI and ``insitu report`` accept the
+suffixes of :data:`app.pipeline.SUFFIXES`, open a finished run's stored FRFs, and compute
+FRFs from time records with the command line's default settings.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from app.io.uff import read_frf_uff
+from app.pipeline import SUFFIXES, RunReport, Settings, detect_format, open_frfs
 from processing.data import FRFSet, InputError
 
-__all__ = ["FRF_SUFFIXES", "RUN_SUFFIXES", "load_frfs"]
+__all__ = ["SETTINGS", "SUFFIXES", "load_frfs", "open_source"]
 
-FRF_SUFFIXES = (".uff", ".unv")
-RUN_SUFFIXES = (".h5", ".hdf5")
+#: how the views open a file: a finished run's stored FRFs, time data as ``insitu frf`` does
+SETTINGS = Settings(stored=True)
 
 
-def load_frfs(path: str | Path) -> FRFSet:
-    """The FRF set stored in ``path`` (UFF FRF file or HDF5 run file).
+def open_source(path: str | Path) -> tuple[FRFSet, list[RunReport], str]:
+    """The FRFs of ``path``, the pipeline's reports, and the file's format
+    (:data:`app.pipeline.FORMATS`).
 
     Raises
     ------
@@ -22,14 +28,16 @@ def load_frfs(path: str | Path) -> FRFSet:
         Unknown file type, or a file that holds no usable FRFs (message names the file).
     """
     p = Path(path)
-    suffix = p.suffix.lower()
-    if suffix in FRF_SUFFIXES:
-        return read_frf_uff(p)
-    if suffix in RUN_SUFFIXES:
-        from app.report.runs import read_run_frfs
+    if p.suffix.lower() not in SUFFIXES:
+        raise InputError(
+            f"{p.name}: unknown file type {p.suffix!r}: open a UFF file of FRFs or time "
+            f"records (.uff, .unv), a run file or an FRF file ({', '.join(SUFFIXES[2:])})"
+        )
+    fmt = detect_format(p)
+    frf, reports = open_frfs(p, SETTINGS, fmt=fmt)
+    return frf, reports, fmt
 
-        return read_run_frfs(p)
-    raise InputError(
-        f"{p.name}: unknown file type {p.suffix!r}: open a UFF FRF file "
-        f"({', '.join(FRF_SUFFIXES)}) or a run file ({', '.join(RUN_SUFFIXES)})"
-    )
+
+def load_frfs(path: str | Path) -> FRFSet:
+    """The FRF set of ``path`` (see :func:`open_source`)."""
+    return open_source(path)[0]

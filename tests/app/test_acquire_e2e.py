@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from app.acquire import HammerProcedure, InProcessBench, Listener, RunState, plan_for_bench
+from app.acquire import HammerProcedure, Listener, RunState
 from app.acquire.analysis import analyse_run
 from app.cli.main import main
 from app.io.runfile import read_run
+from app.mockbench.bench import InProcessBench, plan_for_bench
 from processing.inertia import inertia_properties
 
 #: well-conditioned subset of the engine's 18 excitations (cond(T) 7.5)

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from app.acquire import HammerProcedure, InProcessBench, Listener, RunState, plan_for_bench
+from app.acquire import HammerProcedure, Listener, RunState
 from app.io.runfile import read_run
+from app.mockbench.bench import InProcessBench, plan_for_bench
 
 POINTS = [0, 1]
 

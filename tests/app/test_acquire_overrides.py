@@ -7,10 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from app.acquire import HammerProcedure, InProcessBench, Listener, RunState, plan_for_bench
+from app.acquire import HammerProcedure, Listener, RunState
 from app.acquire.analysis import run_frfs
 from app.cli.main import main
 from app.io.runfile import read_run
+from app.mockbench.bench import InProcessBench, plan_for_bench
 
 
 class Overrider(Listener):

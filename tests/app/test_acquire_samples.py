@@ -10,15 +10,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.acquire import (
-    HammerProcedure,
-    InProcessBench,
-    Listener,
-    RunState,
-    SampleBlock,
-    ShakerProcedure,
-    plan_for_bench,
-)
+from app.acquire import HammerProcedure, Listener, RunState, SampleBlock, ShakerProcedure
+from app.mockbench.bench import InProcessBench, plan_for_bench
 
 
 class Samples(Listener):

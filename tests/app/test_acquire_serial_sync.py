@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from app.acquire import HammerProcedure, InProcessBench, PlanError, RunState, plan_for_bench
+from app.acquire import HammerProcedure, PlanError, RunState
 from app.acquire.analysis import analyse_run, run_frfs
 from app.io.runfile import read_run
+from app.mockbench.bench import InProcessBench, plan_for_bench
 from drivers.sync import signal_delay
 from processing.data import InputError
 from processing.inertia import inertia_properties

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from app.acquire import InProcessBench, Listener, RunState, plan_for_bench
+from app.acquire import Listener, RunState
 from app.acquire.analysis import analyse_run
 from app.acquire.shaker import ShakerProcedure
 from app.cli.main import main
 from app.io.runfile import read_run
+from app.mockbench.bench import InProcessBench, plan_for_bench
 from processing.inertia import inertia_properties
 
 #: well-conditioned subset of the engine's 18 excitations (cond(T) 7.5), as the hammer test

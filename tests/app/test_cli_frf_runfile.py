@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from app.acquire import plan_for_bench
 from app.acquire.analysis import hit_result, margin_samples, point_result
 from app.cli.main import main
 from app.io.frf_h5 import read_frf_h5
 from app.io.runfile import RunWriter
+from app.mockbench.bench import plan_for_bench
 from drivers.base import ChannelConfig
 from hardware_mocks.benches import get_bench
 from hardware_mocks.signals import half_sine, impulse_response, simulate

@@ -8,9 +8,10 @@ import h5py
 import numpy as np
 import pytest
 
-from app.acquire import PlanError, load_plan, plan_for_bench
+from app.acquire import PlanError, load_plan
 from app.cli.main import main
 from app.io.runfile import RunFileError, RunWriter, read_run
+from app.mockbench.bench import plan_for_bench
 from drivers.base import ChannelConfig
 from processing.data import Geometry
 

@@ -9,11 +9,11 @@ import h5py
 import numpy as np
 import pytest
 
-from app.acquire import plan_for_bench
 from app.acquire.analysis import margin_samples
 from app.cli.main import main
 from app.io.mounts import mounts_from_dict
 from app.io.runfile import RunFileError, RunWriter, read_run, write_mounts
+from app.mockbench.bench import plan_for_bench
 from drivers.base import ChannelConfig
 from hardware_mocks.benches import get_bench
 from hardware_mocks.signals import half_sine, impulse_response, simulate

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from app.acquire.mockbench import plan_for_bench
+from app.mockbench.bench import plan_for_bench
 from hardware_mocks.benches import get_bench
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.operator import MockOperator

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import gc
-import threading
-import time
+import json
+from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 import scipy.signal
@@ -32,6 +32,8 @@ from processing.spectral import (
 )
 
 FS = 256.0
+#: sums of the accumulator before it was parallelised with numba.prange (commit 51bd8c7)
+GOLDEN = Path(__file__).parents[1] / "data" / "spectral_crew_sums.npz"
 
 
 def _signals(n: int = 20000, n_resp: int = 3, seed: int = 0) -> np.ndarray:
@@ -106,13 +108,13 @@ def test_channel_roles_and_h1_matches_scipy_ratio():
 @settings(max_examples=40, deadline=None)
 @given(
     cuts=st.lists(st.integers(0, 6000), max_size=12),
-    workers=st.sampled_from([1, 2, 3, 5]),
+    workers=st.sampled_from([1, 2, None]),
     group=st.sampled_from([1, 3, 4]),
     dtype=st.sampled_from([np.float64, np.float32]),
     refs=st.sampled_from([(0,), (3,), (1, 3)]),
 )
 def test_streaming_is_bitwise_identical_to_one_shot(cuts, workers, group, dtype, refs):
-    # workers split the channels: each transforms its own and the references outside them
+    # threads share the channels; the references' spectra are transformed once
     data = _signals(n=6000, n_resp=3).astype(dtype)
     ref = welch_spectra(data, FS, 200, 150, group=7, references=refs)  # the group: FFT calls
     acc = SpectralAccumulator(FS, 200, 150, group=group, workers=workers, references=refs)
@@ -141,26 +143,65 @@ def test_a_rejected_block_changes_nothing(workers):
     assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
 
 
-def test_each_fft_call_fills_the_simd_lanes_where_the_rows_allow():
-    # pocketfft transforms 4 single-precision segments at once: the other worker takes a
-    # multiple of 4 rows, the first call has the force and 3 rows, the odd row is last
+def test_reset_with_more_channels_starts_afresh():
     acc = SpectralAccumulator(FS, 256, workers=2)
-    data = _signals(n=3000, n_resp=24).astype(np.float32)
-    acc.update(data)
-    first, other = acc._shares
-    assert first.lead == (0, 4) and first.runs == ((4, 13),)
-    assert other.lead is None and other.runs == ((13, 25),)
-    assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
-
-
-def test_reset_with_more_channels_gets_enough_threads():
-    acc = SpectralAccumulator(FS, 256, workers=5)
-    acc.update(_signals(n=3000, n_resp=1))  # 2 channels: one worker, no pool
+    acc.update(_signals(n=3000, n_resp=1))
     acc.reset()
-    data = _signals(n=3000, n_resp=9)  # 10 channels: 5 workers, waiting for each other
+    data = _signals(n=3000, n_resp=9)
     acc.update(data)
-    assert len(acc._shares) == 5
     assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256).Sfx)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_sums_are_bit_identical_to_the_crew_code(workers):
+    # golden sums written by the code that had a hand-made thread crew (commit 51bd8c7),
+    # one-shot; here cut in blocks, with one or two threads
+    golden = np.load(GOLDEN)
+    data = golden["data"]
+    for i, case in enumerate(json.loads(str(golden["cases"]))):
+        window = case["window"]
+        acc = SpectralAccumulator(100.0, case["nperseg"], case["noverlap"],
+                                  window=tuple(window) if isinstance(window, list) else window,
+                                  detrend=case["detrend"], scaling=case["scaling"],
+                                  references=case["refs"], workers=workers)
+        for block in np.split(data.astype(case["dtype"]), [700, 701, 1900], axis=-1):
+            acc.update(block)
+        sp = acc.spectra()
+        for name in ("Sff", "Sfx", "Sxx"):
+            assert_array_equal(getattr(sp, name), golden[f"welch{i}_{name}"], err_msg=f"{case}")
+    for i, dtype in enumerate(("float64", "float32")):
+        records = data.astype(dtype)[:, :2800].reshape(5, 7, 400).transpose(1, 0, 2)
+        sp = record_spectra(records, 100.0, np.exp(-np.arange(400) / 120.0))
+        for name in ("Sff", "Sfx", "Sxx"):
+            assert_array_equal(getattr(sp, name), golden[f"records{i}_{name}"], err_msg=dtype)
+
+
+def test_a_long_block_is_taken_in_parts_and_refused_whole():
+    # more than BATCH segments: added in parts (the same bits), checked whole first
+    data = _signals(n=40000)
+    acc = SpectralAccumulator(FS, 256, 128)
+    acc.update(data[:, :30000])
+    acc.update(data[:, 30000:])
+    small = SpectralAccumulator(FS, 256, 128)
+    for block in np.array_split(data, 80, axis=-1):
+        small.update(block)
+    assert acc.n_averages == small.n_averages == 311
+    assert_array_equal(acc.spectra().Sfx, small.spectra().Sfx)
+    assert_array_equal(acc.spectra().Sxx, small.spectra().Sxx)
+    bad = data.copy()
+    bad[1, -5] = np.inf
+    fresh = SpectralAccumulator(FS, 256, 128)
+    with pytest.raises(SpectralError, match="nothing was added"):
+        fresh.update(bad)
+    assert fresh.n_averages == 0 and fresh.n_samples == 0
+
+
+def test_threads_default_to_every_numba_thread():
+    # the live shaker analysis (app/acquire/blocks.py) takes the default
+    most = numba.config.NUMBA_NUM_THREADS
+    assert SpectralAccumulator(FS, 256).workers == most
+    assert SpectralAccumulator(FS, 256, workers=1000).workers == most
+    assert SpectralAccumulator(FS, 256, workers=1).workers == 1
 
 
 def test_spectra_can_be_read_while_streaming():
@@ -360,82 +401,3 @@ def test_two_shakers_multi_reference_h1_and_multiple_coherence(engine):
     assert np.median(coherence(clean)[:, band]) > 0.9999
     # each force alone explains only part of each response
     assert ordinary_coherence(clean)[:, :, band].mean() < 0.95
-
-
-def test_worker_threads_end_with_their_accumulator():
-    def crew() -> set[threading.Thread]:
-        return {t for t in threading.enumerate() if t.name.startswith("spectral-")}
-
-    before = crew()
-    acc = SpectralAccumulator(FS, 256, workers=3)
-    acc.update(_signals(n=3000, n_resp=5))
-    mine = crew() - before
-    assert len(mine) == 2
-    del acc
-    gc.collect()
-    for t in mine:
-        t.join(timeout=5)
-    assert not any(t.is_alive() for t in mine)
-
-
-@pytest.mark.parametrize("held", [0.5, 30.0])  # back within the grace, or left behind
-def test_a_worker_that_does_not_come_is_given_up_with_a_clear_error(held):
-    # the other thread is held up longer than the calling thread waits for it: the block
-    # is refused with one line, so is the next until reset(), and then all is whole again
-    data = _signals(n=4000, n_resp=5)
-    ref = SpectralAccumulator(FS, 256, workers=1)
-    ref.update(data)
-    acc = SpectralAccumulator(FS, 256, workers=2)
-    acc.update(data[:, :1000])
-    acc._patience = 20_000  # spins (a few ms) instead of tens of seconds
-    acc._grace = 1.0
-    work = acc._work
-    stuck = threading.Event()
-
-    def late(*args, **kwargs):
-        if threading.current_thread().name == "spectral-1":
-            stuck.wait(held)
-        return work(*args, **kwargs)
-
-    acc._work = late  # type: ignore[method-assign]
-    t0 = time.monotonic()
-    msg = "a spectral worker thread stopped answering.* reset"
-    with pytest.raises(SpectralError, match=msg):
-        acc.update(data[:, 1000:])
-    assert time.monotonic() - t0 < 5
-    with pytest.raises(SpectralError, match=msg):
-        acc.update(data[:, 1000:])
-    acc._work = work  # type: ignore[method-assign]
-    acc.reset()
-    acc.update(data)
-    stuck.set()  # the one left behind comes back to arrays no longer used
-    assert_array_equal(acc.spectra().Sfx, ref.spectra().Sfx)
-    assert_array_equal(acc.spectra().Sxx, ref.spectra().Sxx)
-
-
-@pytest.mark.parametrize("failing", ["feeder", "spectral-1"])  # calling thread, other
-def test_an_error_in_any_worker_is_raised_and_nothing_waits_forever(failing):
-    acc = SpectralAccumulator(FS, 256, workers=2)
-    data = _signals(n=4000, n_resp=5)
-    acc.update(data[:, :1000])
-    work = acc._work
-
-    def broken(*args, **kwargs):  # the other worker is then waiting inside compiled code
-        if threading.current_thread().name == failing:
-            raise RuntimeError("transform failed")
-        return work(*args, **kwargs)
-
-    acc._work = broken  # type: ignore[method-assign]
-    raised: list[BaseException] = []
-
-    def feed() -> None:
-        try:
-            acc.update(data[:, 1000:])
-        except BaseException as exc:
-            raised.append(exc)
-
-    t = threading.Thread(target=feed, name="feeder")
-    t.start()
-    t.join(timeout=10)
-    assert not t.is_alive()
-    assert len(raised) == 1 and "transform failed" in str(raised[0])

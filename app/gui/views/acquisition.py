@@ -31,8 +31,8 @@ from app.gui.views.projections import ProjectionsWidget
 from app.gui.views.station import StationView
 from app.gui.widgets import verdict_color
 from app.io.runfile import RunFileError, write_mounts
+from app.pipeline import RUN_FILE
 from app.report.analysis import message_of
-from app.report.runs import usable_lines
 
 __all__ = ["AcquisitionView"]
 
@@ -344,8 +344,8 @@ class AcquisitionView(QtWidgets.QWidget):
                     write_mounts(path, self.session.mounts)
                 except RunFileError as err:
                     self.message.emit("error", f"the mounts table was not saved: {err}")
-            self.session.set_frf(usable_lines(proc.frf), path.name if path else "acquisition",
-                                 path)
+            frf = proc.frf.select_lines(proc.frf.anti_alias_fmax())  # as the pipeline opens it
+            self.session.set_frf(frf, path.name if path else "acquisition", path, RUN_FILE)
         else:
             why = proc.message if proc is not None and proc.message else state.value
             self.next_label.setText(f"Ended ({state.value}): {why}")

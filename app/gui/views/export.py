@@ -11,10 +11,10 @@ from PySide6 import QtCore, QtWidgets
 
 from app.gui.session import Session
 from app.io.uff import write_frf_uff
+from app.pipeline import RUN_FILE
 from app.report.analysis import Analysis
 from app.report.html import build_report
 from app.report.mount_system import mount_system
-from app.report.sources import RUN_SUFFIXES
 
 __all__ = ["ExportView"]
 
@@ -33,7 +33,8 @@ class ExportView(QtWidgets.QWidget):
                                    "settings, FRFs and result")
         self.uff_button.setToolTip("FRFs with geometry (UFF 164, 2411, 58), as pyuff and "
                                    "'insitu identify' read them")
-        self.json_button.setToolTip("The identification result (METHOD.md result JSON)")
+        self.json_button.setToolTip("The identification result (the result JSON of "
+                                    "docs/conventions.md)")
         self.html_button.setToolTip("One self-contained HTML page with tables and figures")
         self.run_button.clicked.connect(self._save_run)
         self.uff_button.clicked.connect(self._export_uff)
@@ -62,7 +63,7 @@ class ExportView(QtWidgets.QWidget):
     @QtCore.Slot()
     def _update(self, *_: object) -> None:
         s = self.session
-        run = s.path is not None and s.path.suffix.lower() in RUN_SUFFIXES
+        run = s.path is not None and s.format == RUN_FILE
         a = s.analysis
         self.run_button.setEnabled(run)
         self.uff_button.setEnabled(s.frf is not None)

@@ -6,21 +6,24 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from PySide6 import QtCore, QtWidgets
 
-from app.acquire.mockbench import InProcessBench, plan_for_bench
 from app.acquire.plan import TestPlan
 from app.gui.streaming import DeviceSource, StreamThread
 from app.gui.views.levels import LevelsWidget
 from app.gui.widgets import fill_table
 from app.gui.worker import TaskRunner
+from app.mockbench import bench_names, unavailable
 from app.report.analysis import message_of
 from drivers.base import AcquisitionFrontEnd, ChannelConfig
 from drivers.errors import DeviceError
 from drivers.registry import create_device
 from drivers.station import DeviceConfig, StationConfig, load_station
-from hardware_mocks.benches import BENCHES
+
+if TYPE_CHECKING:
+    from app.mockbench.bench import InProcessBench
 
 __all__ = ["StationView"]
 
@@ -61,7 +64,9 @@ class StationView(QtWidgets.QWidget):
         self.mock: InProcessBench | None = None
         self.stream: StreamThread | None = None
         self.bench_combo = QtWidgets.QComboBox()
-        self.bench_combo.addItems(sorted(BENCHES))
+        #: why the mock bench cannot run on this system ("" when it can: POSIX)
+        self.mock_unavailable = unavailable()
+        self.bench_combo.addItems(bench_names())
         self.bench_combo.setCurrentText("engine-rigid")
         self.method_combo = QtWidgets.QComboBox()
         self.method_combo.addItems(["hammer", "shaker"])
@@ -78,6 +83,10 @@ class StationView(QtWidgets.QWidget):
         self.tap_button = QtWidgets.QPushButton("Simulated hit")
         self.tap_button.setToolTip("Mock bench only: hit the bench once at the first "
                                    "excitation point, to see the levels move")
+        if self.mock_unavailable:  # offered only where it runs
+            for w in (self.mock_button, self.bench_combo, self.method_combo):
+                w.setEnabled(False)
+                w.setToolTip(self.mock_unavailable)
         self.mock_button.clicked.connect(lambda: self.use_mock(self.bench_combo.currentText()))
         self.open_button.clicked.connect(self._open_dialog)
         self.check_button.clicked.connect(self.check_devices)
@@ -95,7 +104,9 @@ class StationView(QtWidgets.QWidget):
         top.addWidget(self.check_button)
         top.addWidget(self.monitor_button)
         top.addWidget(self.tap_button)
-        self.name_label = QtWidgets.QLabel("No station: use the mock bench or open a station file")
+        self.name_label = QtWidgets.QLabel(
+            "No station: open a station file" if self.mock_unavailable else
+            "No station: use the mock bench or open a station file")
         self.devices = QtWidgets.QTableWidget()
         self.devices.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.channels = QtWidgets.QTableWidget()
@@ -127,14 +138,21 @@ class StationView(QtWidgets.QWidget):
         last = str(self.settings.value("last_station", "", str))
         if self._initial is not None:
             self.load_file(self._initial)
-        elif last.startswith(_MOCK) and last[len(_MOCK):] in BENCHES:
+        elif (last.startswith(_MOCK) and last[len(_MOCK):] in bench_names()
+              and not self.mock_unavailable):
             self.use_mock(last[len(_MOCK):])
         elif last and Path(last).is_file():
             self.load_file(Path(last))
 
     # --- choosing the station ----------------------------------------------------------------
     def use_mock(self, name: str) -> None:
-        """Start the in-process mock bench ``name`` and use its station and plan."""
+        """Start the in-process mock bench ``name`` and use its station and plan (a message
+        instead where it cannot run)."""
+        if self.mock_unavailable:
+            self.message.emit("error", self.mock_unavailable)
+            return
+        from app.mockbench.bench import InProcessBench
+
         self._close_mock()
         self.mock = InProcessBench(name, operator={"pause": 0.05})
         self.bench_combo.setCurrentText(name)
@@ -146,6 +164,8 @@ class StationView(QtWidgets.QWidget):
         bench)."""
         if self.mock is None:
             return None
+        from app.mockbench.bench import plan_for_bench
+
         method = self.method_combo.currentText()
         return plan_for_bench(self.mock.bench.name, points=points, length=1.0, method=method,
                               shaker=MOCK_SHAKER if method == "shaker" else None)

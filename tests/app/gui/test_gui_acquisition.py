@@ -17,10 +17,10 @@ import pytest
 from PySide6 import QtWidgets
 
 from app.acquire.events import RunState
-from app.acquire.mockbench import plan_for_bench
 from app.cli.main import main
 from app.gui.main_window import MainWindow
 from app.io.runfile import read_run
+from app.mockbench.bench import plan_for_bench
 from hardware_mocks.benches import get_bench
 
 DOC_SHOTS = Path(__file__).resolve().parents[3] / "docs" / "screenshots"

@@ -127,9 +127,9 @@ def test_report_with_mounts(tmp_path: Path, qapp, capsys: pytest.CaptureFixture[
 def test_run_file_mounts_are_loaded_with_the_run(qtbot, make_window, choose_file,
                                                  tmp_path: Path) -> None:
     """A run file that carries a mounts table brings it into the plan view and the results."""
-    from app.acquire import plan_for_bench
     from app.io.mounts import load_mounts
     from app.io.runfile import RunWriter, write_mounts
+    from app.mockbench.bench import plan_for_bench
     from drivers.base import ChannelConfig
 
     _, toml = _files(tmp_path)

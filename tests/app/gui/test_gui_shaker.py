@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from app.acquire.events import RunState
-from app.acquire.mockbench import plan_for_bench
 from app.gui.main_window import MainWindow
 from app.io.runfile import read_run
+from app.mockbench.bench import plan_for_bench
 from hardware_mocks.shaker_device import ShakerDevice
 
 #: periodic chirp, 0.25 s blocks, 2 averages per point: about 1 s a point

@@ -1,0 +1,98 @@
+"""The input formats and the one dispatch from a file to its FRFs.
+
+A fifth format is added here: a name in :data:`FORMATS`, its test in :func:`detect_format`
+and its reader (``(path, Settings) -> (FRFSet, [RunReport])``) in :data:`READERS`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from app.io.frf_h5 import FORMAT as FRF_H5_FORMAT
+from app.io.frf_h5 import h5_format, read_frf_h5
+from app.io.uff import read_frf_uff
+from app.io.uff_time import uff_holds_time_data
+from app.pipeline.runs import open_run_file
+from app.pipeline.settings import RunReport, Settings
+from app.pipeline.time_uff import open_time_uff
+from processing.data import FRFSet
+
+__all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "H5_SUFFIXES", "READERS", "RUN_FILE", "SUFFIXES",
+           "TIME_UFF", "UFF_SUFFIXES", "detect_format", "open_frfs"]
+
+FRF_UFF = "frf-uff"
+TIME_UFF = "time-uff"
+RUN_FILE = "run-file"
+FRF_H5 = "frf-h5"
+
+#: format -> what it is, for messages and file dialogs
+FORMATS = {
+    FRF_UFF: "UFF file of FRFs (dataset 58, function type 4) with geometry",
+    TIME_UFF: "UFF file of time records (dataset 58, function type 1) with geometry",
+    RUN_FILE: "run file (.h5) written by insitu acquire",
+    FRF_H5: "FRF file (.h5) written by insitu frf",
+}
+UFF_SUFFIXES = (".uff", ".unv")
+H5_SUFFIXES = (".h5", ".hdf5")
+#: every suffix some format is read from
+SUFFIXES = UFF_SUFFIXES + H5_SUFFIXES
+
+Reader = Callable[[Path, Settings], tuple[FRFSet, list[RunReport]]]
+
+
+def detect_format(path: str | Path) -> str:
+    """The format of ``path``: an HDF5 file (by suffix) is an FRF file or a run file by its
+    root attribute ``format``; any other file is UFF, of time records or of FRFs."""
+    p = Path(path)
+    if p.suffix.lower() in H5_SUFFIXES:
+        return FRF_H5 if h5_format(p) == FRF_H5_FORMAT else RUN_FILE
+    return TIME_UFF if uff_holds_time_data(p) else FRF_UFF
+
+
+def _frf_uff(path: Path, _: Settings) -> tuple[FRFSet, list[RunReport]]:
+    return read_frf_uff(path), []
+
+
+def _frf_h5(path: Path, _: Settings) -> tuple[FRFSet, list[RunReport]]:
+    return read_frf_h5(path), []
+
+
+#: format -> reader
+READERS: dict[str, Reader] = {
+    FRF_UFF: _frf_uff,
+    TIME_UFF: open_time_uff,
+    RUN_FILE: open_run_file,
+    FRF_H5: _frf_h5,
+}
+
+
+def open_frfs(path: str | Path, settings: Settings | None = None, *,
+              fmt: str | None = None) -> tuple[FRFSet, list[RunReport]]:
+    """The FRFs of a file of any format, and what was reported on the way.
+
+    Parameters
+    ----------
+    path : the file
+    settings : how FRFs are computed from time data and run files (default: the command
+        line's defaults)
+    fmt : the format, when the caller knows it (default: :func:`detect_format`)
+
+    Returns
+    -------
+    frf : accelerance FRFs, (m/s^2)/N, with coherence when the format has it
+    reports : one line per run or point (verdicts, runs left out: ``skipped``) and the
+        coherence gate and rigidity check of FRFs computed from records; empty for FRF files
+
+    Raises
+    ------
+    OpenError, InputError, OSError
+        One line naming the problem and what to do (an :class:`OpenError` carries the
+        reports gathered before it).
+
+    Examples
+    --------
+    >>> frf, reports = open_frfs("run.h5", Settings(stored=True))  # doctest: +SKIP
+    """
+    p = Path(path)
+    return READERS[fmt or detect_format(p)](p, settings or Settings())

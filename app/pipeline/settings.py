@@ -1,0 +1,135 @@
+"""What the pipeline is asked (:class:`Settings`) and what it says back (:class:`RunReport`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import scipy.signal
+
+from processing.data import InputError
+
+__all__ = ["OpenError", "RunReport", "Settings"]
+
+#: largest accepted --nperseg (samples), --record (s) and --fmax (Hz): far beyond any test,
+#: small enough that a typo is refused before memory is asked for
+MAX_NPERSEG = 2**24
+MAX_RECORD = 3600.0
+MAX_FMAX = 1e7
+
+
+def _between(option: str, value: float, lo: float, hi: float, unit: str) -> None:
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise InputError(f"{option} must be from {lo:.10g} to {hi:.10g} {unit}, got {value:.10g}")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """How a file's FRFs are obtained; the defaults are the command line's.
+
+    Attributes
+    ----------
+    excitation : time records: ``"random"`` (shaker, Welch) or ``"impact"`` (hammer hits)
+    estimator : FRF estimator (``"H1"``, ``"H2"``, ...: :data:`processing.spectral.ESTIMATORS`)
+    nperseg : random: samples per segment (line spacing fs / nperseg)
+    overlap : random: segment overlap, in [0, 1)
+    window : random: window name (``"hann"``, ``"boxcar"``, ...)
+    averages : at most this many averages (random: the first segments of each run; impact and
+        run files: the first used hits or blocks of each point); None for all
+    level : impact: trigger level, N (None: 10 % of the run's largest force)
+    record : impact: record length, s
+    pretrigger : impact: pre-trigger, s
+    exp_tau : impact: exponential window time constant, s (None: no exponential window)
+    coherence : coherence gate threshold of the checks reported
+    fmax : highest line kept, Hz, for FRFs computed from time data (None: fs / 2.56)
+    run_points : run files: ``"all"`` (every point needs a used hit or block, else the file
+        is refused; a run whose force is aligned by host timing only is refused too: it is
+        not identifiable) or ``"usable"`` (points without one are reported and left out,
+        FRFs computed for any run)
+    stored : run files: a finished run's stored FRFs instead of recomputing them (with
+        ``run_points="all"``)
+    """
+
+    excitation: Literal["random", "impact"] = "random"
+    estimator: str = "H1"
+    nperseg: int = 2048
+    overlap: float = 0.5
+    window: str = "hann"
+    averages: int | None = None
+    level: float | None = None
+    record: float = 1.0
+    pretrigger: float = 0.01
+    exp_tau: float | None = None
+    coherence: float = 0.8
+    fmax: float | None = None
+    run_points: Literal["all", "usable"] = "all"
+    stored: bool = False
+
+    def __post_init__(self) -> None:
+        """Every option checked once, here, in the units the user typed; one line each."""
+        _between("--nperseg", self.nperseg, 8, MAX_NPERSEG, "samples")
+        if not isinstance(self.nperseg, int):
+            raise InputError(f"--nperseg must be a whole number of samples, got {self.nperseg}")
+        if not (math.isfinite(self.overlap) and 0 <= self.overlap < 1):
+            raise InputError(f"--overlap must be at least 0 and below 1, got {self.overlap:g}")
+        try:
+            scipy.signal.get_window(self.window, 16)
+        except (ValueError, TypeError) as err:
+            raise InputError(f"--window {self.window!r} is not a window scipy knows: use hann, "
+                             "hamming, blackman, flattop, boxcar, ...") from err
+        if self.averages is not None and self.averages < 1:
+            raise InputError(f"--averages must be at least 1, got {self.averages}")
+        if self.level is not None and not (math.isfinite(self.level) and self.level > 0):
+            raise InputError(f"--level must be a positive force in N (the trigger fires when "
+                             f"the force rises above it), got {self.level:g}")
+        _between("--record", self.record, 1e-3, MAX_RECORD, "s")
+        if not (math.isfinite(self.pretrigger) and 0 <= self.pretrigger < self.record):
+            raise InputError(f"--pretrigger must be at least 0 s and shorter than --record "
+                             f"({self.record:g} s), got {self.pretrigger:g} s")
+        if self.exp_tau is not None and not (math.isfinite(self.exp_tau) and self.exp_tau > 0):
+            raise InputError(f"--exp-tau must be a positive time constant in s, got "
+                             f"{self.exp_tau:g}")
+        if not (math.isfinite(self.coherence) and 0 <= self.coherence <= 1):
+            raise InputError(f"--coherence must be from 0 to 1, got {self.coherence:g}")
+        if self.fmax is not None:
+            _between("--fmax", self.fmax, 1e-3, MAX_FMAX, "Hz")
+
+    def check_rate(self, fs: float, longest: float) -> None:
+        """The options that depend on the data, checked once per file: ``fs`` its sample
+        rate (Hz), ``longest`` its longest run (s)."""
+        if self.fmax is not None and self.fmax > fs / 2:
+            raise InputError(f"--fmax {self.fmax:g} Hz is above the records' Nyquist frequency "
+                             f"({fs / 2:g} Hz): give at most {fs / 2.56:g} Hz (fs / 2.56) or "
+                             "leave it out")
+        if self.excitation == "impact" and self.record > longest:
+            raise InputError(f"--record {self.record:g} s is longer than every run (the "
+                             f"longest is {longest:g} s): give at most that, or leave it out")
+
+
+@dataclass(frozen=True)
+class RunReport:
+    """One line about a run, a point, an FRF column or the checks of the FRF set.
+
+    Attributes
+    ----------
+    message : the line, naming what it is about
+    skipped : True when that run, point or column was bad and is left out of the FRFs
+    """
+
+    message: str
+    skipped: bool = False
+
+
+class OpenError(InputError):
+    """No FRFs can be obtained from the file; ``reports`` says what was found before."""
+
+    def __init__(self, message: str, reports: Sequence[RunReport] = ()) -> None:
+        super().__init__(message)
+        self.reports = list(reports)
+
+
+def n_skipped(reports: Sequence[RunReport]) -> int:
+    """How many runs, points or columns the reports leave out."""
+    return sum(1 for r in reports if r.skipped)

@@ -1,0 +1,65 @@
+"""``StreamingFrontEnd``: the base owns the sample buffer, reads blocks out of it and gives
+the clock pairs (the CAN front end and the serial hammer share it)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from drivers.base import ChannelConfig, StreamingFrontEnd
+from drivers.errors import DeviceTimeoutError
+from drivers.frontend_can import CanFrontEnd
+from drivers.hammer_serial import SerialHammer
+
+
+class _Streamer(StreamingFrontEnd):
+    """Two inputs; starting it "receives" two frames of 3 samples, one at host time 10 s,
+    one at 10.5 s."""
+
+    n_inputs = 2
+
+    @classmethod
+    def from_config(cls, config: Any, **overrides: Any) -> _Streamer:
+        raise NotImplementedError
+
+    def _shutdown_internal(self) -> None:
+        pass
+
+    def _open_internal(self) -> None:
+        pass
+
+    def _start_internal(self) -> None:
+        self._buffer.reset()
+        self._buffer.append(np.array([[1.0, 2, 3], [4, 5, 6]]), host_time=10.0)
+        self._buffer.append(np.array([[7.0, 8, 9], [10, 11, 12]]), host_time=10.5,
+                            overloaded=frozenset({1}))
+
+    def _stop_internal(self) -> None:
+        pass
+
+
+def test_blocks_and_clock_pairs_come_from_the_base() -> None:
+    dev = _Streamer("s", [ChannelConfig("F", 0, "force", 2.25),
+                          ChannelConfig("a", 1, "acceleration", 10.2)], 1024.0,
+                    stall_timeout=0.05)
+    with dev:
+        dev.open()
+        dev.start()
+        first = dev.read_block(4)
+        assert_array_equal(first.data, [[1, 2, 3, 7], [4, 5, 6, 10]])
+        assert first.first_sample == 0 and first.overloaded == ("a",)
+        second = dev.read_block(2)
+        assert second.first_sample == 4 and second.overloaded == ("a",)
+        assert dev.clock_pairs() == [(10.0, 3), (10.5, 6)]
+        with pytest.raises(DeviceTimeoutError):
+            dev.read_block(1, timeout=0.2)  # nothing more arrives: the stall timeout
+
+
+def test_both_streaming_drivers_are_streaming_front_ends() -> None:
+    assert issubclass(CanFrontEnd, StreamingFrontEnd)
+    assert issubclass(SerialHammer, StreamingFrontEnd)
+    for cls in (CanFrontEnd, SerialHammer):
+        assert "clock_pairs" not in vars(cls) and "_read_block_internal" not in vars(cls)
