@@ -285,12 +285,20 @@ class CanFrontEnd(StreamingFrontEnd):
             t_rx = time.monotonic()
             fid = msg.arbitration_id
             if fid == ID_ACK:
+                if len(msg.data) < 2:  # a damaged answer: the command then times out
+                    self.health.bad_frames += 1
+                    continue
                 self._acks.put((msg.data[0], msg.data[1]))
                 self._buffer.touch()
                 continue
             if fid == ID_STATUS:
+                try:
+                    status = self.decode(ID_STATUS, msg.data)
+                except (cantools.database.DecodeError, ProtocolError, ValueError) as err:
+                    self.health.bad_frames += 1
+                    logger.debug("%s: bad status frame %s: %s", self.name, msg.data.hex(), err)
+                    continue
                 n_status += 1
-                status = self.decode(ID_STATUS, msg.data)
                 status["_n"] = n_status
                 self.last_status = status
                 if status["BUFFER_OVERFLOW"]:

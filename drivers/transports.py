@@ -164,6 +164,12 @@ class SerialLink:
                 wire_logger.debug("%s: close failed: %s", self.name, err)
 
 
+def _brief(err: BaseException) -> str:
+    """The first line of an exception's text (some libraries put a traceback in it)."""
+    lines = str(err).strip().splitlines()
+    return lines[0][:200] if lines else type(err).__name__
+
+
 class CanLink:
     """A python-can bus, injected or created from keyword arguments of :class:`can.Bus`.
 
@@ -195,7 +201,7 @@ class CanLink:
             self._bus = can.Bus(**self._bus_kwargs)  # type: ignore[arg-type]
         except (can.CanError, OSError, ValueError, ImportError) as err:
             raise DeviceNotAvailableError(
-                f"{self.name}: cannot open CAN bus {self._bus_kwargs}: {err}", self.name
+                f"{self.name}: cannot open CAN bus {self._bus_kwargs}: {_brief(err)}", self.name
             ) from err
 
     def _probe_server(self) -> None:
@@ -205,12 +211,20 @@ class CanLink:
         last: OSError = ConnectionRefusedError()
         for attempt, pause in enumerate(CONNECT_BACKOFF, start=1):
             try:
-                socket.create_connection((host, port), timeout=CONNECT_TIMEOUT).close()
-                return
+                with socket.create_connection((host, port), timeout=CONNECT_TIMEOUT) as sock:
+                    greeting = sock.recv(64)
             except OSError as err:
                 last = err
                 logger.debug("%s: socketcand %s:%d try %d: %s", self.name, host, port,
                              attempt, err)
+            else:
+                # python-can's client waits without end for a greeting that never comes
+                if greeting.startswith(b"< hi >"):
+                    return
+                raise DeviceNotAvailableError(
+                    f"{self.name}: the server at {host}:{port} does not speak socketcand (it "
+                    f"greeted {greeting[:20]!r}, not '< hi >'): correct host and port in the "
+                    "station file", self.name)
             time.sleep(pause)
         reason = last.strerror or type(last).__name__
         raise DeviceNotAvailableError(
@@ -229,14 +243,16 @@ class CanLink:
         try:
             self.bus.send(msg, timeout=0.5)
         except (can.CanError, OSError) as err:
-            raise DeviceNotAvailableError(f"{self.name}: CAN send failed: {err}",
+            raise DeviceNotAvailableError(f"{self.name}: CAN send failed: {_brief(err)}",
                                           self.name) from err
 
     def recv(self, timeout: float) -> can.Message | None:
         try:
             msg = self.bus.recv(timeout)
-        except (can.CanError, OSError) as err:
-            raise DeviceNotAvailableError(f"{self.name}: CAN receive failed: {err}",
+        except (can.CanError, OSError, ValueError, IndexError, KeyError) as err:
+            # (python-can's socketcand client raises its parser's errors, some wrapped in a
+            # CanError whose text holds a whole traceback: one line of it is kept)
+            raise DeviceNotAvailableError(f"{self.name}: CAN receive failed: {_brief(err)}",
                                           self.name) from err
         if msg is not None:
             log_wire(self.name, "<<", f"{msg.arbitration_id:03X} {msg.data.hex(' ')}")
