@@ -1,6 +1,6 @@
 """Measurement geometry: response matrix E and excitation matrix T.
 
-Conventions (``METHOD.md``): generalised coordinates at the origin O are
+Conventions (docs/conventions.md): generalised coordinates at the origin O are
 ``q = [x, y, z, rx, ry, rz]``. A sensor at ``r`` measuring along the unit vector
 ``d`` reads ``d . (a_O + alpha x r)``, i.e. the row ``d^T [I, -[r]x]`` of E. A
 unit force along ``e`` at ``p`` is the generalised force ``[e; p x e]``, one

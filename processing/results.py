@@ -1,7 +1,7 @@
 """The result of an identification: parameters, bands, evidence and checks.
 
 :class:`IdentificationResult` is what :func:`processing.identify.identify` returns;
-``to_json`` writes the result JSON of ``METHOD.md``.
+``to_json`` writes the result JSON of docs/conventions.md.
 """
 
 from __future__ import annotations
@@ -103,7 +103,7 @@ class IdentificationResult:
         }
 
     def to_json(self) -> dict[str, Any]:
-        """The result JSON of ``METHOD.md`` (plus extra keys)."""
+        """The result JSON of docs/conventions.md (plus extra keys)."""
         p = self.properties
         return {
             "mass": p.mass,
@@ -137,7 +137,7 @@ class IdentificationResult:
 
 def _modes_json(M: NDArray[np.float64], K: NDArray[np.float64], C: NDArray[np.float64]
                 ) -> list[dict[str, Any]]:
-    """The six rigid-body modes (``METHOD.md`` key ``modes``); empty when M is not positive
+    """The six rigid-body modes (docs/conventions.md key ``modes``); empty when M is not positive
     definite (no modes exist)."""
     try:
         return rigid_body_modes(M, K, C).to_json()
