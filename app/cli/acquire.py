@@ -215,6 +215,8 @@ def _kept(path: Path) -> str:
 
 def _check_paths(args: argparse.Namespace) -> None:
     """``--resume RUN.h5`` or ``--resume --out RUN.h5``; refusals before any device opens."""
+    if args.override and not args.resume:
+        raise UserError("--override changes a stored run: give --resume --out RUN.h5")
     if isinstance(args.resume, str):
         named = Path(args.resume)
         if args.out is not None and args.out != named:
@@ -246,8 +248,6 @@ def _check_paths(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     _check_paths(args)
-    if args.override and not args.resume:
-        raise UserError("--override changes a stored run: give --resume --out RUN.h5")
     if args.mock_operator and (args.mock or args.station is None):
         raise UserError("--mock-operator drives a bench started by insitu mock-bench: give "
                         "--station with its station file (--mock has its own operator)")

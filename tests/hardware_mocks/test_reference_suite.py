@@ -85,10 +85,7 @@ def test_article_leakage_grows_with_its_mass_line() -> None:
     assert rule.mass_band[1] == pytest.approx(min(0.8 * nat[6], sc.freq[-1]))
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12 part 3: default refuses ('no mass line "
-                   "found: the rigid-body modes ... reach the elastic/rigidity limit') where "
-                   "the article's method answers")
-@pytest.mark.parametrize("index", [6, 19])
+@pytest.mark.parametrize("index", [6, 19])  # refused before the band fallbacks (issue 12)
 def test_default_answers_where_the_article_answers(index: int, tmp_path: Path) -> None:
     sc = build_scenario(SPECS[index])
     identify_scenario(sc)  # answers (raises ArticleRefusalError otherwise)
