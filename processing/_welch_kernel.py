@@ -12,10 +12,11 @@ one thread, every value summed over the segments in order, and the FFT of a segm
 not depend on the others in its call: the same bits whatever the block boundaries, the
 grouping and the number of threads.
 
-Threads: numba's ``workqueue`` layer unless ``NUMBA_THREADING_LAYER`` says otherwise (its
-threads sleep between tasks; OpenMP's spin, taking the cores from the others on a loaded
-machine). The hot loops index from zero upwards: numba's wrap-around of negative indices
-stops LLVM vectorising a loop.
+Threads: numba's OpenMP layer where the OpenMP runtime is present (else ``workqueue``),
+unless ``NUMBA_THREADING_LAYER`` says otherwise, with ``OMP_WAIT_POLICY=PASSIVE`` unless set:
+its threads sleep between blocks instead of spinning, so they do not take the cores from
+other threads (the acquisition's readers) on a loaded machine. The hot loops index from
+zero upwards: numba's wrap-around of negative indices stops LLVM vectorising a loop.
 """
 
 from __future__ import annotations
@@ -43,7 +44,9 @@ LANES = 4
 BATCH = 64
 
 if "NUMBA_THREADING_LAYER" not in os.environ:
-    numba.config.THREADING_LAYER = "workqueue"  # type: ignore[attr-defined]
+    # read by the OpenMP runtime when numba first loads it (the first parallel call)
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    numba.config.THREADING_LAYER = "default"  # type: ignore[attr-defined]
 
 #: compiled once per sample precision and layout, cached on disk; releases the GIL
 _jit = njit(nogil=True, cache=True, boundscheck=False, error_model="numpy")
