@@ -13,13 +13,12 @@ import pyqtgraph as pg
 from numpy.typing import NDArray
 from PySide6 import QtWidgets
 
+from app.gui.views.projections import VIEWS, projection_plot
 from app.report.figures import COLORS
 from app.report.mount_system import MountSystem
 
 __all__ = ["ModeShapesWidget"]
 
-_VIEWS = (("top view (X-Y)", 0, 1), ("front view (X-Z)", 0, 2), ("side view (Y-Z)", 1, 2))
-_AXES = "XYZ"
 
 
 class ModeShapesWidget(QtWidgets.QWidget):
@@ -42,14 +41,8 @@ class ModeShapesWidget(QtWidgets.QWidget):
         top.addWidget(self.mode, 1)
         grid = QtWidgets.QGridLayout()
         self.plots: list[pg.PlotWidget] = []
-        for k, (title, i, j) in enumerate(_VIEWS):
-            w = pg.PlotWidget()
-            p = w.getPlotItem()
-            p.setTitle(title, size="9pt")
-            p.setLabel("bottom", _AXES[i], units="m")
-            p.setLabel("left", _AXES[j], units="m")
-            p.showGrid(x=True, y=True, alpha=0.2)
-            p.setAspectLocked(True)
+        for k, (title, i, j) in enumerate(VIEWS):
+            w = projection_plot(title, i, j)
             self.plots.append(w)
             grid.addWidget(w, k // 2, k % 2)
         grid.addWidget(self.caption, 1, 1)
@@ -101,7 +94,7 @@ class ModeShapesWidget(QtWidgets.QWidget):
         seg[0::2], seg[1::2] = P, tips
         n_pts = len(self._points)
         mounts = np.array([m.position for m in ms.mounts.mounts]) if ms.mounts else None
-        for k, (_, i, j) in enumerate(_VIEWS):
+        for k, (_, i, j) in enumerate(VIEWS):
             p = self.plots[k].getPlotItem()
             p.plot(seg[:, i], seg[:, j], pen=pg.mkPen("#333333", width=2), connect="pairs")
             p.addItem(pg.ScatterPlotItem(tips[:, i], tips[:, j], symbol="o", size=5,

@@ -18,8 +18,20 @@ from app.report.figures import COLORS
 
 __all__ = ["ProjectionsWidget"]
 
-_VIEWS = (("top view (X-Y)", 0, 1), ("front view (X-Z)", 0, 2), ("side view (Y-Z)", 1, 2))
+VIEWS = (("top view (X-Y)", 0, 1), ("front view (X-Z)", 0, 2), ("side view (Y-Z)", 1, 2))
 _AXES = "XYZ"
+
+
+def projection_plot(title: str, i: int, j: int) -> pg.PlotWidget:
+    """An empty orthographic view: global axis ``i`` across, ``j`` up, metres, equal scales."""
+    w = pg.PlotWidget()
+    p = w.getPlotItem()
+    p.setTitle(title, size="9pt")
+    p.setLabel("bottom", _AXES[i], units="m")
+    p.setLabel("left", _AXES[j], units="m")
+    p.showGrid(x=True, y=True, alpha=0.2)
+    p.setAspectLocked(True)
+    return w
 
 
 class ProjectionsWidget(QtWidgets.QWidget):
@@ -38,14 +50,9 @@ class ProjectionsWidget(QtWidgets.QWidget):
         self._labels: list[list[pg.TextItem]] = []
         self._mounts: list[pg.ScatterPlotItem] = []
         self._mount_axes: list[pg.PlotDataItem] = []
-        for k, (title, i, j) in enumerate(_VIEWS):
-            w = pg.PlotWidget()
+        for k, (title, i, j) in enumerate(VIEWS):
+            w = projection_plot(title, i, j)
             p = w.getPlotItem()
-            p.setTitle(title, size="9pt")
-            p.setLabel("bottom", _AXES[i], units="m")
-            p.setLabel("left", _AXES[j], units="m")
-            p.showGrid(x=True, y=True, alpha=0.2)
-            p.setAspectLocked(True)
             arrows = p.plot([], [], pen=pg.mkPen("#555555", width=1.5), connect="pairs")
             resp = pg.ScatterPlotItem(symbol="o", size=9, brush=COLORS[0], pen=None)
             exc = pg.ScatterPlotItem(symbol="t", size=10, brush=COLORS[1], pen=None)
@@ -88,7 +95,7 @@ class ProjectionsWidget(QtWidgets.QWidget):
         nodes: dict[int, tuple[float, float, float]] = {}
         for r in rows:
             nodes.setdefault(r.node, r.xyz)
-        for k, (_, i, j) in enumerate(_VIEWS):
+        for k, (_, i, j) in enumerate(VIEWS):
             self._resp[k].setData(resp[:, i], resp[:, j])
             self._exc[k].setData(exc[:, i], exc[:, j])
             self._arrows[k].setData(seg[:, i], seg[:, j])
@@ -110,14 +117,14 @@ class ProjectionsWidget(QtWidgets.QWidget):
         seg = np.empty((6 * len(P), 3))
         seg[0::2] = np.repeat(P, 3, axis=0)
         seg[1::2] = (P[:, None, :] + length * A).reshape(-1, 3)
-        for k, (_, i, j) in enumerate(_VIEWS):
+        for k, (_, i, j) in enumerate(VIEWS):
             self._mounts[k].setData(P[:, i], P[:, j])
             self._mount_axes[k].setData(seg[:, i], seg[:, j])
             self.plots[k].getPlotItem().vb.enableAutoRange(x=True, y=True)
 
     def highlight(self, xyz: Sequence[float] | None) -> None:
         """Mark the next point to excite (None clears the mark)."""
-        for k, (_, i, j) in enumerate(_VIEWS):
+        for k, (_, i, j) in enumerate(VIEWS):
             if xyz is None:
                 self._next[k].setData([], [])
             else:
