@@ -18,9 +18,77 @@ from processing.modes import rigid_body_modes
 from processing.selection import ElasticPeak
 from processing.synthesis import SynthesisFit
 
-__all__ = ["IdentificationResult", "Method"]
+__all__ = ["UNCERTAIN_KEYS", "Contribution", "IdentificationResult", "Method", "Uncertainty"]
 
 Method = Literal["improved", "plain"]
+
+#: the result-JSON keys an :class:`Uncertainty` mirrors, with their shapes
+UNCERTAIN_KEYS: dict[str, tuple[int, ...]] = {
+    "mass": (),
+    "cog": (3,),
+    "inertia_cog": (3, 3),
+    "inertia_origin": (3, 3),
+    "principal_moments": (3,),
+    "stiffness": (6, 6),
+    "damping": (6, 6),
+    "rigid_modes_hz": (6,),
+}
+
+
+@dataclass(frozen=True)
+class Contribution:
+    """The share of one input in the variance of one identified number.
+
+    ``quantity`` names the number as the terminal shows it (``"cog z"``,
+    ``"inertia_cog xx"``, ``"mass"``); ``source`` the input (``"point 3 location"``,
+    ``"fit (noise)"``); ``fraction`` its share of that number's variance, 0-1.
+    """
+
+    quantity: str
+    source: str
+    fraction: float
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """How far to trust a result: standard deviations mirroring the result's keys.
+
+    ``std`` maps each key of :data:`UNCERTAIN_KEYS` present to an array of that key's
+    shape (SI units, as the value); ``ci95`` maps keys whose 95 % interval is not
+    ``value +- 1.96 std`` to an array of that shape plus a last axis (lo, hi).
+    ``sources`` says what was propagated, in words (one entry per part: the fit's
+    covariance, a Monte Carlo of stated test uncertainties, a bootstrap over hits);
+    ``contributions`` the inputs that contribute most, largest first.
+    """
+
+    std: dict[str, NDArray[np.float64]]
+    ci95: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    sources: tuple[str, ...] = ()
+    contributions: tuple[Contribution, ...] = ()
+
+    def __post_init__(self) -> None:
+        for table, extra in ((self.std, ()), (self.ci95, (2,))):
+            for key, value in table.items():
+                if key not in UNCERTAIN_KEYS:
+                    raise ValueError(f"uncertainty of unknown key {key!r}")
+                if np.shape(value) != UNCERTAIN_KEYS[key] + extra:
+                    raise ValueError(f"uncertainty of {key!r} has shape {np.shape(value)}, "
+                                     f"expected {UNCERTAIN_KEYS[key] + extra}")
+
+    def to_json(self) -> dict[str, Any]:
+        """``std``, ``ci95`` (when any) and ``uncertainty`` (sources, contributions) keys of
+        the result JSON (docs/conventions.md)."""
+        out: dict[str, Any] = {
+            "std": {k: np.asarray(v, dtype=float).tolist() for k, v in self.std.items()},
+            "uncertainty": {
+                "sources": list(self.sources),
+                "contributions": [{"quantity": c.quantity, "source": c.source,
+                                   "fraction": c.fraction} for c in self.contributions],
+            },
+        }
+        if self.ci95:
+            out["ci95"] = {k: np.asarray(v, dtype=float).tolist() for k, v in self.ci95.items()}
+        return out
 
 
 @dataclass(frozen=True)
@@ -60,6 +128,8 @@ class IdentificationResult:
     band_reason: str = ""
     #: how the mass-line model was chosen (upper residual or not), in words
     model_note: str = ""
+    #: standard deviations and intervals of the identified numbers, when computed
+    uncertainty: Uncertainty | None = None
 
     def checks(self) -> dict[str, dict[str, Any]]:
         """Named pass/fail checks with their figures (result JSON ``checks``)."""
@@ -132,6 +202,7 @@ class IdentificationResult:
             "response_point_corrections": (None if self.point_corrections is None
                                            else self.point_corrections.tolist()),
             "modes": _modes_json(self.M, self.K, self.C),
+            **(_jsonable(self.uncertainty.to_json()) if self.uncertainty else {}),
         }
 
 
