@@ -15,9 +15,9 @@ Two methods on the same data:
     a ``w^2`` term for modes above it), eliminated by projection; the mass
     line allowed to extend close to the first elastic mode.
 
-Both honour coherence (lines of an excitation with a response below the
-threshold are dropped), the per-line rank and condition of T, and optional
-physical consistency (``physical=True``).
+Both weigh each FRF value by its coherence (a low value counts for less; none is
+dropped for it: :func:`processing.problem.prepare`), honour the per-line rank and
+condition of T, and optional physical consistency (``physical=True``).
 
 The work is done in stages, each a function of the prepared problem
 (:func:`processing.problem.prepare`) returning its own result:
@@ -143,8 +143,10 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None,
     choice: BandChoice | None = None
     if opt.mass_band is None or opt.stiffness_band is None:
         clean = problem.clean_lines
+        snr = problem.line_snr
         choice = choose_automatic_bands(problem.freq[clean], problem.X[..., clean], problem.T,
                                         peaks, elastic_margin=0.7 if leak else 0.5,
+                                        line_weights=None if snr is None else snr[clean],
                                         rigid_band_top=rigid_band_top,
                                         rigid_band_fallback=rigid_band_fallback)
     mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
@@ -171,21 +173,23 @@ class LineWeights:
 
     ``mass_lines`` / ``stiffness_lines`` (n_f,) select the lines; ``mass`` /
     ``stiffness`` (n_exc, n_lines) weigh each excitation column on them (0 drops it).
-    The coherence figures cover the lines of both bands.
+    The coherence figures (FRF values under the threshold, weighted down, and the
+    ranges of lines holding any) cover the lines of both bands.
     """
 
     mass_lines: NDArray[np.bool_]
     stiffness_lines: NDArray[np.bool_]
     mass: NDArray[np.float64]
     stiffness: NDArray[np.float64]
-    coherence_dropped: int
+    coherence_low: int
+    coherence_values: int
     coherence_min: float
     coherence_ranges_hz: tuple[tuple[float, float], ...]
 
 
 def weigh_lines(problem: Problem, bands: Bands) -> LineWeights:
     """Section 3: band lines with a usable T and a reconstruction error under ``level`` x the
-    band's mean; columns of incoherent excitations weigh 0."""
+    band's mean; each excitation column weighed by its coherence (:class:`Problem`)."""
     opt, coh, colw = problem.options, problem.coherence, problem.col_weights
     mass_sel = select_lines(problem.rel_err, bands.in_mass & problem.line_ok, opt.level)
     stiff_sel = bands.in_stiffness & problem.line_ok
@@ -193,7 +197,7 @@ def weigh_lines(problem: Problem, bands: Bands) -> LineWeights:
     if np.count_nonzero(mass_sel) < 2:
         raise InputError(
             f"fewer than 2 usable lines in the mass-line band {mb[0]:g}-{mb[1]:g} Hz "
-            "(coherence, rank or condition of T): widen the band or re-measure"
+            "(rank or condition of T): widen the band or re-measure"
         )
     if np.count_nonzero(stiff_sel) < 2:
         raise InputError(
@@ -201,10 +205,12 @@ def weigh_lines(problem: Problem, bands: Bands) -> LineWeights:
             " Hz: widen the band or re-measure"
         )
     in_any = bands.in_mass | bands.in_stiffness
+    low = 0 if coh is None else int(np.count_nonzero(coh[..., in_any] < opt.coherence_threshold))
     return LineWeights(
         mass_lines=mass_sel, stiffness_lines=stiff_sel,
         mass=colw[:, mass_sel], stiffness=colw[:, stiff_sel],
-        coherence_dropped=int(np.count_nonzero(colw[:, in_any] == 0)),
+        coherence_low=low,
+        coherence_values=0 if coh is None else int(coh[..., in_any].size),
         coherence_min=float(np.min(coh[..., bands.in_mass])) if coh is not None else 1.0,
         coherence_ranges_hz=() if coh is None else coherence_gate(  # lines outside pass
             np.where(in_any, coh, 1.0), problem.freq, opt.coherence_threshold).ranges,
@@ -499,7 +505,8 @@ def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
         rigid_modes_hz=checks.rigid_modes_hz,
         reconstruction_error=problem.rel_err[weights.mass_lines],
         synthesis=checks.synthesis,
-        coherence_dropped=weights.coherence_dropped,
+        coherence_low=weights.coherence_low,
+        coherence_values=weights.coherence_values,
         coherence_checked=problem.coherence is not None,
         coherence_min=weights.coherence_min,
         coherence_ranges_hz=weights.coherence_ranges_hz,
@@ -538,8 +545,8 @@ def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]
 def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
     """Identify the ten inertia parameters and K, C at O from an :class:`FRFSet`.
 
-    Uses what the FRF set carries besides H: its coherence (lines below the
-    threshold are kept out of the fit), the rigidity check of its response nodes
+    Uses what the FRF set carries besides H: its coherence (each FRF value weighed by
+    the noise it stands for), the rigidity check of its response nodes
     (bounds the automatic mass-line band) and ``meta["exponential_tau"]`` (the
     damping an exponential window added is removed from C).
 

@@ -71,11 +71,13 @@ class Problem:
     geometry : GeometryReport
     E, Epinv : (n_resp, 6), (6, n_resp) response matrix and its pseudo-inverse
     T : (6, n_exc) generalised unit forces at O
-    X : (6, n_exc, n_f) rigid-body accelerances at O (eq. 6)
+    X : (6, n_exc, n_f) rigid-body accelerances at O (eq. 6; each response weighted by its
+        coherence when given)
     rel_err : (n_f,) relative rigid-body reconstruction error (eq. 15)
     peaks : elastic modes seen in the non-rigid residual
     noise : relative FRF noise read from the reconstruction residual
-    col_weights : (n_exc, n_f) 1, or 0 where some response of that excitation is incoherent
+    col_weights : (n_exc, n_f) weight of each excitation column on each line, from the
+        coherence of its FRF values (1 without coherence; see :func:`_weighted_accelerances`)
     line_ok : (n_f,) lines where T restricted to the coherent columns has rank 6 and
         condition at most ``options.max_cond_T``
     row_scale : (6,) scale of the equation rows (1/L on moments, improved method) or None
@@ -113,9 +115,19 @@ class Problem:
         return 1.0 / self.exponential_tau if self.exponential_tau else 0.0
 
     @property
+    def line_snr(self) -> NDArray[np.float64] | None:
+        """(n_f,) signal-to-noise power ratio of each line, ``g / (1 - g)`` of its FRF values'
+        median coherence ``g`` (at most 1e4), or None without coherence."""
+        if self.coherence is None:
+            return None
+        g = np.median(self.coherence, axis=(0, 1))
+        return np.asarray(np.minimum(g / np.maximum(1.0 - g, 1e-300), 1e4))
+
+    @property
     def clean_lines(self) -> NDArray[np.bool_]:
-        """(n_f,) lines where every FRF is coherent and T usable (all lines if under 8)."""
-        clean = self.line_ok & np.all(self.col_weights > 0, axis=0)
+        """(n_f,) lines where T is usable and no column weighs under a tenth of the median
+        (all lines if under 8)."""
+        clean = self.line_ok & np.all(self.col_weights >= 0.1, axis=0)
         return clean if np.count_nonzero(clean) >= 8 else np.ones(self.freq.size, bool)
 
 
@@ -159,20 +171,50 @@ def _checked_geometry(
     return geo, warnings
 
 
-def _coherence_weights(
-    coherence: NDArray[np.float64] | None, threshold: float, T: NDArray[np.float64],
-    max_cond: float, L: float, n_f: int,
-) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Weights (n_exc, n_f): 0 where a column has low coherence; lines where T stays usable."""
-    n_e = T.shape[1]
-    if coherence is None:
-        return np.ones((n_e, n_f)), np.ones(n_f, bool)
-    good = np.all(coherence >= threshold, axis=0)  # (n_e, n_f)
+#: noise floor of every FRF value, relative to the FRFs' median RMS over lines
+COHERENCE_NOISE_FLOOR = 1e-3
+
+
+def _weighted_accelerances(
+    H: NDArray[np.complex128], E: NDArray[np.float64], coherence: NDArray[np.float64],
+    length: float,
+) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
+    """Rigid-body accelerances weighted by each FRF value's noise, and each column's weight.
+
+    An H1 estimate's variance is ``|H|^2 (1 - g) / (2 n g)`` for coherence ``g`` over
+    ``n`` averages (Bendat & Piersol); ``n`` is common to all values and drops out of
+    the weights. Per excitation column and line, ``X = (E' W E)^-1 E' W H`` with ``W``
+    the inverse variances of its responses (``E^+ H`` when they are equal), and the
+    column's weight in the mass-line and stiffness fits is the inverse of X's variance
+    (translations plus rotations times ``length^2``), relative to the median column.
+    A noise floor of :data:`COHERENCE_NOISE_FLOOR` times the FRFs' typical RMS is added
+    to every value's variance: with a coherence of 1 everywhere the weights are equal.
+    """
+    g = np.clip(coherence, 1e-12, 1.0)
+    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(H) ** 2, axis=(0, 1))))
+    var = np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300)
+    W = 1.0 / var  # (n_r, n_e, n_f)
+    W = W / np.max(W, axis=0, keepdims=True)  # per column: only the ratios matter
+    A = np.einsum("ri,ref,rj->efij", E, W, E)  # (n_e, n_f, 6, 6)
+    b = np.einsum("ri,ref->efi", E, W * H)  # (n_e, n_f, 6) complex
+    Ainv = np.linalg.inv(A)
+    X = np.einsum("efij,efj->ief", Ainv, b)
+    # variance of X (up to the common factor): diag of (E' V^-1 E)^-1 in absolute units
+    scale = np.max(1.0 / var, axis=0)  # undo the per-column normalisation of W
+    dvar = np.diagonal(Ainv, axis1=-2, axis2=-1) / scale[..., None]  # (n_e, n_f, 6)
+    v = dvar[..., :3].sum(-1) + length**2 * dvar[..., 3:].sum(-1)
+    return X, np.median(v) / v
+
+
+def _usable_lines(col_weights: NDArray[np.float64], T: NDArray[np.float64], max_cond: float,
+                  L: float) -> NDArray[np.bool_]:
+    """(n_f,) lines where T restricted to the weighted columns has rank 6 and a condition
+    under ``max_cond``."""
     Ts = T / scaling(L)[:, None]
-    masked = Ts[None, :, :] * np.moveaxis(good, -1, 0)[:, None, :]  # (n_f, 6, n_e)
+    masked = Ts[None, :, :] * np.moveaxis(col_weights > 0, -1, 0)[:, None, :]  # (n_f, 6, n_e)
     s = np.linalg.svd(masked, compute_uv=False)
     ok = (s[:, 5] > 1e-12 * s[:, 0]) & (s[:, 0] <= max_cond * np.maximum(s[:, 5], 1e-300))
-    return good.astype(float), ok
+    return np.asarray(ok)
 
 
 def noise_level(
@@ -213,11 +255,14 @@ def prepare(
     T = excitation_matrix(exc_xyz, exc_dirs)
     n_r, n_e = H_all.shape[:2]
     Ep = np.asarray(np.linalg.pinv(E), dtype=np.float64)
-    X = real_times_complex(Ep, H_all.reshape(n_r, -1)).reshape(6, n_e, -1)[..., k0:]
+    X0 = real_times_complex(Ep, H_all.reshape(n_r, -1)).reshape(6, n_e, -1)[..., k0:]
     freq, H = freq[k0:], H_all[..., k0:]
-    colw, line_ok = _coherence_weights(coherence, options.coherence_threshold, T,
-                                       options.max_cond_T, geo.length, freq.size)
-    _, rel_err = reconstruction_error(H, E, Ep, X)
+    _, rel_err = reconstruction_error(H, E, Ep, X0)
+    if coherence is None:
+        X, colw = X0, np.ones((n_e, freq.size))
+    else:
+        X, colw = _weighted_accelerances(H, E, coherence, geo.length)
+    line_ok = _usable_lines(colw, T, options.max_cond_T, geo.length)
     peaks = elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep) if n_r > 6 else ()
     return Problem(
         options=options, freq=freq, w=2 * np.pi * freq, H=H, coherence=coherence, geometry=geo,

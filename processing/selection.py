@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+import scipy.ndimage
 import scipy.optimize
 import scipy.signal
 from numpy.typing import NDArray
@@ -122,23 +123,32 @@ def elastic_peaks(
 ) -> tuple[ElasticPeak, ...]:
     """Elastic modes seen in the data: peaks of the non-rigid residual.
 
-    A peak counts where the relative reconstruction error
-    stands out of its surroundings by a factor 3 (prominence in log scale) and exceeds
-    both ``min_rel`` and three times the median error (the noise floor).
-    ``rel_err`` and ``Epinv`` may be passed when already computed.
+    A peak counts where the non-rigid residual stands out of its surroundings by a
+    factor 3 (prominence in log scale), either relative to the response (the relative
+    reconstruction error) or in absolute power (a resonance still stands out when higher
+    modes keep the relative error near 1 above it), and where the relative error exceeds
+    ``min_rel`` and three times its floor (the least of its 9-line running median, where
+    the rigid-body motion dominates; the noise floor there): a peak of the
+    residual at a rigid-body resonance (sensor or location errors) is a small part of
+    the response there. ``rel_err`` and ``Epinv`` may be passed when already computed.
     """
     n_r, n_e, n_f = H.shape
     if n_r <= 6 or n_f < 5:
         return ()
     Ep = np.asarray(np.linalg.pinv(E) if Epinv is None else Epinv, dtype=np.float64)
     rel = reconstruction_error(H, E, Ep)[1] if rel_err is None else rel_err
-    logr = np.log10(np.maximum(rel, 1e-12))
-    idx, _ = scipy.signal.find_peaks(logr, prominence=np.log10(3.0))
-    idx = idx[rel[idx] > max(min_rel, 3.0 * float(np.median(rel)))]
-    if idx.size == 0:
-        return ()
     P = np.eye(n_r) - E @ Ep
     R = (P @ H.reshape(n_r, -1)).reshape(n_r * n_e, n_f)
+    power = np.sum(np.abs(R) ** 2, axis=0)
+    prominence = np.log10(3.0)
+    by_rel, _ = scipy.signal.find_peaks(np.log10(np.maximum(rel, 1e-12)), prominence=prominence)
+    by_abs, _ = scipy.signal.find_peaks(np.log10(np.maximum(power, 1e-300)),
+                                        prominence=2 * prominence)  # power: |.|^2
+    idx = np.union1d(by_rel, by_abs)
+    floor = float(np.min(scipy.ndimage.median_filter(rel, size=9, mode="nearest")))
+    idx = idx[rel[idx] > max(min_rel, 3.0 * floor)]
+    if idx.size == 0:
+        return ()
     # keep the strongest residual directions only, for speed
     U, _s, _ = np.linalg.svd(R, full_matrices=False)
     R = (U[:, :4].conj().T @ R) if U.shape[1] > 4 else R
@@ -166,18 +176,24 @@ class BandChoice:
 
 
 def quick_rigid_modes(
-    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64]
+    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64],
+    line_weights: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Rigid-body mode frequencies (Hz) from a fit of ``Re(T X^+) = M - K / w^2``.
 
     Lines whose apparent mass is far above the mass line's (the lowest lines,
     where K / w^2 dominates and leakage or an exponential window distort the
     estimate most) are weighted down in proportion, so they cannot swamp the fit.
+    ``line_weights`` (n_lines,) weigh the lines further, e.g. by their signal-to-noise
+    ratio: noise on X biases ``X^+`` towards zero, and with it K (errors in variables),
+    most on the low lines where the accelerances are small.
     """
     A = line_operators(X, T, w).B  # apparent mass T X^+ per line (n_l, 6, 6)
     size = np.linalg.norm(A.reshape(len(w), 36), axis=1)
     ref = float(np.median(size[w >= np.median(w)]))
     wt = np.minimum(1.0, ref / np.maximum(size, 1e-300))
+    if line_weights is not None:
+        wt = wt * line_weights
     u = 1.0 / w**2
     D = np.stack([np.ones_like(u), -u], axis=1)
     coef, *_ = np.linalg.lstsq(D * wt[:, None], A.real.reshape(len(w), 36) * wt[:, None],
@@ -215,6 +231,7 @@ def choose_bands(
     rigid_band_fallback: float | None = None,
     mass_low_factor: float = 2.0,
     elastic_margin: float = 0.7,
+    line_weights: NDArray[np.float64] | None = None,
 ) -> BandChoice:
     """Automatic mass-line and stiffness bands, with the reason.
 
@@ -226,7 +243,8 @@ def choose_bands(
     its limit at a threshold above its error floor; then the elastic margin,
     up to 0.9x the mode) and the reason says so: a band is always returned when
     the data hold at least 8 lines. The stiffness band runs from the first line to
-    1.5 times the highest rigid-body mode (not into the mass line).
+    1.5 times the highest rigid-body mode (not into the mass line). ``line_weights``
+    (n_f,) weigh the lines in the rigid-body mode estimate (:func:`quick_rigid_modes`).
     """
     f_end = float(freq[-1])
     f_el = min(p.frequency for p in elastic) if elastic else None
@@ -245,7 +263,8 @@ def choose_bands(
     rig_lines = (freq > 0) & (freq <= limits[0][0])  # rigid modes from below the first limit
     if np.count_nonzero(rig_lines) < 4:
         rig_lines = (freq > 0) & (freq <= max(top, float(freq[min(7, freq.size - 1)])))
-    fr = quick_rigid_modes(X[..., rig_lines], T, 2 * np.pi * freq[rig_lines])
+    fr = quick_rigid_modes(X[..., rig_lines], T, 2 * np.pi * freq[rig_lines],
+                           None if line_weights is None else line_weights[rig_lines])
     f_rig = float(fr[-1])
     set_aside: list[str] = []
     for f_hi, name in limits:

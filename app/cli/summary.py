@@ -84,23 +84,25 @@ def checks_table(result: IdentificationResult) -> Table:
     for name, c in result.checks().items():
         figs = ", ".join(
             f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
-            for k, v in c.items() if k not in ("pass", "dropped_ranges_hz")
+            for k, v in c.items() if k not in ("pass", "low_ranges_hz")
         )
         t.add_row(name, "[green]pass[/green]" if c["pass"] else "[red]FAIL[/red]", figs)
     return t
 
 
 def coherence_line(result: IdentificationResult) -> str:
-    """How many (excitation, line) values the coherence gate dropped in the bands, and where."""
+    """How many FRF values of the bands have a low coherence (weighted down), and where."""
     if not result.coherence_checked:
-        return "Coherence: not measured (no coherence in the input), nothing dropped"
-    if result.coherence_dropped == 0:
-        return f"Coherence >= {result.coherence_threshold:g} on every line of the bands"
+        return "Coherence: not measured (no coherence in the input), every value weighs the same"
+    if result.coherence_low == 0:
+        return f"Coherence >= {result.coherence_threshold:g} on every FRF value of the bands"
     ranges = result.coherence_ranges_hz
     where = ", ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in ranges[:8])
     more = f" and {len(ranges) - 8} more ranges" if len(ranges) > 8 else ""
-    return (f"Coherence < {result.coherence_threshold:g}: {result.coherence_dropped} "
-            f"(excitation, line) values dropped from the bands, at {where}{more}")
+    return (f"Coherence < {result.coherence_threshold:g}: {result.coherence_low} of "
+            f"{result.coherence_values} FRF values of the bands "
+            f"({result.coherence_low_fraction:.1%}), weighted by their noise, not dropped; "
+            f"at {where}{more}")
 
 
 def print_result(

@@ -86,7 +86,7 @@ def test_bad_files_are_one_line(tmp_path: Path, engine: tuple[FRFSet, object]) -
     assert "\n" not in str(excinfo.value)
 
 
-def test_identify_reads_frf_file_and_reports_dropped_ranges(
+def test_identify_reads_frf_file_and_reports_low_coherence(
         tmp_path: Path, engine: tuple[FRFSet, tuple[float, float]],
         capsys: pytest.CaptureFixture[str]) -> None:
     frf, (lo, hi) = engine
@@ -100,6 +100,6 @@ def test_identify_reads_frf_file_and_reports_dropped_ranges(
     res = json.loads(out.read_text())
     assert abs(res["mass"] - b.model.mass) / b.model.mass < 0.01
     coh = res["checks"]["coherence"]
-    assert coh["dropped_ranges_hz"] == [[lo, hi]] and coh["dropped_lines"] == 4
-    assert not coh["pass"] and coh["threshold"] == 0.8
-    assert f"4 (excitation, line) values dropped from the bands, at {lo:g}-{hi:g} Hz" in text
+    assert coh["low_ranges_hz"] == [[lo, hi]] and coh["low_values"] == 4
+    assert coh["pass"] and coh["threshold"] == 0.8  # 4 values of the bands' thousands
+    assert "4 of" in text and f"weighted by their noise, not dropped; at {lo:g}-{hi:g} Hz" in text
