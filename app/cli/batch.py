@@ -26,10 +26,12 @@ from app.batch.campaign import Row, run_campaign, write_tables
 from app.batch.cluster import open_client, total_threads
 from app.cli import identify as identify_verb
 from app.cli.common import UserError
-from app.cli.frf import settings_from
+from app.cli.frf import add_processing_arguments, settings_from
 
-#: ``insitu identify`` options that do not apply to a campaign (one output folder, no mounts)
-_NOT_COPIED = {"help", "file", "out", "mounts", "excitation_hz", "loss_factor_hz"}
+#: the ``insitu identify`` options a campaign takes, with identify's own definitions and
+#: defaults (those of the FRFs from time data are added from identify's parser too); an option
+#: is listed here once :func:`run` passes it on to :func:`app.batch.campaign.identify_file`
+_IDENTIFY = {"mass_band", "stiffness_band", "physical", "method", "refine_points"}
 
 
 class _Capture:
@@ -59,8 +61,11 @@ def add_parser(sub: Any) -> None:
     g = p.add_argument_group("identification (as insitu identify)")
     capture = _Capture()
     identify_verb.add_parser(capture)
+    scratch = argparse.ArgumentParser(add_help=False)
+    add_processing_arguments(scratch)
+    wanted = _IDENTIFY | {a.dest for a in scratch._actions}
     for action in capture.parser._actions:  # the same options and defaults as identify
-        if action.dest not in _NOT_COPIED:
+        if action.dest in wanted:
             g._add_action(action)
     p.set_defaults(run=run)
 
