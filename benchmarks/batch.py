@@ -68,7 +68,7 @@ def mass_line_draw() -> MassLineDraw:
 def main() -> None:
     n_files = int(sys.argv[1]) if len(sys.argv) > 1 else N_FILES
     n_draws = int(sys.argv[2]) if len(sys.argv) > 2 else N_DRAWS
-    con = Console()
+    con = Console(width=120)
     draw = mass_line_draw()
     t = time.perf_counter()
     chunk_draws(draw, np.arange(100))
