@@ -104,25 +104,25 @@ def _free_port() -> int:
 
 
 @pytest.fixture(scope="module")
-def scheduler() -> Iterator[str]:
+def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """A ``dask scheduler`` and two one-thread ``dask worker`` processes, started apart;
     yields the scheduler's address; both processes are ended after the module."""
-    procs: list[subprocess.Popen[str]] = []
+    log = tmp_path_factory.mktemp("dask") / "scheduler.log"
+    procs: list[subprocess.Popen[bytes]] = []
     try:
-        sched = subprocess.Popen(
-            [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-             "--port", "0", "--no-dashboard"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-        procs.append(sched)
+        with log.open("wb") as fh:
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
+                 "127.0.0.1", "--port", "0", "--no-dashboard"],
+                stdout=subprocess.DEVNULL, stderr=fh))
         address = ""
-        deadline = time.monotonic() + 60
-        assert sched.stderr is not None
+        deadline = time.monotonic() + 120
         while not address and time.monotonic() < deadline:
-            line = sched.stderr.readline()
-            assert line, "dask scheduler ended before saying its address"
-            m = re.search(r"Scheduler at:\s+(tcp://\S+)", line)
+            assert procs[0].poll() is None, log.read_text()
+            m = re.search(r"Scheduler at:\s+(tcp://\S+)", log.read_text())
             address = m.group(1) if m else ""
-        assert address
+            time.sleep(0.2)
+        assert address, "dask scheduler did not say its address within 120 s"
         procs.append(subprocess.Popen(
             [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "2",
              "--nthreads", "1", "--no-dashboard"],
@@ -139,9 +139,6 @@ def scheduler() -> Iterator[str]:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
-        for p in procs:
-            if p.stderr is not None:
-                p.stderr.close()
 
 
 def test_batch_on_a_running_scheduler(files: list[Path], scheduler: str,
@@ -197,3 +194,22 @@ def test_unreachable_scheduler_is_one_line(tmp_path: Path, files: list[Path],
                              "within 2 s")
     assert "dask scheduler" in err[0] and "Traceback" not in err[0]
     assert not (tmp_path / "campaign.csv").exists()
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--refine-points", "-1"], "--refine-points must be >= 0, got -1"),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the local"),
+    (["--workers", "0"], "--workers must be at least 1, got 0"),
+    (["--overlap", "1.5"], "--overlap must be at least 0 and below 1"),
+])
+def test_bad_options_are_one_line(files: list[Path], tmp_path: Path, extra: list[str],
+                                  message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["batch", str(files[0]), "--out", str(tmp_path), *extra]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+
+
+def test_missing_file_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["batch", str(tmp_path / "none.uff"), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"insitu batch: error: no such file: {tmp_path / 'none.uff'}")
