@@ -24,7 +24,7 @@ PIPE_COLUMNS = 200
 
 #: verb -> module under app.cli
 VERBS = ("identify", "simulate", "demo", "frf", "mock-bench", "acquire", "replay", "repair",
-         "gui", "report")
+         "gui", "report", "batch")
 
 
 class _Parser(argparse.ArgumentParser):

@@ -8,8 +8,16 @@ from rich.console import Console
 from rich.table import Table
 
 from app.report.mount_system import MountSystem
+from app.report.tables import (
+    contribution_lines,
+    half_width,
+    modes_text,
+    sources_line,
+    spread,
+)
 from processing.identify import IdentificationResult
 from processing.inertia import InertiaProperties
+from processing.results import Uncertainty
 
 _DOF = ("x", "y", "z", "rx", "ry", "rz")
 
@@ -31,11 +39,24 @@ def _ten(p: InertiaProperties) -> list[tuple[str, str, float, float]]:
     ]
 
 
+#: (uncertainty key, index, display scale) of each row of :func:`_ten`
+_TEN_KEYS: tuple[tuple[str, tuple[int, ...], float], ...] = (
+    ("mass", (), 1.0), ("cog", (0,), 1e3), ("cog", (1,), 1e3), ("cog", (2,), 1e3),
+    ("inertia_origin", (0, 0), 1.0), ("inertia_origin", (1, 1), 1.0),
+    ("inertia_origin", (2, 2), 1.0), ("inertia_origin", (0, 1), -1.0),
+    ("inertia_origin", (0, 2), -1.0), ("inertia_origin", (1, 2), -1.0))
+
+
 def inertia_table(result: IdentificationResult, truth: InertiaProperties | None = None) -> Table:
+    """The ten parameters about O and the principal moments; with ``result.uncertainty`` a
+    column of 95 % spreads (± 1.96 std, or the [lo, hi] interval when the result has one)."""
+    u = result.uncertainty
     t = Table(title=f"Inertia parameters ({result.method} method)")
     t.add_column("parameter")
     t.add_column("unit")
     t.add_column("identified", justify="right")
+    if u is not None:
+        t.add_column("95 %", justify="left")
     if truth is not None:
         t.add_column("truth", justify="right")
         t.add_column("error", justify="right")
@@ -43,6 +64,9 @@ def inertia_table(result: IdentificationResult, truth: InertiaProperties | None 
     trows = _ten(truth) if truth is not None else None
     for n, (label, unit, value, _) in enumerate(rows):
         cells = [label, unit, f"{value:.4g}"]
+        if u is not None:
+            key, index, scale = _TEN_KEYS[n]
+            cells.append(spread(u, key, index, scale=scale).strip())
         if trows is not None:
             tv = trows[n][2]
             err = (f"{value - tv:+.3f} mm" if unit == "mm"
@@ -52,13 +76,18 @@ def inertia_table(result: IdentificationResult, truth: InertiaProperties | None 
     p = result.properties
     t.add_row("principal moments (CoG)", "kg m²",
               ", ".join(f"{v:.4g}" for v in p.principal_moments),
+              *((", ".join(spread(u, "principal_moments", (k,)).strip() for k in range(3)),)
+                if u is not None else ()),
               *((", ".join(f"{v:.4g}" for v in truth.principal_moments), "")
                 if truth is not None else ()))
     return t
 
 
-def matrix_table(title: str, A: NDArray[np.float64], truth: NDArray[np.float64] | None = None
-                 ) -> Table:
+def matrix_table(title: str, A: NDArray[np.float64], truth: NDArray[np.float64] | None = None,
+                 std: NDArray[np.float64] | None = None,
+                 ci95: NDArray[np.float64] | None = None) -> Table:
+    """A 6x6 matrix; with ``std`` (6x6) each cell followed by ± 1.96 std, or with ``ci95``
+    (6x6x2) by its [lo, hi] interval."""
     t = Table(title=title)
     t.add_column("")
     for d in _DOF:
@@ -69,6 +98,10 @@ def matrix_table(title: str, A: NDArray[np.float64], truth: NDArray[np.float64] 
         cells = []
         for j in range(6):
             c = f"{A[i, j]:.4g}"
+            if ci95 is not None:
+                c += f" [{ci95[i, j, 0]:.4g}, {ci95[i, j, 1]:.4g}]"
+            elif std is not None:
+                c += f" ± {half_width(1.96 * std[i, j])}"
             if truth is not None and scale[i, j] > 0:
                 c += f" ({(A[i, j] - truth[i, j]) / scale[i, j] * 100:+.2f}%)"
             cells.append(c)
@@ -115,23 +148,47 @@ def print_result(
 ) -> None:
     """Print the ten parameters, K and C, the bands and the checks."""
     con = console or Console()
+    u = result.uncertainty
     con.print(inertia_table(result, truth))
-    con.print(matrix_table("Stiffness K at O (N/m, N/rad, N m/m, N m/rad)", result.K, K_truth))
-    con.print(matrix_table("Damping C at O (N s/m, ...)", result.C, C_truth))
+    con.print(matrix_table("Stiffness K at O (N/m, N/rad, N m/m, N m/rad)", result.K, K_truth,
+                           *_spreads(u, "stiffness")))
+    con.print(matrix_table("Damping C at O (N s/m, ...)", result.C, C_truth,
+                           *_spreads(u, "damping")))
     mb, sb = result.mass_band, result.stiffness_band
     con.print(
         f"Bands: mass line {mb[0]:.1f}-{mb[1]:.1f} Hz ({len(result.mass_lines)} lines), "
         f"stiffness {sb[0]:.1f}-{sb[1]:.1f} Hz ({len(result.stiffness_lines)} lines); "
-        f"rigid-body modes {', '.join(f'{f:.1f}' for f in result.rigid_modes_hz)} Hz; "
+        f"rigid-body modes {modes_text(result.rigid_modes_hz, u, '.1f')} Hz; "
         + (
             "elastic modes " + ", ".join(f"{e.frequency:.1f} Hz" for e in result.elastic_modes)
             if result.elastic_modes else "no elastic mode in the data"
         )
     )
+    if u is not None:
+        print_uncertainty(u, con)
     con.print(checks_table(result))
     con.print(coherence_line(result))
     for w in result.warnings:
         con.print(f"[yellow]warning:[/yellow] {w}")
+
+
+def _spreads(u: Uncertainty | None, key: str
+             ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """(std, ci95) of ``key`` for :func:`matrix_table`, None where not known."""
+    if u is None:
+        return None, None
+    return u.std.get(key), u.ci95.get(key)
+
+
+def print_uncertainty(u: Uncertainty, console: Console | None = None, top: int = 6) -> None:
+    """What the ± propagate and the inputs that contribute most, in one short block."""
+    con = console or Console()
+    con.print(sources_line(u), markup=False)
+    lines = contribution_lines(u, top)
+    if lines:
+        con.print("Largest contributions to the variance:")
+        for line in lines:
+            con.print(f"  {line}", markup=False)
 
 
 def _rich_table(title: str, head: list[str], rows: list[list[str]], left: int = 1) -> Table:

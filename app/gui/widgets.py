@@ -101,8 +101,9 @@ def fill_table(table: QtWidgets.QTableWidget, head: Sequence[str],
 
 
 def _numeric(text: str) -> bool:
+    """A number, alone or followed by its 95 % spread (``"1.5 ± 0.2"``, ``"1.5 [1.2, 1.9]"``)."""
     try:
-        float(text)
+        float(text.split(" ± ")[0].split(" [")[0])
     except ValueError:
         return False
     return True

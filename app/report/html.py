@@ -18,7 +18,16 @@ from app.io.mounts import MountsFile
 from app.report import figures
 from app.report.analysis import Analysis
 from app.report.mount_system import mount_system
-from app.report.tables import check_rows, format_matrix, inertia_rows, principal_rows
+from app.report.tables import (
+    check_rows,
+    contribution_lines,
+    format_matrix,
+    inertia_rows,
+    modes_text,
+    principal_rows,
+    sources_line,
+)
+from processing.results import Uncertainty
 
 __all__ = ["build_report"]
 
@@ -60,6 +69,18 @@ def _checks(a: Analysis) -> str:
     )
     head = '<tr><th class="l">check</th><th>verdict</th><th class="l">figures</th></tr>'
     return f"<table>{head}{rows}</table>"
+
+
+def _uncertainty(u: Uncertainty | None) -> str:
+    """What the ± propagate and the largest contributions; empty without an uncertainty."""
+    if u is None:
+        return ""
+    lines = contribution_lines(u)
+    out = f"<p>{html.escape(sources_line(u))}.</p>"
+    if lines:
+        out += ("<p>Largest contributions to the variance:</p><ul class=\"contrib\">"
+                + "".join(f"<li>{html.escape(x)}</li>" for x in lines) + "</ul>")
+    return out
 
 
 def _mount_system(a: Analysis, mounts: MountsFile | None, excitation_hz: float | None) -> str:
@@ -124,23 +145,27 @@ def build_report(a: Analysis, title: str = "In situ identification report",
         parts.append(f"<p class=\"warn\">Identification failed: {html.escape(a.error or '')}</p>")
     else:
         p = r.properties
+        u = r.uncertainty
         parts += [
             f"<p>Bands: mass line {r.mass_band[0]:g}-{r.mass_band[1]:g} Hz, stiffness "
             f"{r.stiffness_band[0]:g}-{r.stiffness_band[1]:g} Hz. Rigid-body modes: "
-            + ", ".join(f"{f:.2f}" for f in r.rigid_modes_hz) + " Hz.</p>",
+            + html.escape(modes_text(r.rigid_modes_hz, u)) + " Hz.</p>",
             "<h2>Inertia parameters</h2>",
+            _uncertainty(u),
             _table(("parameter", "unit", "about the CoG", "about the origin O"),
-                   inertia_rows(p), left=2),
+                   inertia_rows(p, u), left=2),
             "<p>Principal moments about the CoG (axes as unit vectors in the global frame):</p>",
-            _table(("", "moment (kg m²)", "axis x", "axis y", "axis z"), principal_rows(p)),
+            _table(("", "moment (kg m²)", "axis x", "axis y", "axis z"), principal_rows(p, u)),
             "<h2>Stiffness K at O</h2><p>N/m, N/rad, N m/m, N m/rad; DOF order x, y, z, rx, "
             "ry, rz.</p>",
             _table(("", *figures.DOF_LABELS),
-                   [(d, *row) for d, row in zip(figures.DOF_LABELS, format_matrix(r.K),
+                   [(d, *row) for d, row in zip(figures.DOF_LABELS,
+                                                format_matrix(r.K, u, "stiffness"),
                                                 strict=True)]),
             "<h2>Damping C at O</h2><p>N s/m, N s/rad, N m s/m, N m s/rad.</p>",
             _table(("", *figures.DOF_LABELS),
-                   [(d, *row) for d, row in zip(figures.DOF_LABELS, format_matrix(r.C),
+                   [(d, *row) for d, row in zip(figures.DOF_LABELS,
+                                                format_matrix(r.C, u, "damping"),
                                                 strict=True)]),
         ]
         parts.append(_mount_system(a, mounts, excitation_hz))

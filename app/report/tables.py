@@ -13,41 +13,136 @@ from numpy.typing import NDArray
 
 from app.report.analysis import Analysis
 from processing.inertia import InertiaProperties
+from processing.results import Uncertainty
 
-__all__ = ["CheckRow", "check_rows", "format_matrix", "inertia_rows", "principal_rows"]
+__all__ = ["CheckRow", "check_rows", "contribution_lines", "format_matrix", "half_width",
+           "inertia_rows", "modes_text", "principal_rows", "quantity_label", "sources_line",
+           "spread"]
+
+#: half-width of a 95 % interval in standard deviations (normal distribution)
+Z95 = 1.96
+
+
+def spread(u: Uncertainty | None, key: str, index: tuple[int, ...] = (), *,
+           scale: float = 1.0, fmt: str = ".4g") -> str:
+    """The 95 % spread of one identified number as text to append to its value.
+
+    Parameters
+    ----------
+    u : the result's uncertainty, or None
+    key : a key of :data:`processing.results.UNCERTAIN_KEYS` (``"cog"``, ``"stiffness"``, ...)
+    index : the number's index in that key's array (``()`` for the mass)
+    scale : display factor applied to the value (1e3 for m to mm, -1 for a product of
+        inertia shown with the article's sign)
+    fmt : format of the interval's ends (the value's own format)
+
+    Returns
+    -------
+    str
+        ``" [lo, hi]"`` when ``u.ci95`` holds the key, else ``" ± h"`` with
+        ``h = 1.96 std`` (two significant digits), else ``""`` (no uncertainty known).
+    """
+    if u is None:
+        return ""
+    if key in u.ci95:
+        lo, hi = sorted(float(v) * scale for v in np.asarray(u.ci95[key])[index])
+        return f" [{lo:{fmt}}, {hi:{fmt}}]"
+    if key in u.std:
+        return " ± " + half_width(Z95 * float(np.asarray(u.std[key])[index]) * abs(scale))
+    return ""
+
+
+def half_width(h: float) -> str:
+    """A 95 % half-width as text: two significant digits (``0.27``, ``36``, ``2.3e+05``)."""
+    return f"{h:.2g}"
+
+
+_QUANTITY = {"mass": "mass", "cog": "CoG", "inertia_cog": "J about the CoG",
+             "inertia_origin": "J about O", "principal_moments": "principal moment",
+             "stiffness": "K", "damping": "C", "rigid_modes_hz": "rigid mode"}
+
+
+def quantity_label(quantity: str) -> str:
+    """A contribution's quantity as the views show it: ``"cog z"`` -> ``"CoG z"``,
+    ``"inertia_cog xy"`` -> ``"J_xy about the CoG"``; unknown names unchanged."""
+    key, _, rest = quantity.partition(" ")
+    if key in ("inertia_cog", "inertia_origin") and rest:
+        return f"J_{rest} {_QUANTITY[key][2:]}"
+    return f"{_QUANTITY.get(key, key)} {rest}".strip()
+
+
+def contribution_lines(u: Uncertainty | None, top: int = 6) -> list[str]:
+    """The largest contributions, one line each (``"CoG z: 70 % from point 3 location"``),
+    at most ``top`` of them and a last line counting the others; empty without any."""
+    if u is None or not u.contributions:
+        return []
+    lines = [f"{quantity_label(c.quantity)}: {c.fraction * 100:.0f} % from {c.source}"
+             for c in u.contributions[:top]]
+    if len(u.contributions) > top:
+        lines.append(f"({len(u.contributions) - top} smaller contributions in the result JSON)")
+    return lines
 
 _PAIRS = (("J_xx", 0, 0, 1.0), ("J_yy", 1, 1, 1.0), ("J_zz", 2, 2, 1.0),
           ("J_xy", 0, 1, -1.0), ("J_xz", 0, 2, -1.0), ("J_yz", 1, 2, -1.0))
 
 
-def inertia_rows(p: InertiaProperties) -> list[tuple[str, str, str, str]]:
+def modes_text(freq: NDArray[np.float64], u: Uncertainty | None = None, fmt: str = ".2f"
+               ) -> str:
+    """The rigid-body mode frequencies, Hz, comma-separated, each with its 95 % spread."""
+    return ", ".join(f"{f:{fmt}}" + spread(u, "rigid_modes_hz", (k,), fmt=fmt)
+                     for k, f in enumerate(np.asarray(freq)))
+
+
+def sources_line(u: Uncertainty | None) -> str:
+    """One sentence saying what the uncertainty propagates; empty without one."""
+    if u is None:
+        return ""
+    what = "; ".join(u.sources) if u.sources else "sources not stated"
+    return (f"Uncertainty (± 1.96 standard deviations, or [95 % interval]): {what}")
+
+
+def inertia_rows(p: InertiaProperties, u: Uncertainty | None = None
+                 ) -> list[tuple[str, str, str, str]]:
     """(parameter, unit, about the CoG, about the origin O) for the ten parameters.
 
     Mass and CoG are the same in both frames; the CoG column gives the CoG's coordinates
-    in the global frame (it is the origin of the CoG frame).
+    in the global frame (it is the origin of the CoG frame). With ``u``, each value is
+    followed by its 95 % spread (:func:`spread`).
     """
-    rows = [("mass m", "kg", f"{p.mass:.3f}", f"{p.mass:.3f}")]
+    m = f"{p.mass:.3f}" + spread(u, "mass", fmt=".3f")
+    rows = [("mass m", "kg", m, m)]
     for k, axis in enumerate("xyz"):
-        rows.append((f"CoG {axis}_c", "mm", f"{p.cog[k] * 1e3:.2f}", f"{p.cog[k] * 1e3:.2f}"))
+        c = f"{p.cog[k] * 1e3:.2f}" + spread(u, "cog", (k,), scale=1e3, fmt=".2f")
+        rows.append((f"CoG {axis}_c", "mm", c, c))
     for name, i, j, sign in _PAIRS:
-        rows.append((name, "kg m²", f"{sign * p.inertia_cog[i, j]:.4f}",
-                     f"{sign * p.inertia_origin[i, j]:.4f}"))
+        rows.append((name, "kg m²",
+                     f"{sign * p.inertia_cog[i, j]:.4f}"
+                     + spread(u, "inertia_cog", (i, j), scale=sign, fmt=".4f"),
+                     f"{sign * p.inertia_origin[i, j]:.4f}"
+                     + spread(u, "inertia_origin", (i, j), scale=sign, fmt=".4f")))
     return rows
 
 
-def principal_rows(p: InertiaProperties) -> list[tuple[str, str, str, str, str]]:
-    """(name, moment kg m², axis x, axis y, axis z) of the principal moments about the CoG."""
+def principal_rows(p: InertiaProperties, u: Uncertainty | None = None
+                   ) -> list[tuple[str, str, str, str, str]]:
+    """(name, moment kg m², axis x, axis y, axis z) of the principal moments about the CoG
+    (with ``u``, each moment followed by its 95 % spread)."""
     ax = p.principal_axes
     return [
-        (f"J_{k + 1}", f"{p.principal_moments[k]:.4f}",
+        (f"J_{k + 1}", f"{p.principal_moments[k]:.4f}"
+         + spread(u, "principal_moments", (k,), fmt=".4f"),
          f"{ax[0, k]:+.4f}", f"{ax[1, k]:+.4f}", f"{ax[2, k]:+.4f}")
         for k in range(3)
     ]
 
 
-def format_matrix(A: NDArray[np.float64]) -> list[list[str]]:
-    """6x6 matrix as text cells, four significant digits."""
-    return [[f"{v:.4g}" for v in row] for row in np.asarray(A)]
+def format_matrix(A: NDArray[np.float64], u: Uncertainty | None = None,
+                  key: str = "stiffness") -> list[list[str]]:
+    """6x6 matrix as text cells, four significant digits; with ``u``, each cell followed by
+    its 95 % spread from ``u``'s ``key`` (``"stiffness"`` or ``"damping"``)."""
+    A = np.asarray(A)
+    return [[f"{A[i, j]:.4g}" + spread(u, key, (i, j)) for j in range(A.shape[1])]
+            for i in range(A.shape[0])]
 
 
 @dataclass(frozen=True)

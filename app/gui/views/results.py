@@ -16,7 +16,14 @@ from app.gui.widgets import fill_table, make_plot, set_verdict
 from app.report import figures
 from app.report.analysis import Analysis, message_of
 from app.report.mount_system import MountSystem, mount_system
-from app.report.tables import format_matrix, inertia_rows, principal_rows
+from app.report.tables import (
+    contribution_lines,
+    format_matrix,
+    inertia_rows,
+    modes_text,
+    principal_rows,
+    sources_line,
+)
 
 __all__ = ["ResultsView"]
 
@@ -82,6 +89,10 @@ class ResultsView(QtWidgets.QWidget):
         self.verdict = QtWidgets.QLabel()
         self.summary = QtWidgets.QLabel()
         self.summary.setWordWrap(True)
+        self.uncertainty = QtWidgets.QLabel()
+        self.uncertainty.setWordWrap(True)
+        self.uncertainty.setTextFormat(QtCore.Qt.TextFormat.PlainText)
+        self.uncertainty.hide()
         self.inertia = QtWidgets.QTableWidget()
         self.principal = QtWidgets.QTableWidget()
         self.K = QtWidgets.QTableWidget()
@@ -126,6 +137,7 @@ class ResultsView(QtWidgets.QWidget):
         ll.setContentsMargins(0, 0, 0, 0)
         ll.addWidget(self.verdict)
         ll.addWidget(self.summary)
+        ll.addWidget(self.uncertainty)
         ll.addWidget(QtWidgets.QLabel("<b>Ten inertia parameters</b> (products J_xy = ∫xy dm)"))
         ll.addWidget(self.inertia, 4)
         ll.addWidget(QtWidgets.QLabel("<b>Principal moments and axes</b> about the CoG"))
@@ -224,6 +236,7 @@ class ResultsView(QtWidgets.QWidget):
             for t in (self.inertia, self.principal, self.K, self.C):
                 t.clear()
                 t.setRowCount(0)
+            self.uncertainty.hide()
             return
         self._filling = True
         try:
@@ -245,7 +258,8 @@ class ResultsView(QtWidgets.QWidget):
                         + ("not positive definite; " if not p.positive_definite else "")
                         + f"triangle margin {p.triangle_margin:+.3f}. Tick 'enforce physical "
                           "consistency' or check the data")
-        modes = ", ".join(f"{f:.2f}" for f in r.rigid_modes_hz)
+        u = r.uncertainty
+        modes = modes_text(r.rigid_modes_hz, u)
         text = (f"{r.method} method, {r.iterations} iterations"
                 f"{'' if r.converged else ' (NOT converged)'}; mass line "
                 f"{r.mass_band[0]:.2f}-{r.mass_band[1]:.2f} Hz ({len(r.mass_lines)} lines), "
@@ -254,15 +268,21 @@ class ResultsView(QtWidgets.QWidget):
         if r.warnings:
             text += " Warnings: " + "; ".join(r.warnings)
         self.summary.setText(text)
+        top = contribution_lines(u)
+        self.uncertainty.setText("\n".join(
+            [sources_line(u), *(["Largest contributions to the variance:", *top] if top else [])]))
+        self.uncertainty.setVisible(u is not None)
         fill_table(self.inertia, ("parameter", "unit", "about CoG", "about origin O"),
-                   inertia_rows(p))
+                   inertia_rows(p, u))
         fill_table(self.principal, ("", "moment (kg m²)", "axis x", "axis y", "axis z"),
-                   principal_rows(p))
+                   principal_rows(p, u))
         dofs = figures.DOF_LABELS
         fill_table(self.K, ("K at O", *dofs),
-                   [(d, *row) for d, row in zip(dofs, format_matrix(r.K), strict=True)])
+                   [(d, *row) for d, row in zip(dofs, format_matrix(r.K, u, "stiffness"),
+                                                strict=True)])
         fill_table(self.C, ("C at O", *dofs),
-                   [(d, *row) for d, row in zip(dofs, format_matrix(r.C), strict=True)])
+                   [(d, *row) for d, row in zip(dofs, format_matrix(r.C, u, "damping"),
+                                                strict=True)])
         self.K.setToolTip("N/m (translation rows/columns), N/rad, N m/m, N m/rad")
         self.C.setToolTip("N s/m, N s/rad, N m s/m, N m s/rad")
 
