@@ -3,8 +3,11 @@
 The responses are exact to the scenario's model: each run's recording (force, then zeros long
 enough for the slowest mode to decay under 1e-5 of its start) is transformed, multiplied by
 the system's exact accelerance on the FFT's lines (:meth:`.system.ReferenceSystem.accelerance`)
-and transformed back; the zeros are dropped. The DFT of a recording therefore equals the model's
-FRF times the DFT of the true force on every line (to 1e-5 of the tail left at the end).
+and transformed back; the zeros are dropped. Force and responses both pass the same
+anti-alias filter (flat to ``fs / 2.56``, a raised-cosine taper to zero at ``fs / 2``), so
+the signals are band-limited and, for a record that holds the whole decay, the ratio of
+their DFTs is the model's FRF in the band (hysteretic damping is not causal: its small
+response before each impact is cut at the recording's start).
 
 Hammer test (:func:`hammer_test`), per excitation point one run of several hits:
 
@@ -154,8 +157,10 @@ class HammerSpec:
     """What a hammer test draws.
 
     ``spacing`` is the mean time between hits (each drawn within ``+-jitter`` of it),
-    ``noise_force`` the force noise over the test's force, ``noise_response`` the responses'
-    noise over their median peak, ``damping`` the factor on the mounts' loss factors,
+    ``noise_force`` the force noise over the test's force (``offset`` its DC offset and
+    drift), ``noise_response`` the responses' noise over their median peak (``settling`` the
+    IEPE settling offset at the start, ``drift`` a slow sinusoidal drift, both over it too),
+    ``damping`` the factor on the mounts' loss factors,
     ``fs`` the sample rate (None: a power of two >= 2.56 times the scenario's span, >= 256 Hz).
     """
 
@@ -170,6 +175,7 @@ class HammerSpec:
     noise_response: float = 3e-4
     offset: float = 0.005
     settling: float = 0.1
+    drift: float = 1e-3
     damping: float = 1.0
     fs: float | None = None
 
@@ -181,7 +187,8 @@ class ShakerSpec:
     ``kind``: "random" (continuous), "burst" (random bursts over ``burst`` of each
     ``period``) or "chirp" (a linear sweep over the band every ``period``); ``shakers`` 1 or
     2 (two excitation points driven at once, their drive signals ``correlation`` alike);
-    ``armature`` the shaker's moving mass, kg (the force drop-out at resonances).
+    ``armature`` the shaker's moving mass, kg (the force drop-out at resonances); the
+    errors as in :class:`HammerSpec`.
     """
 
     seed: int
@@ -197,6 +204,7 @@ class ShakerSpec:
     noise_response: float = 1e-3
     offset: float = 0.005
     settling: float = 0.1
+    drift: float = 1e-3
     damping: float = 1.0
     fs: float | None = None
 
@@ -216,13 +224,14 @@ def _tail(system: ReferenceSystem) -> float:
 def _through(system: ReferenceSystem, scenario: Scenario, forces: NDArray[np.float64],
              exc: NDArray[np.int64], fs: float, tail: float, armature: float = 0.0,
              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The true forces and the exact responses (n_resp, n) of the system to ``forces``
+    """The forces and the exact responses (n_resp, n) of the system to ``forces``
     (n_ref, n) at the scenario's excitations ``exc``; with ``armature`` > 0, ``forces`` are
-    the shakers' blocked forces ``G V`` and the forces applied are ``(I + m_a H_dd)^-1 G V``."""
+    the shakers' blocked forces ``G V`` and the forces applied are ``(I + m_a H_dd)^-1 G V``.
+    Both pass the anti-alias filter (:func:`_anti_alias`) as a measurement's would."""
     n = forces.shape[1]
     N = scipy.fft.next_fast_len(n + int(np.ceil(tail * fs)), real=True)
     F = scipy.fft.rfft(forces, N, axis=-1)
-    freq = np.fft.rfftfreq(N, 1 / fs)
+    freq = np.asarray(np.fft.rfftfreq(N, 1 / fs), dtype=np.float64)
     sens, fc = scenario.sensors, scenario.forces
     X = np.empty((sens.nodes.size, freq.size), dtype=complex)
     for lo in range(0, freq.size, _BLOCK):
@@ -236,8 +245,17 @@ def _through(system: ReferenceSystem, scenario: Scenario, forces: NDArray[np.flo
             Fb = np.linalg.solve(np.moveaxis(Z, -1, 0), Fb.T[..., None])[..., 0].T
             F[:, lo:lo + _BLOCK] = Fb
         X[:, lo:lo + _BLOCK] = np.einsum("ref,ef->rf", H, Fb)
-    true_force = scipy.fft.irfft(F, N, axis=-1)[:, :n]
-    return true_force, scipy.fft.irfft(X, N, axis=-1)[:, :n]
+    G = _anti_alias(freq, fs)
+    true_force = scipy.fft.irfft(F * G, N, axis=-1)[:, :n]
+    return true_force, scipy.fft.irfft(X * G, N, axis=-1)[:, :n]
+
+
+def _anti_alias(freq: NDArray[np.float64], fs: float) -> NDArray[np.float64]:
+    """The acquisition's anti-alias filter, the same on every channel: 1 up to ``fs / 2.56``,
+    a raised-cosine taper to 0 at ``fs / 2`` (zero phase)."""
+    lo, hi = fs / 2.56, fs / 2
+    u = np.clip((freq - lo) / (hi - lo), 0.0, 1.0)
+    return np.asarray(0.5 * (1 + np.cos(np.pi * u)), dtype=np.float64)
 
 
 def _flat_level(x: NDArray[np.float64], k: int = 3) -> NDArray[np.float64]:
@@ -256,7 +274,7 @@ def _pulse(t: NDArray[np.float64], start: float, width: float, peak: float,
 
 
 def _sensor_errors(x: NDArray[np.float64], fs: float, rng: np.random.Generator, noise: float,
-                   settling: float) -> NDArray[np.float64]:
+                   settling: float, drift_level: float) -> NDArray[np.float64]:
     """Responses with IEPE settling (a decaying offset from t = 0), slow drift and noise,
     each relative to the responses' median peak."""
     n_ch, n = x.shape
@@ -264,7 +282,7 @@ def _sensor_errors(x: NDArray[np.float64], fs: float, rng: np.random.Generator, 
     level = float(np.median(np.max(np.abs(x), axis=1)))
     settle = (settling * level * rng.uniform(-1, 1, (n_ch, 1))
               * np.exp(-t / rng.uniform(0.2, 0.6, (n_ch, 1))))
-    drift = (1e-3 * level * rng.uniform(-1, 1, (n_ch, 1))
+    drift = (drift_level * level * rng.uniform(-1, 1, (n_ch, 1))
              * np.sin(2 * np.pi * rng.uniform(0.01, 0.05, (n_ch, 1)) * t
                       + rng.uniform(0, 2 * np.pi, (n_ch, 1))))
     return x + settle + drift + noise * level * rng.normal(size=x.shape)
@@ -333,7 +351,8 @@ def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
             tf0, x0 = tf0 + scale * tf1, x0 + scale * x1
             peak[which] *= scale
         true_force, x = tf0, x0
-        resp = _sensor_errors(x, fs, rng, spec.noise_response, spec.settling)
+        resp = _sensor_errors(x, fs, rng, spec.noise_response, spec.settling,
+                              spec.drift)
         resp[ch] = np.clip(resp[ch], -top, top)
         force = _force_errors(true_force, fs, rng, spec.force, spec.noise_force, spec.offset)
         hits = tuple(Hit(float(times[k]), float(peak[k]), float(width[k]),
@@ -384,7 +403,8 @@ def shaker_test(scenario: Scenario, spec: ShakerSpec) -> TimeTest:
             c = spec.correlation
             v[1] = c * v[0] + np.sqrt(1 - c**2) * v[1]
         true_force, x = _through(system, scenario, spec.force * v, exc, fs, tail, spec.armature)
-        resp = _sensor_errors(x, fs, rng, spec.noise_response, spec.settling)
+        resp = _sensor_errors(x, fs, rng, spec.noise_response, spec.settling,
+                              spec.drift)
         force = _force_errors(true_force, fs, rng, spec.force, spec.noise_force, spec.offset)
         runs.append(TimeRecording(k + 1, exc, force, resp))
     return TimeTest(scenario, system, spec.kind, fs, tuple(runs),
