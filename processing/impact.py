@@ -679,7 +679,7 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
     # responses: 50 ms block envelopes (block means removed) against their white noise
     B = max(8, round(0.05 * fs))
     thr = 3 * np.maximum(noise_sigma(x), 1e-300)
-    ends = np.r_[starts[1:], n]
+    ends = np.r_[starts[1:] - round(SAME_HIT * fs), n]  # clear of the next impact's rise
     decays, ratios = [], []
     for s0, s1 in zip(starts.tolist(), ends.tolist(), strict=True):  # few impacts
         nb = (s1 - s0) // B

@@ -11,7 +11,7 @@ response before each impact is cut at the recording's start).
 
 Hammer test (:func:`hammer_test`), per excitation point one run of several hits:
 
-- half-sine pulses of varying width (0.6-1.0 of ``2.56 / fs``: a tip that excites up to the
+- half-sine pulses of varying width (0.9-1.1 of ``2.56 / fs``: a tip that excites up to the
   analysis band) and amplitude (0.5-1.0 of the test's force), irregular spacing;
 - double hits (a second pulse 2.5-8 pulse widths after the first, 20-60 % of its height)
   and clipped hits (a hit at least twice the run's others, hard enough that three consecutive
@@ -322,9 +322,9 @@ def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
         gaps = spec.spacing * rng.uniform(1 - spec.jitter, 1 + spec.jitter, spec.hits)
         lead = rng.uniform(1.0, 2.0)
         times = lead + np.concatenate([[0.0], np.cumsum(gaps[:-1])])
-        n = int(np.ceil((times[-1] + gaps[-1]) * fs))
+        n = int(np.ceil((times[-1] + gaps.max()) * fs))  # the longest gap after the last hit
         t = np.arange(n) / fs
-        width = rng.uniform(0.6, 1.0, spec.hits) * 2.56 / fs
+        width = rng.uniform(0.9, 1.1, spec.hits) * 2.56 / fs
         peak = spec.force * rng.uniform(0.5, 1.0, spec.hits)
         which = int(rng.integers(spec.hits))
         kind = defect[e]
