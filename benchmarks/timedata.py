@@ -137,7 +137,11 @@ def evaluate(i: int, kind: str) -> dict[str, Any]:
         # the exact FRFs on the lines the time data gave, identified the same way
         try:
             frf, _ = open_frfs(path, Settings())
-            exact = dataclasses.replace(frf, H=t.exact_frf(frf.freq),
+            fc = t.scenario.forces  # the columns the time data kept (a run may be left out)
+            cols = [int(np.flatnonzero((fc.ids == n) & np.all(np.isclose(fc.reported_dirs, d),
+                                                               axis=1))[0])
+                    for n, d in zip(frf.exc_nodes, frf.exc_dirs, strict=True)]
+            exact = dataclasses.replace(frf, H=t.exact_frf(frf.freq)[:, cols],
                                         coherence=np.ones(frf.H.shape),
                                         meta={**frf.meta, "exponential_tau": None})
             epath = Path(tmp) / "exact.uff"
