@@ -9,7 +9,9 @@ periodic chirp, 40 s a point, armature 1-4 kg: force drop-outs at resonances). E
 written as a binary UFF file and identified as a user would: ``insitu identify FILE.uff``
 with no option (``app.cli.main.main`` in-process; a non-zero exit status is a refusal, its
 last stderr line the reason). The same scenario's exact FRFs, on the same lines, identified
-the same way, give the errors the time-data processing is compared with.
+the same way, give the errors the time-data processing is compared with; "bands" is the time
+data identified in the bands chosen on the exact FRFs with ``--coherence 0`` (what the FRFs
+from time data are worth when the band choice and the coherence gate are set aside).
 
 Figures: refusals (with their messages), hits rejected (true: double or clipped; false: good
 hits), excitation type detected, and the errors of ``hardware_mocks/reference/metrics.py``
@@ -81,14 +83,14 @@ def case(i: int, kind: str) -> TimeTest:
                                       noise_response=float(rng.uniform(1e-4, 1e-3))))
 
 
-def identify_cli(path: Path) -> tuple[dict[str, Any] | None, str, str]:
-    """``insitu identify PATH --out JSON`` in-process: result (None if refused), the refusal's
-    last stderr line, stdout."""
+def identify_cli(path: Path, *extra: str) -> tuple[dict[str, Any] | None, str, str]:
+    """``insitu identify PATH EXTRA --out JSON`` in-process: result (None if refused), the
+    refusal's last stderr line, stdout."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "r.json"
         o, e = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
-            code = insitu_main(["identify", str(path), "--out", str(out)])
+            code = insitu_main(["identify", str(path), *extra, "--out", str(out)])
         res = json.loads(out.read_text()) if code == 0 and out.exists() else None
     lines = e.getvalue().strip().splitlines()
     return res, (lines[-1] if lines else f"exit status {code}") if res is None else "", o.getvalue()
@@ -148,6 +150,13 @@ def evaluate(i: int, kind: str) -> dict[str, Any]:
             write_frf_uff(epath, exact, binary=True, coherence=True)
             res2, why2, _ = identify_cli(epath)
             row["exact"] = {"refused": why2} if res2 is None else {"errors": _errs(t, res2)}
+            if res2 is not None:  # the time data's FRFs in the bands chosen on the exact ones
+                mb, sb = res2["bands"]["mass_line"], res2["bands"]["stiffness"]
+                res3, why3, _ = identify_cli(path, "--mass-band", *map(str, mb),
+                                             "--stiffness-band", *map(str, sb),
+                                             "--coherence", "0")
+                row["bands"] = ({"refused": why3} if res3 is None
+                                else {"errors": _errs(t, res3)})
         except Exception as err:  # reported, not hidden
             row["exact"] = {"refused": f"{type(err).__name__}: {err}"}
     row["seconds"] = time.perf_counter() - t0
@@ -179,10 +188,13 @@ def report(rows: list[dict[str, Any]]) -> str:
             for r in rs:
                 hits.update(r["hits"])
             lines.append(f"  hits: {dict(hits)}")
-        for key in ("time", "exact"):
-            refused = [r[key]["refused"] for r in rs if "refused" in r[key]]
-            lines.append(f"  {key:5s}: answered {len(rs) - len(refused)}/{len(rs)}; "
-                         f"median/p95 {_stats(rs, key)}")
+        for key in ("time", "exact", "bands"):
+            have = [r for r in rs if key in r]
+            if not have:
+                continue
+            refused = [r[key]["refused"] for r in have if "refused" in r[key]]
+            lines.append(f"  {key:5s}: answered {len(have) - len(refused)}/{len(have)}; "
+                         f"median/p95 {_stats(have, key)}")
             for msg, n in Counter(re.sub(r"[-\d.]+", "#", m)[:160] for m in refused).items():
                 lines.append(f"    refused x{n}: {msg}")
     return "\n".join(lines)
