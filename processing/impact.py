@@ -34,10 +34,15 @@ from processing.spectral import CrossSpectra, combine, frf, record_spectra
 from processing.windows import exponential_window, force_window
 
 __all__ = [
+    "ExcitationGuess",
     "HitVerdict",
+    "ImpactDefaults",
     "ImpactResult",
     "ImpactSettings",
+    "excitation_type",
+    "exponential_for",
     "find_triggers",
+    "impact_defaults",
     "impact_frfset",
     "merge_results",
     "process_impacts",
@@ -490,3 +495,206 @@ def impact_frfset(
         coherence=np.concatenate(cohs, axis=1),
         meta=meta,
     )
+
+
+# ---- defaults read from the data ----
+
+#: a force whose kurtosis exceeds this is impulsive (hammer); Gaussian random has 3, a sine
+#: 1.5, burst random about 3 over its duty cycle
+IMPULSIVE_KURTOSIS = 20.0
+#: impacts closer than this (s) are one hit (a double hit's rebound)
+SAME_HIT = 0.1
+
+
+@dataclass(frozen=True)
+class ExcitationGuess:
+    """What the force channel looks like: ``kind`` ('impact' or 'random'), its kurtosis
+    (``E[x^4] / E[x^2]^2`` about the median) and crest factor (peak / RMS)."""
+
+    kind: Literal["impact", "random"]
+    kurtosis: float
+    crest: float
+
+
+def excitation_type(force: ArrayLike) -> ExcitationGuess:
+    """Hammer or shaker from one force channel (N): impulsive (kurtosis above
+    :data:`IMPULSIVE_KURTOSIS`) is a hammer test, anything else random excitation.
+
+    >>> t = np.arange(8192) / 1024.0
+    >>> excitation_type(np.exp(-((t % 2 - 1) / 0.002) ** 2)).kind
+    'impact'
+    >>> excitation_type(np.random.default_rng(0).normal(size=8192)).kind
+    'random'
+    """
+    x = np.asarray(force, dtype=float).ravel()
+    x = x - np.median(x)
+    m2 = float(np.mean(x**2))
+    if not m2 > 0:
+        return ExcitationGuess("random", 0.0, 0.0)
+    k = float(np.mean(x**4) / m2**2)
+    crest = float(np.max(np.abs(x)) / np.sqrt(m2))
+    return ExcitationGuess("impact" if k > IMPULSIVE_KURTOSIS else "random", k, crest)
+
+
+def noise_sigma(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Standard deviation of each row's white noise, from the second differences (robust:
+    the median absolute deviation; slow signals, offsets and drifts barely contribute)."""
+    d2 = np.diff(np.asarray(x, dtype=float), 2, axis=-1)
+    mad = np.median(np.abs(d2 - np.median(d2, axis=-1, keepdims=True)), axis=-1)
+    return np.asarray(1.4826 * mad / np.sqrt(6.0), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class ImpactDefaults:
+    """Hammer-test settings read from one recording (see :func:`impact_defaults`).
+
+    Attributes
+    ----------
+    level : trigger level, N (baseline plus 10 noise standard deviations, at least 2 % of the
+        largest impact above the baseline)
+    noise : the force's noise standard deviation, N
+    n_hits : impacts found (those closer than :data:`SAME_HIT` counted once)
+    spacing : shortest time between impacts, s (None: one impact)
+    pulse_width : median pulse width (first above 10 % of the peak to back below 5 %), s
+    decay : median over impacts of the time their slowest response channel takes to fall
+        under three times its noise (extrapolated exponentially past the next impact), s
+    record : record length, s: the decay plus the pre-trigger (at least :data:`MIN_RECORD`),
+        at most 95 % of the spacing (one impact: what follows it)
+    exp_tau : exponential window time constant, s, when the responses have not decayed by
+        the end of the record (it takes them down to their noise by then,
+        :func:`exponential_for`); None otherwise
+    ratio : the slowest channel's envelope just after the impact over its noise threshold
+    """
+
+    level: float
+    noise: float
+    n_hits: int
+    spacing: float | None
+    pulse_width: float
+    decay: float
+    record: float
+    exp_tau: float | None
+    ratio: float = float(np.e)
+
+
+#: shortest default record, s (lines 0.5 Hz apart: a mount mode of a few Hz needs lines below it)
+MIN_RECORD = 2.0
+
+
+def exponential_for(record: float, pretrigger: float, decay: float, ratio: float,
+                    ) -> float | None:
+    """Exponential window time constant (s) that brings responses decaying in ``decay`` s
+    (start-to-noise ratio ``ratio``) down to their noise by the end of a ``record`` s record
+    starting ``pretrigger`` s before the impact: ``tau = T d / (ln(r) (d - T))`` with
+    ``T = record - pretrigger``, at least ``T / 10``; None when they have decayed by then."""
+    T = record - pretrigger
+    if not decay > T or not ratio > 1:
+        return None
+    return float(max(T * decay / (np.log(ratio) * (decay - T)), T / 10))
+
+
+def _impacts(g: NDArray[np.float64], level: float, fs: float) -> NDArray[np.int64]:
+    """First sample of each impact: rising crossings of ``level`` more than SAME_HIT apart."""
+    above = g > level
+    rise = np.flatnonzero(above[1:] & ~above[:-1]) + 1
+    out: list[int] = []
+    for r in rise.tolist():  # few crossings: one or two a hit
+        if not out or r - out[-1] > SAME_HIT * fs:
+            out.append(r)
+    return np.asarray(out, dtype=np.int64)
+
+
+def _decay_time(env: NDArray[np.float64], thr: NDArray[np.float64], dt: float,
+                ) -> tuple[float, float]:
+    """Time (s) until a response's block envelope (n_ch, n_blk, from an impact to the next)
+    stays under ``thr`` (n_ch,), the slowest channel's, and that channel's start-to-threshold
+    ratio. Past the segment's end, the decay of its last half is extrapolated."""
+    n_ch, nb = env.shape
+    above = env > thr[:, None]
+    times = np.empty(n_ch)
+    for c in range(n_ch):  # few channels, each a vectorised look-up
+        idx = np.flatnonzero(above[c])
+        if idx.size == 0:
+            times[c] = 0.0
+            continue
+        last = int(idx[-1])
+        if last < nb - 1:
+            times[c] = (last + 1) * dt
+            continue
+        half = np.arange(nb // 2, nb)
+        y = np.log(np.maximum(env[c, half], 1e-300))
+        slope = np.polyfit(half * dt, y, 1)[0] if half.size >= 3 else 0.0
+        end = float(np.mean(env[c, -max(1, nb // 8):]))
+        if slope < 0 and end > thr[c]:
+            times[c] = nb * dt + np.log(end / thr[c]) / -slope
+        else:  # not decaying (or already there): say ten segments
+            times[c] = 10 * nb * dt
+    c = int(np.argmax(times))
+    ratio = float(np.max(env[c, : max(1, nb // 20 + 1)]) / thr[c])
+    return float(times[c]), max(ratio, 1.0 + 1e-9)
+
+
+def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
+                    pretrigger: float = 0.01) -> ImpactDefaults:
+    """Trigger level, record length and exponential window read from one hammer recording.
+
+    Parameters
+    ----------
+    force : (n,) force, N (a hammer pushing along the excitation: positive pulses)
+    responses : (n_resp, n) accelerations
+    fs : sample rate, Hz
+    pretrigger : s kept before each trigger
+
+    Returns
+    -------
+    ImpactDefaults
+        See its attributes for how each is chosen. The exponential window is chosen so
+        that ``envelope(T) exp(-T / tau)`` is down at three noise standard deviations at the
+        record's end ``T``: ``tau = T d / (ln(r) (d - T))`` for a decay time ``d`` and a
+        start-to-noise ratio ``r``, at least ``T / 10``.
+
+    Raises
+    ------
+    InputError
+        No impact found above the noise.
+    """
+    f = np.asarray(force, dtype=float).ravel()
+    x = np.atleast_2d(np.asarray(responses, dtype=float))
+    n = f.size
+    base = float(np.median(f))
+    sigma = float(noise_sigma(f[None])[0])
+    g = f - base
+    peak = float(g.max())
+    if not peak > 10 * sigma or peak <= 0:
+        raise InputError("no impact stands out of the force's noise: check the force channel")
+    level = max(10 * sigma, 0.02 * peak)
+    starts = _impacts(g, level, fs)
+    spacing = float(np.min(np.diff(starts)) / fs) if starts.size > 1 else None
+    # pulse widths: from first above 10 % of each impact's peak to back under 5 %
+    w_n = max(1, round(SAME_HIT * fs))
+    seg = g[np.minimum(starts[:, None] + np.arange(w_n), n - 1)]
+    _, fall, _ = _pulse_edges(seg, 0.1)
+    first = np.argmax(seg > 0.1 * seg.max(axis=-1, keepdims=True), axis=-1)
+    width = float(np.median(np.maximum(fall - first, 1))) / fs
+    # responses: 50 ms block envelopes (block means removed) against their white noise
+    B = max(8, round(0.05 * fs))
+    thr = 3 * np.maximum(noise_sigma(x), 1e-300)
+    ends = np.r_[starts[1:] - round(SAME_HIT * fs), n]  # clear of the next impact's rise
+    decays, ratios = [], []
+    for s0, s1 in zip(starts.tolist(), ends.tolist(), strict=True):  # few impacts
+        nb = (s1 - s0) // B
+        if nb < 4:
+            continue
+        blk = x[:, s0:s0 + nb * B].reshape(x.shape[0], nb, B)
+        env = np.sqrt(np.mean((blk - blk.mean(axis=-1, keepdims=True)) ** 2, axis=-1))
+        d, r = _decay_time(env, thr, B / fs)
+        decays.append(d)
+        ratios.append(r)
+    decay = float(np.median(decays)) if decays else (n - starts[-1]) / fs
+    ratio = float(np.median(ratios)) if ratios else np.e
+    limit = (n - starts[-1]) / fs + pretrigger if spacing is None else 0.95 * spacing
+    want = np.ceil(max(decay + pretrigger, MIN_RECORD) * 100) / 100
+    record = max(min(want, np.floor(limit * 100) / 100), 8 / fs, 2 * pretrigger)
+    return ImpactDefaults(level=base + level, noise=sigma, n_hits=int(starts.size),
+                          spacing=spacing, pulse_width=width, decay=decay, record=float(record),
+                          exp_tau=exponential_for(record, pretrigger, decay, ratio), ratio=ratio)

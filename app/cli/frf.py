@@ -53,7 +53,9 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
     """The options that turn time records into FRFs (shared with ``insitu identify``)."""
     flags = ("--excitation", "--method") if method_alias else ("--excitation",)
     p.add_argument(*flags, dest="excitation", choices=("random", "impact"),
-                   default="random", help="time data: shaker random or hammer impact")
+                   help="time data: shaker random or hammer impact (default: from the force "
+                        "channel, an impulsive force is a hammer test; a hammer option given "
+                        "means impact)")
     p.add_argument("--estimator", choices=ESTIMATORS, default="H1")
     p.add_argument("--nperseg", type=int, default=2048,
                    help="random: samples per segment (line spacing fs/nperseg)")
@@ -64,11 +66,14 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
                         "impact, the first N accepted hits of each excitation point "
                         "(default: all)")
     p.add_argument("--level", type=float,
-                   help="impact: trigger level, N (default: 10 %% of the run's largest force)")
-    p.add_argument("--record", type=float, default=1.0, help="impact: record length, s")
-    p.add_argument("--pretrigger", type=float, default=0.01, help="impact: pre-trigger, s")
+                   help="impact: trigger level, N (default: from each run's force noise)")
+    p.add_argument("--record", type=float,
+                   help="impact: record length, s (default: from the hit spacing and the "
+                        "responses' decay)")
+    p.add_argument("--pretrigger", type=float, help="impact: pre-trigger, s (default 0.01)")
     p.add_argument("--exp-tau", type=float,
-                   help="impact: exponential window time constant, s (default: none)")
+                   help="impact: exponential window time constant, s (default: chosen when "
+                        "the responses have not decayed by the end of the record; 0: none)")
     p.add_argument("--coherence", type=float, default=0.8, help="coherence gate threshold")
     p.add_argument("--fmax", type=float,
                    help="highest line kept, Hz (default fs / 2.56, the anti-alias filters' "

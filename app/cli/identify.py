@@ -101,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
     args.mounts_file = mounts_from(args)
     fmt = detect_format(args.file)
     if fmt == TIME_UFF:
-        print(f"{args.file}: time records; computing FRFs ({args.excitation} excitation)")
+        how = f"{args.excitation} excitation" if args.excitation else "settings from the data"
+        print(f"{args.file}: time records; computing FRFs ({how})")
     frf, n_bad = open_and_show(args, settings, fmt)
     stored = frf.meta.get("mounts")
     if args.mounts_file is None and isinstance(stored, MountsFile):

@@ -31,17 +31,21 @@ class Settings:
 
     Attributes
     ----------
-    excitation : time records: ``"random"`` (shaker, Welch) or ``"impact"`` (hammer hits)
+    excitation : time records: ``"random"`` (shaker, Welch) or ``"impact"`` (hammer hits); None
+        reads it from the data (an impulsive force is a hammer test; a hammer option given,
+        ``level``, ``record``, ``pretrigger`` or ``exp_tau``, means one)
     estimator : FRF estimator (``"H1"``, ``"H2"``, ...: :data:`processing.spectral.ESTIMATORS`)
     nperseg : random: samples per segment (line spacing fs / nperseg)
     overlap : random: segment overlap, in [0, 1)
     window : random: window name (``"hann"``, ``"boxcar"``, ...)
     averages : at most this many averages (random: the first segments of each run; impact and
         run files: the first used hits or blocks of each point); None for all
-    level : impact: trigger level, N (None: 10 % of the run's largest force)
-    record : impact: record length, s
-    pretrigger : impact: pre-trigger, s
-    exp_tau : impact: exponential window time constant, s (None: no exponential window)
+    level : impact: trigger level, N (None: from each run's force noise,
+        :func:`processing.impact.impact_defaults`)
+    record : impact: record length, s (None: from the hit spacing and the responses' decay)
+    pretrigger : impact: pre-trigger, s (None: 0.01 s)
+    exp_tau : impact: exponential window time constant, s (None: chosen when the responses
+        have not decayed by the end of the record; 0: no exponential window)
     coherence : coherence gate threshold of the checks reported
     fmax : highest line kept, Hz, for FRFs computed from time data (None: fs / 2.56)
     run_points : run files: ``"all"`` (every point needs a used hit or block, else the file
@@ -52,15 +56,15 @@ class Settings:
         ``run_points="all"``)
     """
 
-    excitation: Literal["random", "impact"] = "random"
+    excitation: Literal["random", "impact"] | None = None
     estimator: str = "H1"
     nperseg: int = 2048
     overlap: float = 0.5
     window: str = "hann"
     averages: int | None = None
     level: float | None = None
-    record: float = 1.0
-    pretrigger: float = 0.01
+    record: float | None = None
+    pretrigger: float | None = None
     exp_tau: float | None = None
     coherence: float = 0.8
     fmax: float | None = None
@@ -84,13 +88,18 @@ class Settings:
         if self.level is not None and not (math.isfinite(self.level) and self.level > 0):
             raise InputError(f"--level must be a positive force in N (the trigger fires when "
                              f"the force rises above it), got {self.level:g}")
-        _between("--record", self.record, 1e-3, MAX_RECORD, "s")
-        if not (math.isfinite(self.pretrigger) and 0 <= self.pretrigger < self.record):
+        if self.record is not None:
+            _between("--record", self.record, 1e-3, MAX_RECORD, "s")
+        if self.pretrigger is not None and not (
+                math.isfinite(self.pretrigger) and 0 <= self.pretrigger
+                and (self.record is None or self.pretrigger < self.record)):
             raise InputError(f"--pretrigger must be at least 0 s and shorter than --record "
-                             f"({self.record:g} s), got {self.pretrigger:g} s")
-        if self.exp_tau is not None and not (math.isfinite(self.exp_tau) and self.exp_tau > 0):
-            raise InputError(f"--exp-tau must be a positive time constant in s, got "
-                             f"{self.exp_tau:g}")
+                             f"({self.record:g} s), got {self.pretrigger:g} s"
+                             if self.record is not None else
+                             f"--pretrigger must be at least 0 s, got {self.pretrigger:g} s")
+        if self.exp_tau is not None and not (math.isfinite(self.exp_tau) and self.exp_tau >= 0):
+            raise InputError(f"--exp-tau must be a time constant in s (0: no exponential "
+                             f"window), got {self.exp_tau:g}")
         if not (math.isfinite(self.coherence) and 0 <= self.coherence <= 1):
             raise InputError(f"--coherence must be from 0 to 1, got {self.coherence:g}")
         if self.fmax is not None:
@@ -103,9 +112,16 @@ class Settings:
             raise InputError(f"--fmax {self.fmax:g} Hz is above the records' Nyquist frequency "
                              f"({fs / 2:g} Hz): give at most {fs / 2.56:g} Hz (fs / 2.56) or "
                              "leave it out")
-        if self.excitation == "impact" and self.record > longest:
+        if self.record is not None and self.excitation != "random" and self.record > longest:
             raise InputError(f"--record {self.record:g} s is longer than every run (the "
                              f"longest is {longest:g} s): give at most that, or leave it out")
+
+
+    @property
+    def hammer_given(self) -> bool:
+        """A hammer option was given (trigger level, record, pre-trigger, exponential window)."""
+        return any(v is not None for v in (self.level, self.record, self.pretrigger,
+                                           self.exp_tau))
 
 
 @dataclass(frozen=True)

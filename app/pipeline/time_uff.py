@@ -8,8 +8,10 @@ per-hit checks, force and exponential windows). A bad run is reported and left o
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,7 +22,16 @@ from app.io.uff_time import TimeRun
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
-from processing.impact import ImpactResult, ImpactSettings, merge_results, process_impacts
+from processing.impact import (
+    ImpactDefaults,
+    ImpactResult,
+    ImpactSettings,
+    excitation_type,
+    exponential_for,
+    impact_defaults,
+    merge_results,
+    process_impacts,
+)
 from processing.spectral import CrossSpectra, SpectralAccumulator, combine, frf
 
 __all__ = ["open_time_uff"]
@@ -46,18 +57,27 @@ def _random_spectra(r: TimeRun, s: Settings) -> CrossSpectra:
     return acc.spectra()
 
 
-def _impact(r: TimeRun, s: Settings, max_averages: int | None = None) -> ImpactResult:
+#: pre-trigger when none is given, s
+PRETRIGGER = 0.01
+
+
+def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
+            max_averages: int | None = None) -> ImpactResult:
     """Hits of one run, the first ``max_averages`` accepted ones averaged; InputError (naming
-    the load case) when none can be used."""
+    the load case) when none can be used. ``s`` is resolved (:func:`_resolve`); ``levels``
+    the runs' default trigger levels, N."""
     lc = f"load case {r.load_case}"
     peak = float(np.max(np.abs(r.force)))
-    if s.level is None and peak == 0:
-        raise InputError(f"{lc}: the force channel is zero throughout: check the hammer channel")
-    level = s.level if s.level is not None else 0.1 * peak
+    if s.level is None and (peak == 0 or r.load_case not in levels):
+        raise InputError(f"{lc}: the force channel is zero throughout: check the hammer channel"
+                         if peak == 0 else f"{lc}: no impact stands out of the force's noise: "
+                         "check the hammer channel or give --level")
+    level = s.level if s.level is not None else levels[r.load_case]
+    assert s.record is not None and s.pretrigger is not None
     settings = ImpactSettings(
         level=level, record_length=round(s.record * r.fs),
         pretrigger=round(s.pretrigger * r.fs),
-        slope="rising" if level > 0 else "falling", exp_tau=s.exp_tau,
+        slope="rising" if level > 0 else "falling", exp_tau=s.exp_tau or None,
     )
     names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
     res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
@@ -90,7 +110,7 @@ def _consistent(runs: list[TimeRun], reports: list[RunReport]) -> list[TimeRun]:
 
 
 def _impact_column(key: DofKey, members: list[TimeRun], s: Settings,
-                   reports: list[RunReport]) -> Column | None:
+                   reports: list[RunReport], levels: dict[int, float]) -> Column | None:
     """The averaged hits of one excitation DOF's runs (None when none is usable)."""
     results: list[ImpactResult] = []
     for r in members:
@@ -103,7 +123,7 @@ def _impact_column(key: DofKey, members: list[TimeRun], s: Settings,
                                          "are averaged"))
                 continue
         try:
-            one = _impact(r, s, left)
+            one = _impact(r, s, levels, left)
         except InputError as err:
             reports.append(RunReport(str(err), skipped=True))
             continue
@@ -123,7 +143,7 @@ def _impact_column(key: DofKey, members: list[TimeRun], s: Settings,
 
 
 def _random_column(key: DofKey, members: list[TimeRun], s: Settings,
-                   reports: list[RunReport]) -> Column | None:
+                   reports: list[RunReport], levels: dict[int, float]) -> Column | None:
     """The Welch average over one excitation DOF's runs (None when none is usable)."""
     spectra = []
     for r in members:
@@ -144,6 +164,70 @@ def _random_column(key: DofKey, members: list[TimeRun], s: Settings,
     return H, coh, sp.freq
 
 
+def _excitation(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]]:
+    """``s`` with its excitation read from the data when not given, and the line saying so."""
+    if s.excitation is not None:
+        return s, []
+    if s.hammer_given:
+        return dataclasses.replace(s, excitation="impact"), [RunReport(
+            "excitation impact (a hammer option is given; --excitation random to change)")]
+    guesses = [excitation_type(r.force) for r in runs]
+    n_imp = sum(g.kind == "impact" for g in guesses)
+    kind: Literal["impact", "random"] = "impact" if 2 * n_imp > len(guesses) else "random"
+    k = float(np.median([g.kurtosis for g in guesses]))
+    crest = float(np.median([g.crest for g in guesses]))
+    why = (f"force impulsive in {n_imp} of {len(runs)} runs: median kurtosis {k:.3g}, crest "
+           f"factor {crest:.3g}" if kind == "impact" else
+           f"force not impulsive in {len(runs) - n_imp} of {len(runs)} runs: median kurtosis "
+           f"{k:.3g}, crest factor {crest:.3g}")
+    other = "random" if kind == "impact" else "impact"
+    return dataclasses.replace(s, excitation=kind), [
+        RunReport(f"excitation {kind} ({why}; --excitation {other} to change)")]
+
+
+def _resolve(runs: list[TimeRun], s: Settings,
+             ) -> tuple[Settings, dict[int, float], list[RunReport]]:
+    """The settings with every default read from the data, the runs' trigger levels (N, by
+    load case) and one line per default chosen."""
+    s, lines = _excitation(runs, s)
+    if s.excitation != "impact":
+        return s, {}, lines
+    pre = s.pretrigger if s.pretrigger is not None else PRETRIGGER
+    found: dict[int, ImpactDefaults] = {}
+    for r in runs:
+        try:
+            found[r.load_case] = impact_defaults(r.force, r.responses, r.fs, pre)
+        except InputError:
+            continue  # reported by the run's processing
+    levels = {lc: d.level for lc, d in found.items()}
+    if not found:
+        return dataclasses.replace(s, pretrigger=pre, record=s.record or 1.0,
+                                   exp_tau=s.exp_tau or 0.0), levels, lines
+    d = list(found.values())
+    if s.level is None:
+        lv = np.array(list(levels.values()))
+        lines.append(RunReport(
+            f"trigger level {lv.min():.3g}-{lv.max():.3g} N by run (10 x the force's noise, "
+            f"{np.median([x.noise for x in d]):.2g} N, at least 2 % of the largest impact; "
+            "--level to change)"))
+    spacing = [x.spacing for x in d if x.spacing is not None]
+    decay = float(np.median([x.decay for x in d]))
+    ratio = float(np.median([x.ratio for x in d]))
+    record = s.record if s.record is not None else min(x.record for x in d)
+    tau = s.exp_tau if s.exp_tau is not None else exponential_for(record, pre, decay, ratio)
+    hits = f"hits {min(spacing):.2g} s apart at least" if spacing else "one hit a run"
+    if s.record is None or s.exp_tau is None:
+        window = (f"exponential window tau = {tau:.2g} s" if tau else "no exponential window")
+        lines.append(RunReport(
+            f"record {record:g} s ({hits}; responses decay in {decay:.2g} s): {window} "
+            "(--record, --exp-tau to change)"))
+    lines.append(RunReport(
+        f"force window: each pulse's end plus one pulse width (pulses "
+        f"{np.median([x.pulse_width for x in d]) * 1e3:.2g} ms wide)"))
+    return dataclasses.replace(s, pretrigger=pre, record=record, exp_tau=tau or 0.0), levels, \
+        lines
+
+
 def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
     """FRFs with coherence and geometry from the time runs of a UFF file.
 
@@ -153,11 +237,14 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
     """
     runs, problems = read_time_uff(path, strict=False)
     reports = [RunReport(msg, skipped=True) for _, msg in problems]
+    levels: dict[int, float] = {}
     if runs:  # options that depend on the data: once for the file, not once per run
         try:
             s.check_rate(runs[0].fs, max(r.n_samples / r.fs for r in runs))
         except InputError as err:
             raise OpenError(str(err), reports) from err
+        s, levels, chosen = _resolve(runs, s)
+        reports = chosen + reports
     if runs and s.excitation == "random" and max(r.n_samples for r in runs) < s.nperseg:
         raise OpenError(f"the longest run has {max(r.n_samples for r in runs)} samples, fewer "
                         f"than --nperseg {s.nperseg}: lower --nperseg", reports)
@@ -167,7 +254,7 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
         groups.setdefault((int(r.exc_node), tuple(np.round(r.exc_dir, 6))), []).append(r)
     column = _impact_column if s.excitation == "impact" else _random_column
     cols = {key: col for key, members in groups.items()
-            if (col := column(key, members, s, reports)) is not None}
+            if (col := column(key, members, s, reports, levels)) is not None}
     if not cols:
         raise OpenError(f"{path}: no usable time run ({n_skipped(reports)} bad run(s), see "
                         "above)", reports)
@@ -175,7 +262,7 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
     geometry, _ = read_geometry_uff(path)
     keys = list(cols)
     meta: dict[str, object] = {"estimator": s.estimator, "excitation": s.excitation,
-                               "exponential_tau": s.exp_tau if s.excitation == "impact"
+                               "exponential_tau": s.exp_tau or None if s.excitation == "impact"
                                else None}
     out = assemble(cols[keys[0]][2], [cols[k][0] for k in keys], [cols[k][1] for k in keys],
                    first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),

@@ -206,6 +206,33 @@ class ReferenceSystem:
             return np.sort(np.abs(lam[lam.imag > 0])) / (2 * np.pi)
         return np.sqrt(np.clip(lam.real, 0.0, None)) / (2 * np.pi)
 
+    def slowest_decay_per_s(self) -> float:
+        """Smallest modal decay rate ``alpha`` (free vibration ``~ exp(-alpha t)``), 1/s.
+
+        Viscous modes: ``-Re s`` of the state-space poles; hysteretic ones (``lam = w^2 (1 +
+        j eta)``): ``|Im sqrt(lam)|`` (about ``w eta / 2``). A rigid system uses its truth's
+        6-DOF model (poles of ``[[0, I], [-M^-1 (K + j K_loss), -M^-1 C]]``). 0 when undamped.
+        """
+        if self.rigid:
+            t = self.truth
+            A = np.zeros((12, 12), dtype=complex)
+            A[:6, 6:] = np.eye(6)
+            A[6:, :6] = -np.linalg.solve(t.M, t.K + 1j * t.K_loss)
+            A[6:, 6:] = -np.linalg.solve(t.M, t.C)
+            return float(np.min(np.abs(np.linalg.eigvals(A).real)))
+        lam = self._modal[0]
+        if self.damping == "viscous":
+            return float(np.min(np.abs(lam.real)))
+        return float(np.min(np.abs(np.sqrt(lam.astype(complex)).imag)))
+
+    def with_mount_damping(self, factor: float) -> ReferenceSystem:
+        """The same body and mounts with every mount loss factor times ``factor`` (mass,
+        centre of gravity, inertia and stiffness unchanged; the damping of the truth scales)."""
+        mounts = tuple(Mount(m.node, m.position, m.axes, m.rates, m.loss_factors * factor)
+                       for m in self.mounts)
+        return ReferenceSystem(self.body, mounts, rigid=self.rigid, damping=self.damping,
+                               reference_hz=self.reference_hz)
+
     def first_elastic_hz(self) -> float:
         """The seventh natural frequency (the first above the six mount modes); inf if rigid."""
         return float("inf") if self.rigid else float(self.natural_frequencies_hz()[6])

@@ -115,7 +115,7 @@ def test_averages_impact_uses_the_first_accepted_hits_of_a_point(
                     r1.resp_dirs)
     src, out = tmp_path / "time.uff", tmp_path / "frf.uff"
     write_time_uff(src, [*runs, again], g, binary=True)  # type: ignore[arg-type]
-    opts = ["--method", "impact", "--record", "4", "--pretrigger", "0.25"]
+    opts = ["--method", "impact", "--record", "4", "--pretrigger", "0.25", "--exp-tau", "0"]
     assert main(["frf", str(src), "--out", str(out), *opts, "--averages", "2"]) == 0
     text = capsys.readouterr().out
     assert "load case 1 (node" in text

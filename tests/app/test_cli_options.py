@@ -22,9 +22,11 @@ FS = 256.0
     (["--averages", "0"], "--averages must be at least 1, got 0"),
     (["--level", "-3"], "--level must be a positive force in N"),
     (["--record", "1e9"], "--record must be from 0.001 to 3600 s, got 1000000000"),
-    (["--pretrigger", "-1"], "--pretrigger must be at least 0 s and shorter than --record "
-                             "(1 s), got -1 s"),
-    (["--exp-tau", "-1"], "--exp-tau must be a positive time constant in s, got -1"),
+    (["--pretrigger", "-1"], "--pretrigger must be at least 0 s, got -1 s"),
+    (["--pretrigger", "2", "--record", "1"], "--pretrigger must be at least 0 s and shorter "
+                                             "than --record (1 s), got 2 s"),
+    (["--exp-tau", "-1"], "--exp-tau must be a time constant in s (0: no exponential window), "
+                          "got -1"),
     (["--coherence", "1.5"], "--coherence must be from 0 to 1, got 1.5"),
     (["--fmax", "1e300"], "--fmax must be from 0.001 to 10000000 Hz, got 1e+300"),
     (["--fmax", "nan"], "--fmax must be from"),

@@ -1,0 +1,225 @@
+"""Time data to identification with default options, on generated hammer and shaker tests.
+
+Each case is a reference-model scenario (``hardware_mocks/reference/scenarios.py``: lattice
+body on inclined mounts, 9 excitation points, 4 triaxial sensors) measured as time records by
+the generator (``hardware_mocks/reference/timedata.py``): hammer tests (5 hits a point,
+2.5-5 s apart +-20 %, one double hit and one clipped hit per test, mount damping x0.2-x3,
+noise, offsets, drift, IEPE settling) and shaker tests (continuous random, burst random or
+periodic chirp, 40 s a point, armature 1-4 kg: force drop-outs at resonances). Each is
+written as a binary UFF file and identified as a user would: ``insitu identify FILE.uff``
+with no option (``app.cli.main.main`` in-process; a non-zero exit status is a refusal, its
+last stderr line the reason). The same scenario's exact FRFs, on the same lines, identified
+the same way, give the errors the time-data processing is compared with; "bands" is the time
+data identified in the bands chosen on the exact FRFs with ``--coherence 0`` (what the FRFs
+from time data are worth when the band choice and the coherence gate are set aside).
+
+Figures: refusals (with their messages), hits rejected (true: double or clipped; false: good
+hits), excitation type detected, and the errors of ``hardware_mocks/reference/metrics.py``
+(mass %, CoG mm, inertia % of the largest principal moment), median and 95th percentile.
+
+Run: ``.venv/bin/python benchmarks/timedata.py [--hammer 50] [--shaker 50] [--jobs 2]
+[--json FILE]``.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import dataclasses  # noqa: E402
+import io  # noqa: E402
+import json  # noqa: E402
+import re  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from collections import Counter  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from app.cli.main import main as insitu_main  # noqa: E402
+from app.io.uff import write_frf_uff  # noqa: E402
+from app.pipeline import Settings, open_frfs  # noqa: E402
+from hardware_mocks.reference.metrics import errors  # noqa: E402
+from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario  # noqa: E402
+from hardware_mocks.reference.timedata import (  # noqa: E402
+    HammerSpec,
+    ShakerSpec,
+    TimeTest,
+    hammer_test,
+    shaker_test,
+    write_uff,
+)
+
+FIGURES = ("mass", "cog", "inertia")
+
+
+def case(i: int, kind: str) -> TimeTest:
+    """Generated test ``i`` of ``kind`` ("hammer" or "shaker"), deterministic in ``i``."""
+    rng = np.random.default_rng([2026, i, kind == "hammer"])
+    spec = ScenarioSpec(seed=7000 + i + (500 if kind == "shaker" else 0),
+                        shape=("block", "engine", "gearbox")[i % 3], n_sensors=4, n_forces=9,
+                        elastic_ratio=float(rng.uniform(4.0, 12.0)),
+                        band_ratio=float(rng.uniform(0.3, 0.8)),
+                        damping="viscous" if rng.uniform() < 1 / 3 else "hysteretic")
+    sc = build_scenario(spec)
+    damping = float(np.exp(rng.uniform(np.log(0.2), np.log(3.0))))
+    if kind == "hammer":
+        return hammer_test(sc, HammerSpec(seed=i, spacing=float(rng.uniform(2.5, 5.0)),
+                                          n_double=1, n_clipped=1, damping=damping,
+                                          noise_force=float(rng.uniform(2e-4, 2e-3)),
+                                          noise_response=float(rng.uniform(1e-4, 1e-3))))
+    drive = ("random", "burst", "chirp")[i % 3]
+    return shaker_test(sc, ShakerSpec(seed=i, kind=drive, damping=damping,  # type: ignore[arg-type]
+                                      armature=float(rng.uniform(1.0, 4.0)),
+                                      noise_force=float(rng.uniform(2e-4, 2e-3)),
+                                      noise_response=float(rng.uniform(1e-4, 1e-3))))
+
+
+def identify_cli(path: Path, *extra: str) -> tuple[dict[str, Any] | None, str, str]:
+    """``insitu identify PATH EXTRA --out JSON`` in-process: result (None if refused), the
+    refusal's last stderr line, stdout."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "r.json"
+        o, e = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
+            code = insitu_main(["identify", str(path), *extra, "--out", str(out)])
+        res = json.loads(out.read_text()) if code == 0 and out.exists() else None
+    lines = e.getvalue().strip().splitlines()
+    return res, (lines[-1] if lines else f"exit status {code}") if res is None else "", o.getvalue()
+
+
+def _errs(t: TimeTest, res: dict[str, Any]) -> dict[str, float]:
+    return errors(t.truth, res["mass"], res["cog"], res["inertia_origin"], res["inertia_cog"],
+                  res["stiffness"])
+
+
+def _hit_counts(t: TimeTest, out: str) -> dict[str, int]:
+    """Rejected hits from the pipeline's lines ``load case N (node ..): k hits accepted,
+    rejected: hit i: ...``, matched to the generator's labels by order."""
+    rejected: dict[int, set[int]] = {}
+    for m in re.finditer(r"load case (\d+) \(node \d+\): \d+ hits accepted(.*)", out):
+        rejected[int(m.group(1))] = {int(h) - 1 for h in re.findall(r"hit (\d+):", m.group(2))}
+    c = Counter[str]()
+    for r in t.runs:
+        rej = rejected.get(r.load_case)
+        if rej is None:  # the whole run left out
+            c["run left out"] += 1
+            continue
+        for k, h in enumerate(r.hits):
+            c["bad rejected" if not h.good and k in rej else
+              "bad accepted" if not h.good else
+              "good rejected" if k in rej else "good accepted"] += 1
+    return dict(c)
+
+
+def evaluate(i: int, kind: str) -> dict[str, Any]:
+    t0 = time.perf_counter()
+    t = case(i, kind)
+    row: dict[str, Any] = {"case": i, "kind": kind, "drive": t.kind,
+                           "damping": t.settings["damping"]}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "time.uff"
+        write_uff(t, path)
+        res, why, out = identify_cli(path)
+        m = re.search(r"^excitation (\w+) ", out, re.M)
+        row["detected"] = m.group(1) if m else "?"
+        row["defaults"] = [ln for ln in out.splitlines()
+                           if ln.startswith(("excitation ", "record ", "trigger level"))]
+        row["time"] = {"refused": why} if res is None else {"errors": _errs(t, res)}
+        if kind == "hammer":
+            row["hits"] = _hit_counts(t, out)
+        # the exact FRFs on the lines the time data gave, identified the same way
+        try:
+            frf, _ = open_frfs(path, Settings())
+            fc = t.scenario.forces  # the columns the time data kept (a run may be left out)
+            cols = [int(np.flatnonzero((fc.ids == n) & np.all(np.isclose(fc.reported_dirs, d),
+                                                               axis=1))[0])
+                    for n, d in zip(frf.exc_nodes, frf.exc_dirs, strict=True)]
+            exact = dataclasses.replace(frf, H=t.exact_frf(frf.freq)[:, cols],
+                                        coherence=np.ones(frf.H.shape),
+                                        meta={**frf.meta, "exponential_tau": None})
+            epath = Path(tmp) / "exact.uff"
+            write_frf_uff(epath, exact, binary=True, coherence=True)
+            res2, why2, _ = identify_cli(epath)
+            row["exact"] = {"refused": why2} if res2 is None else {"errors": _errs(t, res2)}
+            if res2 is not None:  # the time data's FRFs in the bands chosen on the exact ones
+                mb, sb = res2["bands"]["mass_line"], res2["bands"]["stiffness"]
+                res3, why3, _ = identify_cli(path, "--mass-band", *map(str, mb),
+                                             "--stiffness-band", *map(str, sb),
+                                             "--coherence", "0")
+                row["bands"] = ({"refused": why3} if res3 is None
+                                else {"errors": _errs(t, res3)})
+        except Exception as err:  # reported, not hidden
+            row["exact"] = {"refused": f"{type(err).__name__}: {err}"}
+    row["seconds"] = time.perf_counter() - t0
+    return row
+
+
+def _stats(rows: list[dict[str, Any]], key: str) -> str:
+    ok = [r[key]["errors"] for r in rows if "errors" in r[key]]
+    if not ok:
+        return "no answer"
+    out = []
+    for f in FIGURES:
+        v = [e[f] for e in ok]
+        out.append(f"{f} {np.median(v):.3g}/{np.percentile(v, 95):.3g}"
+                   f"{' mm' if f == 'cog' else ' %'}")
+    return ", ".join(out)
+
+
+def report(rows: list[dict[str, Any]]) -> str:
+    lines = []
+    for kind in ("hammer", "shaker"):
+        rs = [r for r in rows if r["kind"] == kind]
+        if not rs:
+            continue
+        det = Counter(r["detected"] for r in rs)
+        lines.append(f"{kind}: {len(rs)} tests; excitation detected {dict(det)}")
+        if kind == "hammer":
+            hits = Counter[str]()
+            for r in rs:
+                hits.update(r["hits"])
+            lines.append(f"  hits: {dict(hits)}")
+        for key in ("time", "exact", "bands"):
+            have = [r for r in rs if key in r]
+            if not have:
+                continue
+            refused = [r[key]["refused"] for r in have if "refused" in r[key]]
+            lines.append(f"  {key:5s}: answered {len(have) - len(refused)}/{len(have)}; "
+                         f"median/p95 {_stats(have, key)}")
+            for msg, n in Counter(re.sub(r"[-\d.]+", "#", m)[:160] for m in refused).items():
+                lines.append(f"    refused x{n}: {msg}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--hammer", type=int, default=50)
+    p.add_argument("--shaker", type=int, default=50)
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--json", type=Path)
+    a = p.parse_args(argv)
+    todo = [(i, "hammer") for i in range(a.hammer)] + [(i, "shaker") for i in range(a.shaker)]
+    rows: list[dict[str, Any]] = []
+    with ProcessPoolExecutor(a.jobs) as pool:
+        for row in pool.map(evaluate, *zip(*todo, strict=True)):
+            rows.append(row)
+            print(f"{row['kind']} {row['case']}: {row['drive']}, detected {row['detected']}, "
+                  f"time {row['time']}, exact {row['exact']}, {row.get('hits', '')} "
+                  f"({row['seconds']:.0f} s)", flush=True)
+            if a.json:
+                a.json.write_text(json.dumps(rows, indent=1, default=float))
+    print(report(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
