@@ -312,7 +312,7 @@ def _iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
         new = fit_.theta
         M = mass_matrix(new)
         if fit_.leakage is not None:  # B - M X = -M Y b: clean X of the fitted leakage
-            Yk = -np.einsum("ia,aks->iks", np.linalg.inv(M), fit_.leakage)
+            Yk = -np.einsum("ia,aks->iks", np.linalg.pinv(M), fit_.leakage)
             leak = np.einsum("iks,sl->ikl", Yk, np.array(shapes)[ml.shape_index])
             Xcm, Xcs = Xm - leak[..., msel], Xs - leak[..., ssel]
         K, C = step(M, Xcs)

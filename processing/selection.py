@@ -205,7 +205,8 @@ def quick_rigid_modes(
     try:
         w2 = scipy.linalg.eigh(K, M, eigvals_only=True)
     except (np.linalg.LinAlgError, ValueError):
-        w2 = np.linalg.eigvals(np.linalg.solve(M, K)).real
+        w2 = scipy.linalg.eigvals(K, M).real  # generalised: M may be singular here
+        w2 = np.where(np.isfinite(w2), w2, 0.0)  # a singular direction of M: no mode
     return np.sort(np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi))
 
 

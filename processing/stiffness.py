@@ -72,7 +72,11 @@ def line_operators(
     Xh = np.conj(np.swapaxes(Xl, 1, 2))
     G = Xl @ Xh  # X X^H (n_l, 6, 6), Hermitian
     # B = T X^H G^-1: solve G^T B^T = (T X^H)^T
-    B = np.swapaxes(np.linalg.solve(np.swapaxes(G, 1, 2), np.swapaxes(T[None] @ Xh, 1, 2)), 1, 2)
+    try:
+        B = np.swapaxes(np.linalg.solve(np.swapaxes(G, 1, 2), np.swapaxes(T[None] @ Xh, 1, 2)),
+                        1, 2)
+    except np.linalg.LinAlgError:  # X of rank < 6 on some line (e.g. zero above a filter)
+        B = T[None] @ np.linalg.pinv(Xl)
     return LineOperators(B, np.asarray(w, dtype=float))
 
 
