@@ -118,10 +118,7 @@ class Problem:
     def line_snr(self) -> NDArray[np.float64] | None:
         """(n_f,) signal-to-noise power ratio of each line, ``g / (1 - g)`` of its FRF values'
         median coherence ``g`` (at most 1e4), or None without coherence."""
-        if self.coherence is None:
-            return None
-        g = np.median(self.coherence, axis=(0, 1))
-        return np.asarray(np.minimum(g / np.maximum(1.0 - g, 1e-300), 1e4))
+        return None if self.coherence is None else _line_snr(self.coherence)
 
     @property
     def clean_lines(self) -> NDArray[np.bool_]:
@@ -129,6 +126,12 @@ class Problem:
         (all lines if under 8)."""
         clean = self.line_ok & np.all(self.col_weights >= 0.1, axis=0)
         return clean if np.count_nonzero(clean) >= 8 else np.ones(self.freq.size, bool)
+
+
+def _line_snr(coherence: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(n_f,) ``g / (1 - g)`` of each line's median coherence ``g``, at most 1e4."""
+    g = np.median(coherence, axis=(0, 1))
+    return np.asarray(np.minimum(g / np.maximum(1.0 - g, 1e-300), 1e4))
 
 
 def _checked_arrays(
@@ -263,7 +266,9 @@ def prepare(
     else:
         X, colw = _weighted_accelerances(H, E, coherence, geo.length)
     line_ok = _usable_lines(colw, T, options.max_cond_T, geo.length)
-    peaks = elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep) if n_r > 6 else ()
+    snr = None if coherence is None else _line_snr(coherence)
+    peaks = (elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep, line_snr=snr)
+             if n_r > 6 else ())
     return Problem(
         options=options, freq=freq, w=2 * np.pi * freq, H=H, coherence=coherence, geometry=geo,
         E=E, Epinv=Ep, T=T, X=X, rel_err=rel_err, peaks=peaks,

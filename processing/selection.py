@@ -120,6 +120,7 @@ def elastic_peaks(
     min_rel: float = 0.01,
     rel_err: NDArray[np.float64] | None = None,
     Epinv: NDArray[np.float64] | None = None,
+    line_snr: NDArray[np.float64] | None = None,
 ) -> tuple[ElasticPeak, ...]:
     """Elastic modes seen in the data: peaks of the non-rigid residual.
 
@@ -128,9 +129,12 @@ def elastic_peaks(
     reconstruction error) or in absolute power (a resonance still stands out when higher
     modes keep the relative error near 1 above it), and where the relative error exceeds
     ``min_rel`` and three times its floor (the least of its 9-line running median, where
-    the rigid-body motion dominates; the noise floor there): a peak of the
-    residual at a rigid-body resonance (sensor or location errors) is a small part of
-    the response there. ``rel_err`` and ``Epinv`` may be passed when already computed.
+    the rigid-body motion dominates; the noise floor there), ten times for a peak in power
+    only: a peak of the residual's power at a rigid-body resonance (sensor or location
+    errors) is a small part of the response there. With ``line_snr`` (n_f,), the
+    signal-to-noise power ratio of each line, peaks on lines under 1 are noise (the lowest
+    lines, where accelerances are small).
+    ``rel_err`` and ``Epinv`` may be passed when already computed.
     """
     n_r, n_e, n_f = H.shape
     if n_r <= 6 or n_f < 5:
@@ -144,15 +148,19 @@ def elastic_peaks(
     by_rel, _ = scipy.signal.find_peaks(np.log10(np.maximum(rel, 1e-12)), prominence=prominence)
     by_abs, _ = scipy.signal.find_peaks(np.log10(np.maximum(power, 1e-300)),
                                         prominence=2 * prominence)  # power: |.|^2
-    idx = np.union1d(by_rel, by_abs)
     floor = float(np.min(scipy.ndimage.median_filter(rel, size=9, mode="nearest")))
-    idx = idx[rel[idx] > max(min_rel, 3.0 * floor)]
+    idx = np.union1d(by_rel[rel[by_rel] > max(min_rel, 3.0 * floor)],
+                     by_abs[rel[by_abs] > max(min_rel, 10.0 * floor)])
+    if line_snr is not None:
+        idx = idx[line_snr[idx] >= 1.0]
     if idx.size == 0:
         return ()
     # keep the strongest residual directions only, for speed
-    U, _s, _ = np.linalg.svd(R, full_matrices=False)
-    R = (U[:, :4].conj().T @ R) if U.shape[1] > 4 else R
-    fitted = sorted((_fit_peak(freq, R, float(freq[i])) for i in idx), key=lambda p: p.frequency)
+    if R.shape[0] > 4:  # the leading left singular vectors, from the Hermitian R R^H
+        _ev, U = np.linalg.eigh(R @ R.conj().T)
+        R = U[:, ::-1][:, :4].conj().T @ R
+    fitted = sorted((p for p in (_fit_peak(freq, R, float(freq[i])) for i in idx)
+                     if p.damping < 0.29), key=lambda p: p.frequency)  # 0.3: noise, no mode
     # two residual peaks of one mode (a dip on its flank) fit to the same mode: keep it once
     unique: list[ElasticPeak] = []
     for p in fitted:
@@ -266,6 +274,11 @@ def choose_bands(
         rig_lines = (freq > 0) & (freq <= max(top, float(freq[min(7, freq.size - 1)])))
     fr = quick_rigid_modes(X[..., rig_lines], T, 2 * np.pi * freq[rig_lines],
                            None if line_weights is None else line_weights[rig_lines])
+    if fr[-1] <= 0 and line_weights is not None:  # no estimate: try the lines unweighted
+        fr = quick_rigid_modes(X[..., rig_lines], T, 2 * np.pi * freq[rig_lines])
+    if fr[-1] <= 0:  # still none: the strongest resonance of the rigid-body accelerances
+        power = np.sum(np.abs(X[..., rig_lines]) ** 2, axis=(0, 1))
+        fr = np.full(6, float(freq[rig_lines][np.argmax(power)]))
     f_rig = float(fr[-1])
     set_aside: list[str] = []
     for f_hi, name in limits:
