@@ -86,7 +86,8 @@ class ResultsView(QtWidgets.QWidget):
         self.principal = QtWidgets.QTableWidget()
         self.K = QtWidgets.QTableWidget()
         self.C = QtWidgets.QTableWidget()
-        for t in (self.inertia, self.principal, self.K, self.C):
+        self.D = QtWidgets.QTableWidget()
+        for t in (self.inertia, self.principal, self.K, self.C, self.D):
             t.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.modes = QtWidgets.QTableWidget()
         self.energy = QtWidgets.QTableWidget()
@@ -106,6 +107,7 @@ class ResultsView(QtWidgets.QWidget):
         tabs = QtWidgets.QTabWidget()
         tabs.addTab(self.K, "Stiffness K at O")
         tabs.addTab(self.C, "Damping C at O")
+        tabs.addTab(self.D, "Structural damping D at O")
         modes_page = QtWidgets.QWidget()
         mlay = QtWidgets.QVBoxLayout(modes_page)
         mlay.setContentsMargins(0, 0, 0, 0)
@@ -221,7 +223,7 @@ class ResultsView(QtWidgets.QWidget):
         if r is None:
             set_verdict(self.verdict, False, f"Identification failed: {a.error}")
             self.summary.setText("Adjust the bands or check the data (see Checks).")
-            for t in (self.inertia, self.principal, self.K, self.C):
+            for t in (self.inertia, self.principal, self.K, self.C, self.D):
                 t.clear()
                 t.setRowCount(0)
             return
@@ -250,7 +252,9 @@ class ResultsView(QtWidgets.QWidget):
                 f"{'' if r.converged else ' (NOT converged)'}; mass line "
                 f"{r.mass_band[0]:.2f}-{r.mass_band[1]:.2f} Hz ({len(r.mass_lines)} lines), "
                 f"stiffness {r.stiffness_band[0]:.2f}-{r.stiffness_band[1]:.2f} Hz "
-                f"({len(r.stiffness_lines)} lines). Rigid-body modes: {modes} Hz.")
+                f"({len(r.stiffness_lines)} lines). Rigid-body modes: {modes} Hz."
+                + (f" {r.damping_note[0].upper()}{r.damping_note[1:]}." if r.damping_note
+                   else ""))
         if r.warnings:
             text += " Warnings: " + "; ".join(r.warnings)
         self.summary.setText(text)
@@ -263,8 +267,12 @@ class ResultsView(QtWidgets.QWidget):
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.K), strict=True)])
         fill_table(self.C, ("C at O", *dofs),
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.C), strict=True)])
+        fill_table(self.D, ("D at O", *dofs),
+                   [(d, *row) for d, row in zip(dofs, format_matrix(r.D), strict=True)])
         self.K.setToolTip("N/m (translation rows/columns), N/rad, N m/m, N m/rad")
         self.C.setToolTip("N s/m, N s/rad, N m s/m, N m s/rad")
+        self.D.setToolTip("K* = K + j w C + j D: N/m, N/rad, N m/m, N m/rad (zero unless the "
+                          "damping model holds D)")
 
     # --- mount system ----------------------------------------------------------------------------
     def _show_mount_system(self, _mounts: object = None) -> None:
