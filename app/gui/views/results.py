@@ -106,8 +106,19 @@ class ResultsView(QtWidgets.QWidget):
         mp.addWidget(self.tra, 2)
         tabs = QtWidgets.QTabWidget()
         tabs.addTab(self.K, "Stiffness K at O")
-        tabs.addTab(self.C, "Damping C at O")
-        tabs.addTab(self.D, "Structural damping D at O")
+        # viscous C and structural D of K* = K + j w C + j D on one page, with the model chosen
+        damping_page = QtWidgets.QWidget()
+        dl = QtWidgets.QVBoxLayout(damping_page)
+        dl.setContentsMargins(0, 0, 0, 0)
+        self.damping_note = QtWidgets.QLabel()
+        self.damping_note.setWordWrap(True)
+        dl.addWidget(self.damping_note)
+        dl.addWidget(QtWidgets.QLabel("<b>Viscous C</b> (N s/m, N s/rad, N m s/m, N m s/rad)"))
+        dl.addWidget(self.C, 1)
+        dl.addWidget(QtWidgets.QLabel("<b>Structural D</b> (units of K)"))
+        dl.addWidget(self.D, 1)
+        self.damping_page = damping_page
+        tabs.addTab(damping_page, "Damping at O")
         modes_page = QtWidgets.QWidget()
         mlay = QtWidgets.QVBoxLayout(modes_page)
         mlay.setContentsMargins(0, 0, 0, 0)
@@ -133,8 +144,8 @@ class ResultsView(QtWidgets.QWidget):
         ll.addWidget(QtWidgets.QLabel("<b>Principal moments and axes</b> about the CoG"))
         ll.addWidget(self.principal, 2)
         ll.addWidget(tabs, 3)
-        units = QtWidgets.QLabel("DOF order x, y, z, rx, ry, rz at the origin O. K: N/m, N/rad, "
-                                 "N m/m, N m/rad; C: N s/m, N s/rad, N m s/m, N m s/rad.")
+        units = QtWidgets.QLabel("DOF order x, y, z, rx, ry, rz at the origin O. K, D: N/m, "
+                                 "N/rad, N m/m, N m/rad; C: N s/m, N s/rad, N m s/m, N m s/rad.")
         units.setWordWrap(True)
         ll.addWidget(units)
         # --- plots
@@ -226,6 +237,7 @@ class ResultsView(QtWidgets.QWidget):
             for t in (self.inertia, self.principal, self.K, self.C, self.D):
                 t.clear()
                 t.setRowCount(0)
+            self.damping_note.clear()
             return
         self._filling = True
         try:
@@ -252,9 +264,8 @@ class ResultsView(QtWidgets.QWidget):
                 f"{'' if r.converged else ' (NOT converged)'}; mass line "
                 f"{r.mass_band[0]:.2f}-{r.mass_band[1]:.2f} Hz ({len(r.mass_lines)} lines), "
                 f"stiffness {r.stiffness_band[0]:.2f}-{r.stiffness_band[1]:.2f} Hz "
-                f"({len(r.stiffness_lines)} lines). Rigid-body modes: {modes} Hz."
-                + (f" {r.damping_note[0].upper()}{r.damping_note[1:]}." if r.damping_note
-                   else ""))
+                f"({len(r.stiffness_lines)} lines). Rigid-body modes: {modes} Hz. Damping "
+                f"model: {r.damping_model}.")
         if r.warnings:
             text += " Warnings: " + "; ".join(r.warnings)
         self.summary.setText(text)
@@ -267,6 +278,8 @@ class ResultsView(QtWidgets.QWidget):
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.K), strict=True)])
         fill_table(self.C, ("C at O", *dofs),
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.C), strict=True)])
+        self.damping_note.setText(f"K* = K + jωC + jD; {r.damping_note}."
+                                  if r.damping_note else "K* = K + jωC + jD")
         fill_table(self.D, ("D at O", *dofs),
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.D), strict=True)])
         self.K.setToolTip("N/m (translation rows/columns), N/rad, N m/m, N m/rad")
