@@ -254,9 +254,9 @@ class _StiffnessStep:
     """K, C, D for a mass matrix on the stiffness lines, by the rule the problem calls for:
 
     with an exponential window, eq. 14 per line with the window's pole shift undone,
-    C (and D) by least squares (Im P = w C + D); improved, a direct (symmetric) fit from
-    moments; plain, the article's eq. 14 averaged over lines (viscous only). ``model``
-    names the damping terms fitted.
+    C by least squares (Im P = w C; viscous only: the shift ``K*(j w + a)`` holds for
+    damping analytic in s); improved, a direct (symmetric) fit from moments of the terms
+    ``model`` names; plain, the article's eq. 14 averaged over lines (viscous only).
     """
 
     def __init__(self, problem: Problem, weights: LineWeights, operators: LineOperators,
@@ -285,17 +285,10 @@ class _StiffnessStep:
         if a:
             s = 1j * w + a
             P = -(s**2 / w**2)[:, None, None] * dynamic_stiffness(Xs, p.T, w, M)
-            # least squares per entry: Im P = w C (+ D), Re P = K + a C
-            cols = {"viscous": [w], "hysteretic": [np.ones_like(w)],
-                    "both": [w, np.ones_like(w)]}[self.model]
-            A = np.stack(cols, axis=1)
-            coef = np.linalg.lstsq(A, P.imag.reshape(w.size, 36), rcond=None)[0]
-            C = coef[0].reshape(6, 6) if self.model != "hysteretic" else np.zeros((6, 6))
-            D = coef[-1].reshape(6, 6) if self.model != "viscous" else np.zeros((6, 6))
+            C = np.tensordot(w, P.imag, axes=1) / np.sum(w**2)  # least squares, Im P = w C
             K = np.mean(P.real, axis=0) - a * C
-            if opt.symmetric:
-                return 0.5 * (K + K.T), 0.5 * (C + C.T), 0.5 * (D + D.T)
-            return K, C, D
+            D = np.zeros((6, 6))
+            return (0.5 * (K + K.T), 0.5 * (C + C.T), D) if opt.symmetric else (K, C, D)
         if p.improved:  # moments reused while the same Xs is passed
             sf = fit_stiffness(self.moments(Xs), p.T, w, M, row_scale=p.row_scale,
                                symmetric=opt.symmetric, model=self.model)
@@ -306,32 +299,14 @@ class _StiffnessStep:
         DampingModel, str
     ]:
         """The damping model the stiffness lines Xs call for at mass matrix M (BIC, see
-        :func:`processing.stiffness.choose_damping`); with an exponential window the
-        residual of ``Im P = w C (+ D)`` over the lines is compared the same way."""
+        :func:`processing.stiffness.choose_damping`); viscous with an exponential window."""
         p, opt, w = self.problem, self.problem.options, self.w
-        if not p.window_decay:
-            ch = choose_damping(Xs, p.T, w, M, weights=self.weights, row_scale=p.row_scale,
-                                symmetric=opt.symmetric, moments=self.moments(Xs))
-            return ch.model, ch.reason
-        s = 1j * w + p.window_decay
-        Pi = (-(s**2 / w**2)[:, None, None] * dynamic_stiffness(Xs, p.T, w, M)).imag
-        Pi = Pi.reshape(w.size, 36)
-        n = Pi.size
-        bic: dict[str, float] = {}
-        for model, cols in (("viscous", [w]), ("hysteretic", [np.ones_like(w)]),
-                            ("both", [w, np.ones_like(w)])):
-            A = np.stack(cols, axis=1)
-            r = Pi - A @ np.linalg.lstsq(A, Pi, rcond=None)[0]
-            rss = max(float(np.sum(r**2)), 1e-12 * float(np.sum(Pi**2)), 1e-300)
-            bic[model] = n * np.log(rss / n) + 36 * len(cols) * np.log(n)
-        best = min(bic, key=lambda m: bic[m])
-        chosen: DampingModel = "viscous"
-        if best != "viscous" and bic[best] < bic["viscous"] - 10.0:
-            chosen = "hysteretic" if best == "hysteretic" else "both"
-        return chosen, (f"damping {chosen}: BIC of Im K* over the stiffness lines (window "
-                        f"corrected) relative to viscous C: structural D "
-                        f"{bic['hysteretic'] - bic['viscous']:+.4g}, C and D "
-                        f"{bic['both'] - bic['viscous']:+.4g}")
+        if p.window_decay:
+            return "viscous", ("damping viscous (K + jwC): kept with an exponential window "
+                               "(its correction K*(jw + a) holds for damping analytic in s)")
+        ch = choose_damping(Xs, p.T, w, M, weights=self.weights, row_scale=p.row_scale,
+                            symmetric=opt.symmetric, moments=self.moments(Xs))
+        return ch.model, ch.reason
 
 
 def _leakage_shapes(problem: Problem, bands: Bands) -> list[NDArray[np.complex128]]:
@@ -368,8 +343,7 @@ def _iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
     for it in range(1, opt.max_iter + 1):
         if a:  # B = T + K*_m X / w^2 with the windowed K*_m
             Xf = Xcm.reshape(6, -1)
-            KX = (((K + a * C + 1j * D) @ Xf).reshape(Xm.shape)
-                  + 1j * wm * (C @ Xf).reshape(Xm.shape))
+            KX = ((K + a * C) @ Xf).reshape(Xm.shape) + 1j * wm * (C @ Xf).reshape(Xm.shape)
             fit_ = ml.solve(T[:, :, None] - KX / s_m**2 + 0j)
         else:
             fit_ = ml.solve_kc(T, K, C, Xcm, wm, D if step.model != "viscous" else None)
@@ -733,7 +707,7 @@ def _refined(
         shapes.append(np.asarray(w**2, dtype=np.complex128))  # quasi-static, modes above
         step = point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
                              result.M, result.K, result.C, shapes=np.array(shapes),
-                             applied=xyz0 - xyz)
+                             applied=xyz0 - xyz, D=result.D)
         trial = identify_at(xyz - step)
         if trial.synthesis.overall >= result.synthesis.overall:
             why = f"round {k} did not improve the fit of the synthesised FRFs; kept round {k - 1}"
