@@ -10,9 +10,11 @@ Two methods on the same data:
 ``improved`` (default)
     The same equations, plus: moment equations scaled by the size of the
     measurement (balanced rows); K and C fitted directly and symmetric over the
-    stiffness band; the leakage of elastic modes into the mass line modelled
-    by free terms with the shape of each elastic mode found in the data (and
-    a ``w^2`` term for modes above it), eliminated by projection; the mass
+    stiffness band, with a structural (hysteretic) damping D in ``K* = K + j w C + j D``
+    instead of or besides C when the stiffness lines call for it (BIC); the leakage
+    of elastic modes into the mass line modelled by free terms with the shape of each
+    elastic mode found in the data (and a ``w^2`` term for modes above it), eliminated
+    by projection; the mass
     line allowed to extend close to the first elastic mode.
 
 Both weigh each FRF value by its coherence (a low value counts for less; none is
@@ -53,8 +55,11 @@ from processing.selection import (
 )
 from processing.selection import choose_bands as choose_automatic_bands
 from processing.stiffness import (
+    DAMPING_MODELS,
+    DampingModel,
     LineOperators,
     StiffnessMoments,
+    choose_damping,
     dynamic_stiffness,
     fit_stiffness,
     line_operators,
@@ -220,12 +225,17 @@ def weigh_lines(problem: Problem, bands: Bands) -> LineWeights:
 # --- stage 3: fit ----------------------------------------------------------------------------
 
 
+def _zeros66() -> NDArray[np.float64]:
+    return np.zeros((6, 6))
+
+
 @dataclass(frozen=True)
 class Fit:
-    """The ten inertia parameters and K, C at O, and how they were reached.
+    """The ten inertia parameters and K, C (and D) at O, and how they were reached.
 
     ``normal`` is the 10x10 normal matrix of the last mass-line solve;
-    ``operators`` the per-line operators of eq. 14 on the stiffness band.
+    ``operators`` the per-line operators of eq. 14 on the stiffness band;
+    ``D`` the structural damping of ``K* = K + j w C + j D`` (zero for the viscous model).
     """
 
     theta: NDArray[np.float64]
@@ -238,14 +248,21 @@ class Fit:
     operators: LineOperators
     #: how the mass-line model was chosen, in words
     model_note: str = ""
+    #: structural (hysteretic) damping at O, N/m, ... (zero for the viscous model)
+    D: NDArray[np.float64] = dataclasses.field(default_factory=_zeros66)
+    #: the damping model of K* ("viscous", "hysteretic" or "both")
+    damping_model: DampingModel = "viscous"
+    #: how the damping model was chosen, in words
+    damping_note: str = ""
 
 
 class _StiffnessStep:
-    """K, C for a mass matrix on the stiffness lines, by the rule the problem calls for:
+    """K, C, D for a mass matrix on the stiffness lines, by the rule the problem calls for:
 
     with an exponential window, eq. 14 per line with the window's pole shift undone,
-    C by least squares (Im P = w C); improved, a direct (symmetric) fit from moments;
-    plain, the article's eq. 14 averaged over lines.
+    C by least squares (Im P = w C; viscous only: the shift ``K*(j w + a)`` holds for
+    damping analytic in s); improved, a direct (symmetric) fit from moments of the terms
+    ``model`` names; plain, the article's eq. 14 averaged over lines (viscous only).
     """
 
     def __init__(self, problem: Problem, weights: LineWeights, operators: LineOperators,
@@ -256,11 +273,19 @@ class _StiffnessStep:
         self.mean = operators.mean_kc(stiff_in_band)
         self._moments: StiffnessMoments | None = None
         self._key: object = None
+        self.model: DampingModel = "viscous"
+
+    def moments(self, Xs: NDArray[np.complex128]) -> StiffnessMoments:
+        """The stiffness moments of Xs, kept while the same array is passed."""
+        if self._key is not Xs or self._moments is None:
+            p = self.problem
+            self._moments, self._key = stiffness_moments(Xs, p.T, self.w, self.weights), Xs
+        return self._moments
 
     def __call__(self, M: NDArray[np.float64], Xs: NDArray[np.complex128]) -> (
-        tuple[NDArray[np.float64], NDArray[np.float64]]
+        tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
     ):
-        """K, C (6, 6) for mass matrix M on the (leakage-cleaned) stiffness lines Xs."""
+        """K, C, D (6, 6) for mass matrix M on the (leakage-cleaned) stiffness lines Xs."""
         p, opt, w = self.problem, self.problem.options, self.w
         a = p.window_decay
         if a:
@@ -268,14 +293,26 @@ class _StiffnessStep:
             P = -(s**2 / w**2)[:, None, None] * dynamic_stiffness(Xs, p.T, w, M)
             C = np.tensordot(w, P.imag, axes=1) / np.sum(w**2)  # least squares, Im P = w C
             K = np.mean(P.real, axis=0) - a * C
-            return (0.5 * (K + K.T), 0.5 * (C + C.T)) if opt.symmetric else (K, C)
+            D = np.zeros((6, 6))
+            return (0.5 * (K + K.T), 0.5 * (C + C.T), D) if opt.symmetric else (K, C, D)
         if p.improved:  # moments reused while the same Xs is passed
-            if self._key is not Xs or self._moments is None:
-                self._moments, self._key = stiffness_moments(Xs, p.T, w, self.weights), Xs
-            sf = fit_stiffness(self._moments, p.T, w, M, row_scale=p.row_scale,
-                               symmetric=opt.symmetric)
-            return sf.K, sf.C
-        return self.mean(M)
+            sf = fit_stiffness(self.moments(Xs), p.T, w, M, row_scale=p.row_scale,
+                               symmetric=opt.symmetric, model=self.model)
+            return sf.K, sf.C, sf.D
+        return (*self.mean(M), np.zeros((6, 6)))
+
+    def choose(self, M: NDArray[np.float64], Xs: NDArray[np.complex128]) -> tuple[
+        DampingModel, str
+    ]:
+        """The damping model the stiffness lines Xs call for at mass matrix M (BIC, see
+        :func:`processing.stiffness.choose_damping`); viscous with an exponential window."""
+        p, opt, w = self.problem, self.problem.options, self.w
+        if p.window_decay:
+            return "viscous", ("damping viscous (K + jwC): kept with an exponential window "
+                               "(its correction K*(jw + a) holds for damping analytic in s)")
+        ch = choose_damping(Xs, p.T, w, M, weights=self.weights, row_scale=p.row_scale,
+                            symmetric=opt.symmetric, moments=self.moments(Xs))
+        return ch.model, ch.reason
 
 
 def _leakage_shapes(problem: Problem, bands: Bands) -> list[NDArray[np.complex128]]:
@@ -287,20 +324,27 @@ def _leakage_shapes(problem: Problem, bands: Bands) -> list[NDArray[np.complex12
 
 
 def _iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
-             step: _StiffnessStep, shapes: list[NDArray[np.complex128]]) -> tuple[
+             step: _StiffnessStep, shapes: list[NDArray[np.complex128]],
+             start: tuple[NDArray[np.float64], NDArray[np.complex128]] | None = None,
+             ) -> tuple[
     MassLineFit, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
-    NDArray[np.complex128], int, bool,
+    NDArray[np.float64], NDArray[np.complex128], int, bool,
 ]:
-    """Section 2.2: inertia from the mass line with the stiffness term, K and C from the
-    stiffness band, until theta converges. Returns the last fit, theta, K, C, the
-    cleaned stiffness-line X, the iterations and whether theta converged."""
+    """Section 2.2: inertia from the mass line with the stiffness term, K, C and D from the
+    stiffness band, until theta converges (from zero, or from ``start`` = theta and the
+    cleaned stiffness-line X it was reached with: K, C, D then start from the stiffness
+    step there). Returns the last fit, theta, K, C, D, the cleaned stiffness-line X, the
+    iterations and whether theta converged."""
     opt, T, a = problem.options, problem.T, problem.window_decay
     msel, ssel = weights.mass_lines, weights.stiffness_lines
     Xm, wm = problem.X[..., msel], problem.w[msel]
     Xs = problem.X[..., ssel]
     s_m = 1j * wm + a
     Xcm, Xcs = Xm, Xs
-    K, C, theta = np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(10)
+    K, C, D, theta = np.zeros((6, 6)), np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(10)
+    if start is not None:
+        theta = start[0]
+        K, C, D = step(mass_matrix(theta), start[1])
     fit_ = None
     for it in range(1, opt.max_iter + 1):
         if a:  # B = T + K*_m X / w^2 with the windowed K*_m
@@ -308,28 +352,31 @@ def _iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
             KX = ((K + a * C) @ Xf).reshape(Xm.shape) + 1j * wm * (C @ Xf).reshape(Xm.shape)
             fit_ = ml.solve(T[:, :, None] - KX / s_m**2 + 0j)
         else:
-            fit_ = ml.solve_kc(T, K, C, Xcm, wm)
+            fit_ = ml.solve_kc(T, K, C, Xcm, wm, D if step.model != "viscous" else None)
         new = fit_.theta
         M = mass_matrix(new)
         if fit_.leakage is not None:  # B - M X = -M Y b: clean X of the fitted leakage
             Yk = -np.einsum("ia,aks->iks", np.linalg.pinv(M), fit_.leakage)
             leak = np.einsum("iks,sl->ikl", Yk, np.array(shapes)[ml.shape_index])
             Xcm, Xcs = Xm - leak[..., msel], Xs - leak[..., ssel]
-        K, C = step(M, Xcs)
+        K, C, D = step(M, Xcs)
         change = np.max(np.abs(new - theta) / np.maximum(np.abs(new), 1e-12 * abs(new[0])))
         theta = new
         if change < opt.tol:
-            return fit_, theta, K, C, Xcs, it, True
+            return fit_, theta, K, C, D, Xcs, it, True
     assert fit_ is not None
-    return fit_, theta, K, C, Xcs, opt.max_iter, False
+    return fit_, theta, K, C, D, Xcs, opt.max_iter, False
 
 
 def _mass_line_rhs(problem: Problem, Xm: NDArray[np.complex128], wm: NDArray[np.float64],
-                   K: NDArray[np.float64], C: NDArray[np.float64]) -> NDArray[np.complex128]:
-    """``B = T + K* X / w^2`` on the mass lines (K* as the exponential window shows it)."""
+                   K: NDArray[np.float64], C: NDArray[np.float64],
+                   D: NDArray[np.float64] | None = None) -> NDArray[np.complex128]:
+    """``B = T + K* X / w^2`` on the mass lines (K* = K + j w C + j D as the exponential
+    window shows it)."""
     a = problem.window_decay
     s2 = (1j * wm + a) ** 2
-    KX = np.einsum("ab,bel->ael", K + a * C, Xm) + 1j * wm * np.einsum("ab,bel->ael", C, Xm)
+    KD = K + a * C + (0 if D is None else 1j * D)
+    KX = np.einsum("ab,bel->ael", KD, Xm) + 1j * wm * np.einsum("ab,bel->ael", C, Xm)
     return problem.T[:, :, None] - KX / s2 + 0j
 
 
@@ -345,12 +392,15 @@ class _Candidate:
     Xs: NDArray[np.complex128]
     iterations: int
     converged: bool
+    D: NDArray[np.float64] = dataclasses.field(default_factory=_zeros66)
 
 
 def _fit_model(problem: Problem, weights: LineWeights, step: _StiffnessStep,
-               shapes: list[NDArray[np.complex128]]) -> _Candidate:
+               shapes: list[NDArray[np.complex128]],
+               start: _Candidate | None = None) -> _Candidate:
     """The mass-line model with the given leakage shapes, fitted (plain method without a
-    window: the article's fixed point, solved directly)."""
+    window: the article's fixed point, solved directly); the iteration starts from
+    ``start``'s estimates when given."""
     msel, ssel = weights.mass_lines, weights.stiffness_lines
     ml = MassLineProblem(problem.X[..., msel], weights=weights.mass, row_scale=problem.row_scale,
                          shapes=np.array([stack_real(s[msel]) for s in shapes]) if shapes
@@ -360,10 +410,11 @@ def _fit_model(problem: Problem, weights: LineWeights, step: _StiffnessStep,
         mean = step.mean
         fit_ = ml.fixed_point_affine(problem.T, mean.w2, mean.KB, mean.C, problem.w[msel])
         Xs = problem.X[..., ssel]
-        K, C = step(mass_matrix(fit_.theta), Xs)
-        return _Candidate(ml, fit_, fit_.theta, K, C, Xs, 1, True)
-    fit_, theta, K, C, Xs, it, converged = _iterate(problem, weights, ml, step, shapes)
-    return _Candidate(ml, fit_, theta, K, C, Xs, it, converged)
+        K, C, D = step(mass_matrix(fit_.theta), Xs)
+        return _Candidate(ml, fit_, fit_.theta, K, C, Xs, 1, True, D)
+    init = None if start is None else (start.theta, start.Xs)
+    fit_, theta, K, C, D, Xs, it, converged = _iterate(problem, weights, ml, step, shapes, init)
+    return _Candidate(ml, fit_, theta, K, C, Xs, it, converged, D)
 
 
 def _halves(weights: LineWeights) -> tuple[LineWeights, LineWeights]:
@@ -405,11 +456,15 @@ def _upper_residual_chosen(problem: Problem, weights: LineWeights,
 
 
 def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
-    """Inertia, K and C: the article's fixed point solved directly (plain, no window), else
-    the iteration of section 2.2; then projected onto consistent inertia if asked.
+    """Inertia, K and C (and D): the article's fixed point solved directly (plain, no
+    window), else the iteration of section 2.2; then projected onto consistent inertia if
+    asked.
 
     Improved method without modelled elastic leakage: the fit with an upper residual (a
-    ``w^2`` term for modes above the band) is kept when the data call for it (BIC).
+    ``w^2`` term for modes above the band) is kept when the data call for it (by how the
+    two halves of the mass line agree). Improved method: at the converged mass matrix the
+    damping model of ``K*`` (viscous C, structural D or both) is chosen by BIC over the
+    stiffness lines; when it is not the viscous one the iteration is resumed with it.
     """
     opt, T = problem.options, problem.T
     ssel = weights.stiffness_lines
@@ -423,17 +478,34 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
         use, note = _upper_residual_chosen(problem, weights, step)
         if use:
             w = problem.w
-            best = _fit_model(problem, weights, step, [(w / w[-1]) ** 2 + 0j])
-    theta, K, C, Xs = best.theta, best.K, best.C, best.Xs
+            shapes = [(w / w[-1]) ** 2 + 0j]
+            best = _fit_model(problem, weights, step, shapes)
+    damping_note = "damping viscous (K + jwC): the article's model (plain method)"
+    if problem.improved:
+        # chosen at the converged M; a fit with another model moves M, so the choice is
+        # made again there until it stands (at most three models to try)
+        tried: set[str] = {"viscous"}
+        for _ in range(len(DAMPING_MODELS)):
+            model, damping_note = step.choose(mass_matrix(best.theta), best.Xs)
+            if model == step.model:
+                break
+            step.model = model
+            done = best.iterations
+            best = _fit_model(problem, weights, step, shapes, start=best)
+            best = dataclasses.replace(best, iterations=done + best.iterations)
+            if model in tried:
+                break
+            tried.add(model)
+    theta, K, C, D, Xs = best.theta, best.K, best.C, best.D, best.Xs
     enforced = False
     if opt.physical:
         theta_c = constrain_physical(theta, best.fit.normal)
         enforced = not np.array_equal(theta_c, theta)
         if enforced:
             theta = theta_c
-            K, C = step(mass_matrix(theta), Xs)
+            K, C, D = step(mass_matrix(theta), Xs)
     return Fit(theta, K, C, best.iterations, best.converged, best.fit.normal, enforced, ops,
-               note)
+               note, D, step.model, damping_note)
 
 
 # --- stage 4: checks -------------------------------------------------------------------------
@@ -471,7 +543,7 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
     except (np.linalg.LinAlgError, ValueError):
         used = weights.stiffness_lines | weights.mass_lines
         rigid_hz = quick_rigid_modes(problem.X[..., used], problem.T, problem.w[used])
-    H_syn = synthesise(freq, problem.E, problem.T, M, K, fitted.C)
+    H_syn = synthesise(freq, problem.E, problem.T, M, K, fitted.C, fitted.D)
     syn = synthesis_error(freq, problem.H, H_syn, (float(freq[0]), bands.mass_band[1]))
     Ks_line = fitted.operators.stiffness(M)
     if tau:
@@ -516,6 +588,9 @@ def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
         stiffness_per_line=checks.stiffness_per_line,
         band_reason=bands.reason,
         model_note=fitted.model_note,
+        D=fitted.D,
+        damping_model=fitted.damping_model,
+        damping_note=fitted.damping_note,
     )
 
 
@@ -639,7 +714,7 @@ def _refined(
         shapes.append(np.asarray(w**2, dtype=np.complex128))  # quasi-static, modes above
         step = point_offsets(freq[lines], np.asarray(H)[..., lines], xyz, resp_dirs, T,
                              result.M, result.K, result.C, shapes=np.array(shapes),
-                             applied=xyz0 - xyz)
+                             applied=xyz0 - xyz, D=result.D)
         trial = identify_at(xyz - step)
         if trial.synthesis.overall >= result.synthesis.overall:
             why = f"round {k} did not improve the fit of the synthesised FRFs; kept round {k - 1}"

@@ -57,7 +57,7 @@ class MassLineProblem:
     Everything that depends on X only (weights, leakage projection, the 10x10
     normal matrix and its factorisation) is computed once here; each
     :meth:`solve` then costs one (6 x 2 n_exc n_lines) by (.. x 6) product, and
-    :meth:`solve_kc` (the iteration's right-hand side ``T + (K + j w C) Xc / w^2``)
+    :meth:`solve_kc` (the iteration's right-hand side ``T + (K + j w C + j D) Xc / w^2``)
     only 6x6 algebra once the moments of ``Xc`` are known.
 
     Parameters
@@ -118,7 +118,7 @@ class MassLineProblem:
         except np.linalg.LinAlgError:  # singular: the minimum-norm solution
             self._solver = np.linalg.pinv(self.normal) @ self._MBs
         self._kc_key: object = None
-        self._kc: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None
+        self._kc: tuple[NDArray[np.float64], ...] | None = None
 
     def _weighted(self, Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
         """Real-stacked, weighted (6, n_e * 2 n_l) form of Z (6, n_e, n_l)."""
@@ -176,23 +176,28 @@ class MassLineProblem:
         C: NDArray[np.float64],
         Xc: NDArray[np.complex128],
         w: NDArray[np.float64],
+        D: NDArray[np.float64] | None = None,
     ) -> MassLineFit:
-        """:meth:`solve` for ``B = T + (K + j w C) Xc / w^2`` (the iteration of section 2.2).
+        """:meth:`solve` for ``B = T + (K + j w C + j D) Xc / w^2`` (the iteration of section
+        2.2; ``D`` the structural damping, none when omitted).
 
         The moments of ``Xc`` are kept while the same array is passed again, so
         each further iteration is 6x6 algebra.
         """
         if self._Q is not None:  # leakage coefficients need B itself
             Xf = Xc.reshape(6, -1)
-            KX = (K @ Xf).reshape(Xc.shape) + 1j * w * (C @ Xf).reshape(Xc.shape)
+            KD = K if D is None else K + 1j * D
+            KX = (KD @ Xf).reshape(Xc.shape) + 1j * w * (C @ Xf).reshape(Xc.shape)
             return self.solve(T[:, :, None] + KX / w**2)
         if self._kc_key is not Xc or self._kc is None:
             WT = self._weighted(T[:, :, None] + 0j) @ self._Xp.T
             P2 = self._weighted(Xc / w**2) @ self._Xp.T
             P1 = self._weighted(1j * Xc / w) @ self._Xp.T
-            self._kc_key, self._kc = Xc, (WT, P2, P1)
-        WT, P2, P1 = self._kc
-        return self._finish(WT + K @ P2 + C @ P1, None)
+            P0 = self._weighted(1j * Xc / w**2) @ self._Xp.T
+            self._kc_key, self._kc = Xc, (WT, P2, P1, P0)
+        WT, P2, P1, P0 = self._kc
+        W = WT + K @ P2 + C @ P1
+        return self._finish(W if D is None else W + D @ P0, None)
 
 
     def fixed_point_affine(
@@ -213,7 +218,7 @@ class MassLineProblem:
             raise ValueError("fixed_point_affine is for problems without leakage shapes")
         self.solve_kc(T, np.zeros((6, 6)), np.zeros((6, 6)), self.X, w)  # moments of X
         assert self._kc is not None
-        WT, P2, P1 = self._kc
+        WT, P2, P1, _ = self._kc
         a = self._solver @ (WT - KB @ P2 + C @ P1).ravel()
         J = w2 * (self._solver @ (MASS_BASIS @ P2).reshape(10, 36).T)
         theta = np.linalg.solve(np.eye(10) - J, a)

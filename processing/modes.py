@@ -1,4 +1,4 @@
-"""Mount-system analysis of the identified M, K, C: the six rigid-body modes, their kinetic-
+"""Mount-system analysis of the identified M, K, C (, D): the six rigid-body modes, their kinetic-
 energy decoupling, the torque roll axis, the mounts' elastic axis and the isolation margin.
 
 Modes
@@ -6,10 +6,13 @@ Modes
     order x, y, z, rx, ry, rz, mass-normalised (``phi^T M phi = 1``, so translations are in
     m and rotations in rad per unit modal coordinate of ``sqrt(kg) m``), with the sign that
     makes the entry of largest kinetic energy positive. Damping ratio: the proportional
-    (modal) approximation ``zeta_r = phi_r^T C phi_r / (2 w_r)``, which ignores the
-    off-diagonal terms of ``Phi^T C Phi``; their largest relative size
-    ``|c_rs| / sqrt(c_rr c_ss)`` is reported as ``damping_coupling`` (small: the
-    approximation holds).
+    (modal) approximation ``zeta_r = phi_r^T C phi_r / (2 w_r) + phi_r^T D phi_r / (2 w_r^2)``
+    (viscous C, structural D of ``K + j w C + j D``: the modal loss factor
+    ``phi_r^T D phi_r / w_r^2`` is ``2 zeta`` at resonance), which ignores the off-diagonal
+    terms of ``Phi^T C_r Phi`` (``C_r = C + D / w``, the viscous equivalent at the modes'
+    frequencies); their largest relative size ``|c_rs| / sqrt(c_rr c_ss)``, with ``D`` taken
+    at ``sqrt(w_r w_s)``, is reported as ``damping_coupling`` (small: the approximation
+    holds).
 Kinetic-energy decoupling
     At the centre of gravity ``G`` with global axis directions, where the mass matrix
     ``M_G = diag(m I, J_G)`` has no translation-rotation coupling: the shape there is
@@ -85,10 +88,11 @@ class ModeSet:
     ----------
     frequency_hz : (6,) undamped natural frequencies, ascending (0 for a negative
         eigenvalue, which ``warnings`` names)
-    damping_ratio : (6,) modal damping ratios (0 without C)
+    damping_ratio : (6,) modal damping ratios (0 without C and D)
     shapes : (6, 6) mass-normalised shapes at O as columns (DOF order x..rz)
     energy : (6, 6) kinetic-energy fractions at the CoG, DOF (rows) by mode (columns)
-    damping_coupling : largest ``|c_rs| / sqrt(c_rr c_ss)`` of ``Phi^T C Phi`` (r != s)
+    damping_coupling : largest ``|c_rs| / sqrt(c_rr c_ss)`` of ``Phi^T C Phi`` (r != s), D
+        taken as its viscous equivalent (module notes)
     warnings : one line per problem (indefinite K, ...)
     """
 
@@ -123,7 +127,8 @@ class ModeSet:
         return out
 
 
-def rigid_body_modes(M: ArrayLike, K: ArrayLike, C: ArrayLike | None = None) -> ModeSet:
+def rigid_body_modes(M: ArrayLike, K: ArrayLike, C: ArrayLike | None = None,
+                     D: ArrayLike | None = None) -> ModeSet:
     """The six rigid-body modes of the body on its mounts.
 
     Parameters
@@ -131,6 +136,7 @@ def rigid_body_modes(M: ArrayLike, K: ArrayLike, C: ArrayLike | None = None) -> 
     M : (6, 6) mass matrix at O (kg, kg m, kg m^2)
     K : (6, 6) stiffness at O (N/m, N/rad, N m/m, N m/rad)
     C : (6, 6) viscous damping at O, optional
+    D : (6, 6) structural (hysteretic) damping at O (``K* = K + j w C + j D``), optional
 
     Returns
     -------
@@ -149,6 +155,7 @@ def rigid_body_modes(M: ArrayLike, K: ArrayLike, C: ArrayLike | None = None) -> 
     """
     Mm, Km = _square(M, "M"), _square(K, "K")
     Cm = _square(C, "C") if C is not None else np.zeros((6, 6))
+    Dm = _square(D, "D") if D is not None else np.zeros((6, 6))
     try:
         w2, V = scipy.linalg.eigh(Km, Mm)
     except np.linalg.LinAlgError as err:
@@ -170,9 +177,11 @@ def rigid_body_modes(M: ArrayLike, K: ArrayLike, C: ArrayLike | None = None) -> 
     E = E / np.sum(E, axis=0, keepdims=True)
     sign = np.sign(V[np.argmax(E, axis=0), np.arange(6)])
     V = V * np.where(sign == 0, 1.0, sign)
-    Cr = V.T @ Cm @ V
+    w_safe = np.where(w > 0, w, np.inf)
+    # viscous equivalent of D between modes r and s at sqrt(w_r w_s)
+    Cr = V.T @ Cm @ V + (V.T @ Dm @ V) / np.sqrt(np.outer(w_safe, w_safe))
     diag = np.diag(Cr)
-    zeta = diag / (2 * np.where(w > 0, w, np.inf))
+    zeta = diag / (2 * w_safe)
     dd = np.sqrt(np.abs(np.outer(diag, diag)))
     off = np.where(dd > 0, np.abs(Cr) / np.where(dd > 0, dd, 1.0), 0.0)
     np.fill_diagonal(off, 0.0)

@@ -10,8 +10,11 @@ spring ``a``). K is therefore linear in the ``3 n`` rates: ``vech(K) = D k`` wit
 independent entries of the symmetric K as rows and one column ``vech(g_a g_a^T)`` per rate.
 The rates are the non-negative least-squares solution (:func:`scipy.optimize.nnls`) of the
 weighted problem; the same design gives the viscous rates ``c`` from C (N s/m along each
-axis), and the loss factor at a stated frequency ``f`` is ``eta = 2 pi f c / k`` (the
-hysteretic loss factor that dissipates, at ``f``, what the viscous rate ``c`` does).
+axis) and the structural rates ``d`` from the structural damping D of
+``K* = K + j w C + j D`` (N/m: a rubber mount's ``eta k``). The loss factor is
+``eta = (d + 2 pi f c) / k``: ``d / k`` directly when the damping is structural (the same at
+every frequency), and at a stated frequency ``f`` for the viscous part (the hysteretic loss
+factor that dissipates, at ``f``, what the viscous rate ``c`` does).
 
 Weighting
     Without standard deviations of K the residual ``K - D k`` is expressed at the centroid
@@ -319,9 +322,10 @@ class MountRates:
     ----------
     stiffness : the fit of K (rates N/m)
     damping : the fit of C with the same design (viscous rates N s/m), or None
-    loss_factor_hz : frequency of the loss factors, Hz
-    loss_factors : (n, 3) ``2 pi f c / k`` (nan without C or where k = 0)
-    loss_factors_std : (n, 3) first-order propagation of both fits' std (nan: undetermined)
+    loss_factor_hz : frequency of the viscous part of the loss factors, Hz
+    loss_factors : (n, 3) ``(d + 2 pi f c) / k`` (nan without C and D or where k = 0)
+    loss_factors_std : (n, 3) first-order propagation of the fits' std (nan: undetermined)
+    structural : the fit of the structural damping D (structural rates ``d``, N/m), or None
     """
 
     stiffness: MountFit
@@ -329,12 +333,13 @@ class MountRates:
     loss_factor_hz: float
     loss_factors: NDArray[np.float64]
     loss_factors_std: NDArray[np.float64]
+    structural: MountFit | None = None
 
     def to_json(self) -> list[dict[str, Any]]:
         """One object per mount: ``rates``, ``loss_factors``, ``std`` of both,
-        ``identifiable``, plus ``name``, ``damping_rates`` (N s/m), ``loss_factor_hz``.
-        Undetermined values are null."""
-        k, c = self.stiffness, self.damping
+        ``identifiable``, plus ``name``, ``damping_rates`` (N s/m), ``structural_rates``
+        (N/m), ``loss_factor_hz``. Undetermined values are null."""
+        k, c, d = self.stiffness, self.damping, self.structural
 
         def vals(a: NDArray[np.float64]) -> list[float | None]:
             return [float(v) if np.isfinite(v) else None for v in a]
@@ -352,6 +357,7 @@ class MountRates:
                                    for iv in ci[i]]},
                 "identifiable": [bool(v) for v in k.identifiable[i]],
                 "damping_rates": None if c is None else vals(c.rates[i]),
+                "structural_rates": None if d is None else vals(d.rates[i]),
                 "loss_factor_hz": self.loss_factor_hz,
             })
         return out
@@ -364,15 +370,21 @@ def identify_mount_rates(
     loss_factor_hz: float,
     K_std: ArrayLike | None = None,
     C_std: ArrayLike | None = None,
+    D: ArrayLike | None = None,
+    D_std: ArrayLike | None = None,
 ) -> MountRates:
-    """Rates from K, viscous rates from C and the loss factors ``2 pi f c / k`` at ``f``.
+    """Rates from K, viscous rates from C, structural rates from D and the loss factors
+    ``(d + 2 pi f c) / k``.
 
     Parameters
     ----------
     mounts : positions and axes
     K, C : (6, 6) stiffness and viscous damping at O (C may be None)
-    loss_factor_hz : frequency ``f`` of the loss factors, Hz (> 0)
+    loss_factor_hz : frequency ``f`` of the viscous part of the loss factors, Hz (> 0)
     K_std, C_std : optional (6, 6) standard deviations (weights, see :func:`fit_mount_rates`)
+    D : (6, 6) structural damping at O (``K* = K + j w C + j D``), or None (or all zero:
+        no structural part)
+    D_std : optional (6, 6) standard deviations of D
 
     Raises
     ------
@@ -384,15 +396,23 @@ def identify_mount_rates(
             f"the loss-factor frequency must be > 0 Hz, got {loss_factor_hz:g}")
     kf = fit_mount_rates(mounts, K, K_std)
     cf = fit_mount_rates(mounts, C, C_std) if C is not None else None
-    if cf is None:
+    has_d = D is not None and bool(np.any(np.asarray(D, dtype=float) != 0))
+    df = fit_mount_rates(mounts, D, D_std) if D is not None and has_d else None
+    if cf is None and df is None:
         nan = np.full_like(kf.rates, np.nan)
         return MountRates(kf, None, float(loss_factor_hz), nan, nan)
     w = 2 * np.pi * loss_factor_hz
     ok = kf.identifiable & (kf.rates > 0)
     k_safe = np.where(ok, kf.rates, 1.0)
-    eta = np.where(ok, w * cf.rates / k_safe, np.nan)
+    zero = np.zeros_like(kf.rates)
+    # the loss's parts (d and w c, N/m) and their variances
+    parts = [(w * f.rates, (w * f.std) ** 2) for f in (cf,) if f is not None]
+    parts += [(f.rates, f.std**2) for f in (df,) if f is not None]
+    loss = sum((p for p, _ in parts), zero)
+    loss_var = sum((v for _, v in parts), zero)
+    eta = np.where(ok, loss / k_safe, np.nan)
     rel_k = kf.std / k_safe
     with np.errstate(invalid="ignore", divide="ignore"):
-        eta_std = np.sqrt((w * cf.std / k_safe) ** 2 + (eta * rel_k) ** 2)
+        eta_std = np.sqrt(loss_var / k_safe**2 + (eta * rel_k) ** 2)
     eta_std = np.where(ok, eta_std, np.nan)
-    return MountRates(kf, cf, float(loss_factor_hz), eta, eta_std)
+    return MountRates(kf, cf, float(loss_factor_hz), eta, eta_std, df)

@@ -37,6 +37,7 @@ def point_offsets(
     shapes: NDArray[np.complex128] | None = None,
     ridge: float = 1e-3,
     applied: NDArray[np.float64] | None = None,
+    D: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Estimated location error (n_resp, 3), m, of each response DOF's point.
 
@@ -49,11 +50,14 @@ def point_offsets(
     ``applied`` (n_resp, 3), m: corrections already subtracted from the nominal
     locations; the ridge then holds the total correction (applied + returned), not
     the step, so repeated rounds settle instead of drifting along what the data
-    do not fix.
+    do not fix. ``D`` is the structural damping of ``K* = K + j w C + j D`` (none when
+    omitted).
     """
     w = 2 * np.pi * np.asarray(freq, dtype=float)
     E = response_matrix(resp_xyz, resp_dirs)
     Z = K[None] + 1j * w[:, None, None] * C[None] - (w**2)[:, None, None] * M[None]
+    if D is not None:
+        Z = Z + 1j * D[None]
     Y = -(w**2)[:, None, None] * np.linalg.solve(Z, np.broadcast_to(T, (w.size, *T.shape)))
     R = H - np.einsum("ra,lae->rel", E, Y)  # (n_r, n_e, n_l)
     d = resp_dirs / np.linalg.norm(resp_dirs, axis=1, keepdims=True)

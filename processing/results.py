@@ -137,6 +137,13 @@ class IdentificationResult:
     model_note: str = ""
     #: standard deviations and intervals of the identified numbers, when computed
     uncertainty: Uncertainty | None = None
+    #: structural (hysteretic) damping at O of ``K* = K + j w C + j D`` (same units as K;
+    #: zero for the viscous model)
+    D: NDArray[np.float64] = field(default_factory=lambda: np.zeros((6, 6)))
+    #: the damping model of K*: "viscous" (C), "hysteretic" (D) or "both"
+    damping_model: str = "viscous"
+    #: how the damping model was chosen, in words
+    damping_note: str = ""
 
     @property
     def coherence_low_fraction(self) -> float:
@@ -197,6 +204,9 @@ class IdentificationResult:
             "principal_axes": p.principal_axes.tolist(),
             "stiffness": self.K.tolist(),
             "damping": self.C.tolist(),
+            "structural_damping": self.D.tolist(),
+            "damping_model": self.damping_model,
+            "damping_choice": self.damping_note,
             "bands": {"mass_line": list(self.mass_band), "stiffness": list(self.stiffness_band)},
             "band_choice": self.band_reason,
             "mass_line_model": self.model_note,
@@ -214,17 +224,17 @@ class IdentificationResult:
             "warnings": list(self.warnings),
             "response_point_corrections": (None if self.point_corrections is None
                                            else self.point_corrections.tolist()),
-            "modes": _modes_json(self.M, self.K, self.C),
+            "modes": _modes_json(self.M, self.K, self.C, self.D),
             **(_jsonable(self.uncertainty.to_json()) if self.uncertainty else {}),
         }
 
 
-def _modes_json(M: NDArray[np.float64], K: NDArray[np.float64], C: NDArray[np.float64]
-                ) -> list[dict[str, Any]]:
+def _modes_json(M: NDArray[np.float64], K: NDArray[np.float64], C: NDArray[np.float64],
+                D: NDArray[np.float64]) -> list[dict[str, Any]]:
     """The six rigid-body modes (docs/conventions.md key ``modes``); empty when M is not positive
     definite (no modes exist)."""
     try:
-        return rigid_body_modes(M, K, C).to_json()
+        return rigid_body_modes(M, K, C, D).to_json()
     except ValueError:
         return []
 

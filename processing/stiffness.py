@@ -1,27 +1,35 @@
-"""System dynamic stiffness at O (article eqs. 12-14) and its fit to K + j w C.
+"""System dynamic stiffness at O (article eqs. 12-14) and its fit to K + j w C (+ j D).
 
 ``K*(w) X(w) = w^2 (M X(w) - T)``: per line, ``K*`` follows by a right
-pseudo-inverse of X (eq. 14). Over a band, the real ``K`` and ``C`` of
-``K* = K + j w C`` are fitted directly to these equations in the
-least-squares sense (optionally symmetric), from 6x6 moments of X.
+pseudo-inverse of X (eq. 14). Over a band, the real ``K``, ``C`` (viscous) and
+``D`` (structural, hysteretic) of ``K* = K + j w C + j D`` are fitted directly to
+these equations in the least-squares sense (optionally symmetric), from 6x6
+moments of X. Which damping terms enter (:data:`DAMPING_MODELS`) is chosen from
+the data by :func:`choose_damping` (docs/mounts.md).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "DAMPING_MODELS",
+    "DampingChoice",
+    "DampingModel",
     "LineOperators",
     "MeanStiffness",
     "StiffnessFit",
     "StiffnessMoments",
+    "choose_damping",
     "dynamic_stiffness",
     "fit_stiffness",
     "line_operators",
     "stiffness_moments",
+    "stiffness_residual",
 ]
 
 
@@ -111,18 +119,29 @@ def _duplication() -> NDArray[np.float64]:
 
 
 _DUP = _duplication()
-_DUP2 = np.zeros((72, 42))
-_DUP2[:36, :21] = _DUP
-_DUP2[36:, 21:] = _DUP
+
+#: the damping terms of ``K* = K + j w C + j D`` a fit may hold: viscous C, structural
+#: (hysteretic) D, or both
+DampingModel = Literal["viscous", "hysteretic", "both"]
+DAMPING_MODELS: tuple[DampingModel, ...] = ("viscous", "hysteretic", "both")
+#: the unknown blocks of each model, indices into (K, C, D)
+_BLOCKS: dict[str, tuple[int, ...]] = {"viscous": (0, 1), "hysteretic": (0, 2),
+                                       "both": (0, 1, 2)}
 
 
 @dataclass(frozen=True)
 class StiffnessFit:
-    """K and C at O fitted over a band, from ``n_equations`` real equations."""
+    """K and C (and D) at O fitted over a band, from ``n_equations`` real equations.
+
+    ``D`` is the structural (hysteretic) damping of ``K* = K + j w C + j D`` (zero unless
+    ``model`` holds it; ``C`` is zero for the ``"hysteretic"`` model).
+    """
 
     K: NDArray[np.float64]
     C: NDArray[np.float64]
     n_equations: int
+    D: NDArray[np.float64] = field(default_factory=lambda: np.zeros((6, 6)))
+    model: DampingModel = "viscous"
 
 
 @dataclass(frozen=True)
@@ -142,22 +161,31 @@ class StiffnessMoments:
     Q3: NDArray[np.complexfloating]
     n_equations: int
     #: solvers of the normal equations per (row scale, symmetric), filled on first use
-    _solvers: dict[tuple[bytes, bool], NDArray[np.float64]] = field(
+    _solvers: dict[tuple[bytes, bool, str], NDArray[np.float64]] = field(
         default_factory=dict, compare=False, repr=False)
 
-    def solver(self, s2: NDArray[np.float64], symmetric: bool) -> NDArray[np.float64]:
-        """Matrix S with ``[vec K; vec C] = S [vec rK; vec rC]`` (row-major vecs)."""
-        key = (s2.tobytes(), symmetric)
+    def solver(self, s2: NDArray[np.float64], symmetric: bool,
+               model: DampingModel = "viscous") -> NDArray[np.float64]:
+        """Matrix S with ``[vec K; vec C] = S [vec rK; vec rC]`` (row-major vecs), the
+        blocks of ``model`` (``[vec K; vec D]`` for ``"hysteretic"``, ``[.. C; .. D]`` for
+        ``"both"``)."""
+        key = (s2.tobytes(), symmetric, model)
         S = self._solvers.get(key)
         if S is None:
-            Nb = np.block([[self.G0.real, -self.G1.imag], [self.G1.imag, self.G2.real]])
-            # full normal matrix over [vec K; vec C] (row-major): row blocks s2_i * Nb
-            Nfull = np.einsum("i,ij,taub->tiaujb", s2, np.eye(6), Nb.reshape(2, 6, 2, 6))
-            Nfull = Nfull.reshape(72, 72)
-            if symmetric:  # unknowns [vech K; vech C] through the duplication matrix
-                S = _DUP2 @ np.linalg.solve(_DUP2.T @ Nfull @ _DUP2, _DUP2.T)
+            G0r, G0i, G1r, G1i = self.G0.real, self.G0.imag, self.G1.real, self.G1.imag
+            # Gram blocks of the regressors x (K), j w x (C) and j x (D)
+            full = [[G0r, -G1i, -G0i], [G1i, self.G2.real, G1r], [G0i, G1r, G0r]]
+            b = _BLOCKS[model]
+            n = len(b)
+            Nb = np.block([[full[r][c] for c in b] for r in b])
+            # full normal matrix over the stacked row-major vecs: row blocks s2_i * Nb
+            Nfull = np.einsum("i,ij,taub->tiaujb", s2, np.eye(6), Nb.reshape(n, 6, n, 6))
+            Nfull = Nfull.reshape(36 * n, 36 * n)
+            if symmetric:  # unknowns [vech K; vech C; ...] through the duplication matrix
+                dup = np.kron(np.eye(n), _DUP)
+                S = np.asarray(dup @ np.linalg.solve(dup.T @ Nfull @ dup, dup.T), dtype=float)
             else:
-                S = np.linalg.inv(Nfull)
+                S = np.asarray(np.linalg.inv(Nfull), dtype=float)
             self._solvers[key] = S
         return S
 
@@ -191,8 +219,9 @@ def fit_stiffness(
     weights: NDArray[np.float64] | None = None,
     row_scale: NDArray[np.float64] | None = None,
     symmetric: bool = True,
+    model: DampingModel = "viscous",
 ) -> StiffnessFit:
-    """Real K, C with ``(K + j w C) X_j = w_j^2 (M X_j - T)`` over the lines given.
+    """Real K, C (, D) with ``(K + j w C + j D) X_j = w_j^2 (M X_j - T)`` over the lines given.
 
     Parameters
     ----------
@@ -204,12 +233,92 @@ def fit_stiffness(
     weights : (n_exc, n_lines), optional non-negative weights
     row_scale : (6,), optional scale of each equation row
     symmetric : fit symmetric K and C (21 + 21 unknowns) instead of general 36 + 36
+    model : the damping terms fitted (:data:`DAMPING_MODELS`): viscous C (default),
+        structural D, or both; the absent one is returned as zeros
     """
     mom = X if isinstance(X, StiffnessMoments) else stiffness_moments(X, T, w, weights)
     R0 = mom.G2 @ M.T - mom.Q2  # (a, i)
     R1 = mom.G3 @ M.T - mom.Q3
     s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
-    rK = R0.real * s2[None, :]  # (a, i)
-    rC = R1.imag * s2[None, :]
-    v = mom.solver(s2, symmetric) @ np.concatenate([rK.T.ravel(), rC.T.ravel()])
-    return StiffnessFit(v[:36].reshape(6, 6), v[36:].reshape(6, 6), mom.n_equations)
+    rhs = (R0.real, R1.imag, R0.imag)  # right-hand sides of K, C, D: Re of conj(regressor) y
+    r = np.concatenate([(rhs[b] * s2[None, :]).T.ravel() for b in _BLOCKS[model]])
+    v = mom.solver(s2, symmetric, model) @ r
+    parts = [np.zeros((6, 6))] * 3
+    for k, b in enumerate(_BLOCKS[model]):
+        parts[b] = v[36 * k:36 * (k + 1)].reshape(6, 6)
+    return StiffnessFit(parts[0], parts[1], mom.n_equations, parts[2], model)
+
+
+def stiffness_residual(
+    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64],
+    M: NDArray[np.float64], sf: StiffnessFit, *,
+    weights: NDArray[np.float64] | None = None,
+    row_scale: NDArray[np.float64] | None = None,
+) -> tuple[float, float]:
+    """Weighted sums of squares of ``(K + j w C + j D) X_j - w_j^2 (M X_j - T)`` and of the
+    right-hand side ``w_j^2 (M X_j - T)``, over the lines (the quantities :func:`fit_stiffness`
+    compares), for X (6, n_exc, n_lines)."""
+    Xf = X.reshape(6, -1)
+    shape = X.shape
+    Y = (w**2) * ((M @ Xf).reshape(shape) - T[:, :, None])
+    R = ((sf.K + 1j * sf.D) @ Xf).reshape(shape) + 1j * w * (sf.C @ Xf).reshape(shape) - Y
+    wt = np.ones(shape[1:]) if weights is None else np.asarray(weights, float)
+    s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
+    rss = float(np.einsum("i,iel,el->", s2, np.abs(R) ** 2, wt))
+    yss = float(np.einsum("i,iel,el->", s2, np.abs(Y) ** 2, wt))
+    return rss, yss
+
+
+@dataclass(frozen=True)
+class DampingChoice:
+    """The damping model chosen for ``K*`` and the evidence, in words (``reason``)."""
+
+    model: DampingModel
+    bic: dict[str, float]
+    reason: str
+
+
+#: relative residual below which a fit counts as exact (the BIC then compares this floor)
+_RSS_FLOOR = 1e-12
+#: BIC margin an alternative must gain over the viscous model (strong evidence)
+_BIC_MARGIN = 10.0
+
+
+def choose_damping(
+    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64],
+    M: NDArray[np.float64], *,
+    weights: NDArray[np.float64] | None = None,
+    row_scale: NDArray[np.float64] | None = None,
+    symmetric: bool = True,
+    moments: StiffnessMoments | None = None,
+) -> DampingChoice:
+    """Viscous C, structural D or both in ``K*``, by the Bayesian information criterion of the
+    stiffness fit over the lines given.
+
+    ``BIC = n ln(RSS / n) + p ln n`` with ``n`` the real equations of non-zero weight, ``p``
+    the unknowns (21 per symmetric 6x6 block) and RSS floored at ``1e-12`` of the
+    right-hand side's sum of squares (fits below it are exact to rounding and count as
+    equal). The viscous model (the article's) is kept unless another's BIC is lower by
+    more than 10 (strong evidence): a stiffness band too narrow to tell ``w C`` from a
+    constant gives nearly equal residuals and keeps it.
+    """
+    mom = moments if moments is not None else stiffness_moments(X, T, w, weights)
+    wt = np.ones(X.shape[1:]) if weights is None else np.asarray(weights, float)
+    n = 2 * 6 * int(np.count_nonzero(wt))
+    per_block = 21 if symmetric else 36
+    bic: dict[str, float] = {}
+    for model in DAMPING_MODELS:
+        sf = fit_stiffness(mom, T, w, M, row_scale=row_scale, symmetric=symmetric, model=model)
+        rss, yss = stiffness_residual(X, T, w, M, sf, weights=weights, row_scale=row_scale)
+        rss = max(rss, _RSS_FLOOR * yss, 1e-300)
+        bic[model] = n * float(np.log(rss / n)) + per_block * len(_BLOCKS[model]) * np.log(n)
+    best = min(DAMPING_MODELS, key=lambda m: bic[m])
+    chosen: DampingModel = best if bic[best] < bic["viscous"] - _BIC_MARGIN else "viscous"
+    names = {"viscous": "viscous C", "hysteretic": "structural D", "both": "C and D"}
+    words = {"viscous": "viscous (K + jwC)", "hysteretic": "structural (K + jD)",
+             "both": "viscous and structural (K + jwC + jD)"}
+    others = ", ".join(f"{names[m]} {bic[m] - bic['viscous']:+.4g}"
+                       for m in DAMPING_MODELS if m != "viscous")
+    reason = (f"damping {words[chosen]}: BIC over the stiffness lines relative to viscous C: "
+              f"{others} (another model is taken when lower by more than {_BIC_MARGIN:g})")
+    return DampingChoice(chosen, bic, reason)

@@ -1,7 +1,7 @@
-"""FRFs synthesised from identified M, K, C and their error against measurement.
+"""FRFs synthesised from identified M, K, C (, D) and their error against measurement.
 
-``H_syn(w) = E (M - (K + j w C) / w^2)^-1 T`` (article eq. 5), the comparison of
-the article's Figs. 9 and 13, per FRF and overall.
+``H_syn(w) = E (M - (K + j w C + j D) / w^2)^-1 T`` (article eq. 5, with the structural
+damping D), the comparison of the article's Figs. 9 and 13, per FRF and overall.
 """
 
 from __future__ import annotations
@@ -24,27 +24,32 @@ def synthesise(
     M: NDArray[np.float64],
     K: NDArray[np.float64],
     C: NDArray[np.float64],
+    D: NDArray[np.float64] | None = None,
 ) -> NDArray[np.complex128]:
     """Accelerance FRFs (n_resp, n_exc, n_f) of the identified rigid-body model.
 
     Computed by modal superposition of the 12 first-order modes of
-    ``M q'' + C q' + K q = T f`` (one 12x12 eigenproblem, then one product for all
-    lines); falls back to one 6x6 solve per line when the modes are nearly defective.
+    ``M q'' + C q' + (K + j D) q = T f`` (one 12x12 eigenproblem, then one product for all
+    lines: the state-space resolvent at ``s = j w`` is ``(K + j D + s C + s^2 M)^-1``
+    exactly, a complex stiffness included); falls back to one 6x6 solve per line when the
+    modes are nearly defective. ``D`` is the structural damping (none when omitted).
     """
     w = 2 * np.pi * np.asarray(freq, dtype=float)
-    modal = _modal_receptance(E, T, M, K, C)
+    Kc: NDArray[np.float64] | NDArray[np.complex128] = (
+        K if D is None or not np.any(D) else K + 1j * D)
+    modal = _modal_receptance(E, T, M, Kc, C)
     if modal is None:
-        Z = K[None] + 1j * w[:, None, None] * C[None] - (w**2)[:, None, None] * M[None]
+        Z = Kc[None] + 1j * w[:, None, None] * C[None] - (w**2)[:, None, None] * M[None]
         A = -(w**2)[:, None, None] * np.linalg.solve(Z, np.broadcast_to(T, (len(w), *T.shape)))
         return np.einsum("ra,fae->ref", E, A)
     R, lam = modal  # (n_r * n_e, 12), (12,)
-    D = -(w**2)[None, :] / (1j * w[None, :] - lam[:, None])  # (12, n_f)
-    return (R @ D).reshape(E.shape[0], T.shape[1], w.size)
+    G = -(w**2)[None, :] / (1j * w[None, :] - lam[:, None])  # (12, n_f)
+    return (R @ G).reshape(E.shape[0], T.shape[1], w.size)
 
 
 def _modal_receptance(
     E: NDArray[np.float64], T: NDArray[np.float64], M: NDArray[np.float64],
-    K: NDArray[np.float64], C: NDArray[np.float64],
+    K: NDArray[np.floating] | NDArray[np.complexfloating], C: NDArray[np.float64],
 ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]] | None:
     """Residues ``E V_q diag(.) W M^-1 T`` flattened (n_r n_e, 12) and the 12 poles."""
     try:

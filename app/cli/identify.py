@@ -66,8 +66,9 @@ def add_mount_arguments(p: Any) -> None:
                    help="excitation frequency (e.g. idle firing order), Hz: each mode's "
                         "frequency ratio, isolation margin (ratio / sqrt 2) and transmissibility")
     g.add_argument("--loss-factor-hz", type=float, metavar="F",
-                   help="frequency of the mounts' loss factors 2 pi f c / k, Hz (default: "
-                        "geometric mean of the rigid-body mode frequencies)")
+                   help="frequency of the viscous part of the mounts' loss factors "
+                        "(d + 2 pi f c) / k, Hz (default: geometric mean of the rigid-body mode "
+                        "frequencies); a structural (hysteretic) part d / k needs none")
 
 
 def mounts_from(args: argparse.Namespace) -> MountsFile | None:

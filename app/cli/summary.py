@@ -154,6 +154,11 @@ def print_result(
                            *_spreads(u, "stiffness")))
     con.print(matrix_table("Damping C at O (N s/m, ...)", result.C, C_truth,
                            *_spreads(u, "damping")))
+    if result.damping_model != "viscous":
+        con.print(matrix_table("Structural damping D at O (K* = K + jwC + jD; N/m, ...)",
+                               result.D, None))
+    if result.damping_note:
+        con.print(f"{result.damping_note[0].upper()}{result.damping_note[1:]}")
     mb, sb = result.mass_band, result.stiffness_band
     con.print(
         f"Bands: mass line {mb[0]:.1f}-{mb[1]:.1f} Hz ({len(result.mass_lines)} lines), "

@@ -136,7 +136,8 @@ def draw_rigidity(plot: pg.PlotItem, a: Analysis) -> None:
 
 
 def draw_dynamic_stiffness(plot: pg.PlotItem, a: Analysis, rotational: bool = False) -> None:
-    """|K*(f)| of the diagonal terms per line (article Fig. 12) and the fitted |K + j w C|."""
+    """|K*(f)| of the diagonal terms per line (article Fig. 12) and the fitted
+    |K + j w C + j D| (D zero unless the damping model holds it)."""
     kind = "rotational" if rotational else "translational"
     unit = "N m/rad" if rotational else "N/m"
     _prepare(plot, f"Dynamic stiffness at O, {kind} (cf. article Fig. 12)",
@@ -151,9 +152,10 @@ def draw_dynamic_stiffness(plot: pg.PlotItem, a: Analysis, rotational: bool = Fa
         color = COLORS[n]
         plot.plot(f, np.abs(r.stiffness_per_line[:, i, i]), pen=None, symbol="o", symbolSize=4,
                   symbolBrush=color, symbolPen=None, name=f"{DOF_LABELS[i]} per line")
-        fit = np.abs(r.K[i, i] + 1j * w * r.C[i, i])
+        fit = np.abs(r.K[i, i] + 1j * w * r.C[i, i] + 1j * r.D[i, i])
+        label = {"viscous": "K+jωC", "hysteretic": "K+jD"}.get(r.damping_model, "K+jωC+jD")
         plot.plot(f, fit, pen=pg.mkPen(color, width=2, style=QtCore.Qt.PenStyle.DashLine),
-                  name=f"{DOF_LABELS[i]} fit K+jωC")
+                  name=f"{DOF_LABELS[i]} fit {label}")
 
 
 def draw_synthesis(plot: pg.PlotItem, a: Analysis) -> None:

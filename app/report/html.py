@@ -167,6 +167,11 @@ def build_report(a: Analysis, title: str = "In situ identification report",
                    [(d, *row) for d, row in zip(figures.DOF_LABELS,
                                                 format_matrix(r.C, u, "damping"),
                                                 strict=True)]),
+            "<h2>Structural damping D at O</h2><p>K* = K + jωC + jD; N/m, N/rad, N m/m, "
+            f"N m/rad. {html.escape(r.damping_note)}.</p>",
+            _table(("", *figures.DOF_LABELS),
+                   [(d, *row) for d, row in zip(figures.DOF_LABELS, format_matrix(r.D),
+                                                strict=True)]),
         ]
         parts.append(_mount_system(a, mounts, excitation_hz))
         if r.warnings:

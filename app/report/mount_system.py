@@ -132,9 +132,13 @@ class MountSystem:
         return rows
 
     def mount_head(self) -> list[str]:
-        f = self.rates.loss_factor_hz if self.rates is not None else 0.0
-        return ["mount", "axis", "rate (N/m)", "std (N/m)", f"loss factor at {f:.3g} Hz",
-                "std", "determined"]
+        """Column titles of :meth:`mount_rows`; the loss factor is ``d / k`` when the damping
+        is structural only (no frequency), else at the loss-factor frequency."""
+        r = self.rates
+        f = r.loss_factor_hz if r is not None else 0.0
+        eta = ("loss factor d/k" if r is not None and r.damping is None
+               and r.structural is not None else f"loss factor at {f:.3g} Hz")
+        return ["mount", "axis", "rate (N/m)", "std (N/m)", eta, "std", "determined"]
 
     def mount_notes(self) -> list[str]:
         """Rank and condition of the fit and one line per undetermined combination."""
@@ -200,7 +204,7 @@ def mount_system(
     problems: list[str] = []
     modes: ModeSet | None = None
     try:
-        modes = rigid_body_modes(result.M, result.K, result.C)
+        modes = rigid_body_modes(result.M, result.K, result.C, result.D)
         problems += modes.warnings
     except ValueError as err:
         problems.append(f"no modes: {err}")
@@ -210,7 +214,9 @@ def mount_system(
                            result.properties.cog)
     f_eta = (loss_factor_hz if loss_factor_hz is not None
              else default_loss_factor_hz(modes, result.stiffness_band))
-    rates = identify_mount_rates(mounts.mounts, result.K, result.C, f_eta)
+    # the damping model's parts only: C for viscous, D for structural, both for both
+    C = result.C if np.any(result.C) else None
+    rates = identify_mount_rates(mounts.mounts, result.K, C, f_eta, D=result.D)
     tra: TorqueRollAxis | None = None
     try:
         tra = torque_roll_axis(result.M, result.K, mounts.crank_axis)

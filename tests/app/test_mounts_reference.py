@@ -24,7 +24,8 @@ from processing.data import FRFSet, Geometry
 from processing.modes import rigid_body_modes
 
 
-def _identify(sc: Scenario, tmp_path: Path, mounts: str) -> tuple[int, dict[str, Any] | None]:
+def _identify(sc: Scenario, tmp_path: Path, mounts: str,
+              extra: tuple[str, ...] = ()) -> tuple[int, dict[str, Any] | None]:
     ids, xyz = sc.geometry()
     frf = FRFSet(freq=sc.freq, H=sc.H, resp_nodes=sc.sensors.ids,
                  resp_dirs=sc.sensors.reported_dirs, exc_nodes=sc.forces.ids,
@@ -33,7 +34,7 @@ def _identify(sc: Scenario, tmp_path: Path, mounts: str) -> tuple[int, dict[str,
     uff, toml, out = tmp_path / "t.uff", tmp_path / "mounts.toml", tmp_path / "r.json"
     write_frf_uff(uff, frf, binary=True)
     toml.write_text(mounts)
-    code = main(["identify", str(uff), "--mounts", str(toml), "--out", str(out)])
+    code = main(["identify", str(uff), "--mounts", str(toml), "--out", str(out), *extra])
     return code, json.loads(out.read_text()) if code == 0 else None
 
 
@@ -48,20 +49,30 @@ def _stiff(seed: int, shape: str, noise: float = 0.0, damping: str = "viscous") 
 
 
 @pytest.mark.parametrize(("seed", "shape"), [(1, "block"), (2, "engine"), (3, "gearbox")])
-@pytest.mark.parametrize(("damping", "rtol"), [("viscous", 0.001), ("hysteretic", 0.15)])
-def test_rates_noise_free(seed: int, shape: str, damping: str, rtol: float,
-                          tmp_path: Path) -> None:
-    """Viscous mounts (the K + jwC the identification fits): rates to 0.1 %. Hysteretic
-    mounts (rubber): the fit's viscous model biases K by up to 0.6 % of sqrt(Kii Kjj),
-    which the rate fit amplifies on the softest rates (measured up to 12.9 %)."""
+@pytest.mark.parametrize("damping", ["viscous", "hysteretic"])
+def test_rates_and_loss_factors_noise_free(seed: int, shape: str, damping: str,
+                                           tmp_path: Path) -> None:
+    """Viscous mounts (K + jwC) and hysteretic ones (rubber, K + jD): the identification
+    chooses the damping model from the stiffness lines, then the rates come to 0.1 %
+    (measured: 1.7e-12 at most) and the loss factors too (measured 1.4e-12): hysteretic
+    ones as d / k, viscous ones as 2 pi f c / k at the model's reference 10 Hz."""
     sc = _stiff(seed, shape, damping=damping)
-    code, r = _identify(sc, tmp_path, mounts_toml(sc.mounts))
+    code, r = _identify(sc, tmp_path, mounts_toml(sc.mounts), ("--loss-factor-hz", "10"))
     assert code == 0 and r is not None
+    assert r["damping_model"] == damping and r["damping_choice"].startswith("damping ")
     got = np.array([m["rates"] for m in r["mounts"]])
     ok = np.array([m["identifiable"] for m in r["mounts"]])
     true = _rates(sc)
     assert ok.all()  # four turned mounts: every rate determined
-    np.testing.assert_allclose(got, true, rtol=rtol)
+    np.testing.assert_allclose(got, true, rtol=1e-3)
+    eta = np.array([m["loss_factors"] for m in r["mounts"]], dtype=float)
+    np.testing.assert_allclose(eta, [m.loss_factors for m in sc.mounts], rtol=1e-3)
+    D = np.array(r["structural_damping"])
+    if damping == "hysteretic":  # D is the mounts' K_loss; no viscous part
+        np.testing.assert_allclose(D, sc.truth.K_loss, atol=1e-6 * np.abs(sc.truth.K).max())
+        assert not np.any(r["damping"])
+    else:
+        assert not np.any(D)
 
 
 def test_modes_and_decoupling_of_the_true_system() -> None:
@@ -128,3 +139,20 @@ def test_undetermined_geometry_flagged_and_refused(tmp_path: Path,
     code, _ = _identify(sc, tmp_path, many)
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "mount" in err[0]
+
+
+def test_hysteretic_rates_and_loss_factors_at_noise(tmp_path: Path) -> None:
+    """Rubber mounts at 1.5 % FRF noise, the six scenarios of the viscous test above: the
+    structural model is chosen every time, rates within 1 % (measured 0.23 % at most,
+    median 0.04 %; with the viscous model alone it was 7.5 % and 0.95 %) and loss factors
+    within 0.01 (measured 0.0025)."""
+    for seed in range(6):
+        sc = _stiff(10 + seed, ("block", "engine", "gearbox")[seed % 3], noise=0.015,
+                    damping="hysteretic")
+        code, r = _identify(sc, tmp_path, mounts_toml(sc.mounts))
+        assert code == 0 and r is not None
+        assert r["damping_model"] == "hysteretic", r["damping_choice"]
+        got = np.array([m["rates"] for m in r["mounts"]])
+        np.testing.assert_allclose(got, _rates(sc), rtol=0.01)
+        eta = np.array([m["loss_factors"] for m in r["mounts"]], dtype=float)
+        np.testing.assert_allclose(eta, [m.loss_factors for m in sc.mounts], atol=0.01)

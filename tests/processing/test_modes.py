@@ -8,7 +8,15 @@ import json
 import numpy as np
 import pytest
 import scipy.linalg
-from mount_truth import Spring, Truth, cuboid_points, engine_on_four_mounts, point_map, rotation
+from mount_truth import (
+    ETA_HZ,
+    Spring,
+    Truth,
+    cuboid_points,
+    engine_on_four_mounts,
+    point_map,
+    rotation,
+)
 from numpy.testing import assert_allclose
 
 from hardware_mocks.benches import get_bench
@@ -169,3 +177,20 @@ def test_bad_matrices() -> None:
 def test_rotation_helper_is_a_rotation() -> None:
     R = rotation("y", 30.0) @ rotation("z", -20.0)
     assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+
+
+def test_damping_ratios_with_structural_damping() -> None:
+    """``zeta_r = phi_r^T D phi_r / (2 w_r^2)``: half the loss factor of the complex
+    eigenvalues of ``(K + j D, M)`` (exact for D proportional to K; within 1 % for the
+    four mounts' D, measured 0.45 %, coupling 0.22)."""
+    t = engine_on_four_mounts()
+    m = rigid_body_modes(t.M, t.K, None, 0.1 * t.K)
+    assert_allclose(m.damping_ratio, 0.05, rtol=1e-10)
+    D = 2 * np.pi * ETA_HZ * t.C  # the springs' eta k: structural instead of viscous
+    lam = scipy.linalg.eigvals(t.K + 1j * D, t.M)
+    lam = lam[np.argsort(lam.real)]
+    m = rigid_body_modes(t.M, t.K, None, D)
+    assert_allclose(2 * m.damping_ratio, lam.imag / lam.real, rtol=0.01)
+    both = rigid_body_modes(t.M, t.K, t.C, D)  # viscous and structural parts add
+    alone = rigid_body_modes(t.M, t.K, t.C)
+    assert_allclose(both.damping_ratio, alone.damping_ratio + m.damping_ratio, rtol=1e-12)

@@ -180,3 +180,22 @@ def test_rates_from_noisy_frfs_of_the_simulated_engine(noise: float) -> None:
         errs.append(np.abs(f.rates - k) / k)
     assert np.max(errs) < 0.01
     assert np.mean(hits) >= 0.8
+
+
+def test_loss_factors_from_structural_damping() -> None:
+    """With the structural damping D (``d = eta k`` per spring) the loss factors are
+    ``d / k`` whatever the frequency given; with C as well the two parts add."""
+    t = engine_on_four_mounts()
+    eta = np.array([2 * np.pi * ETA_HZ * s.c / s.k for s in t.springs])
+    D = 2 * np.pi * ETA_HZ * t.C
+    r = identify_mount_rates(geometry(t), t.K, None, 123.0, D=D)
+    assert r.damping is None and r.structural is not None
+    assert_allclose(r.loss_factors, eta, rtol=1e-9)
+    assert_allclose(r.structural.rates, eta * rates(t), rtol=1e-9)
+    js = r.to_json()
+    assert_allclose([m["structural_rates"] for m in js], eta * rates(t), rtol=1e-9)
+    assert all(m["damping_rates"] is None for m in js)
+    both = identify_mount_rates(geometry(t), t.K, t.C, ETA_HZ, D=D)
+    assert_allclose(both.loss_factors, 2 * eta, rtol=1e-9)
+    zero = identify_mount_rates(geometry(t), t.K, t.C, ETA_HZ, D=np.zeros((6, 6)))
+    assert zero.structural is None and zero.to_json()[0]["structural_rates"] is None

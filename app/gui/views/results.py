@@ -97,7 +97,8 @@ class ResultsView(QtWidgets.QWidget):
         self.principal = QtWidgets.QTableWidget()
         self.K = QtWidgets.QTableWidget()
         self.C = QtWidgets.QTableWidget()
-        for t in (self.inertia, self.principal, self.K, self.C):
+        self.D = QtWidgets.QTableWidget()
+        for t in (self.inertia, self.principal, self.K, self.C, self.D):
             t.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
         self.modes = QtWidgets.QTableWidget()
         self.energy = QtWidgets.QTableWidget()
@@ -116,7 +117,19 @@ class ResultsView(QtWidgets.QWidget):
         mp.addWidget(self.tra, 2)
         tabs = QtWidgets.QTabWidget()
         tabs.addTab(self.K, "Stiffness K at O")
-        tabs.addTab(self.C, "Damping C at O")
+        # viscous C and structural D of K* = K + j w C + j D on one page, with the model chosen
+        damping_page = QtWidgets.QWidget()
+        dl = QtWidgets.QVBoxLayout(damping_page)
+        dl.setContentsMargins(0, 0, 0, 0)
+        self.damping_note = QtWidgets.QLabel()
+        self.damping_note.setWordWrap(True)
+        dl.addWidget(self.damping_note)
+        dl.addWidget(QtWidgets.QLabel("<b>Viscous C</b> (N s/m, N s/rad, N m s/m, N m s/rad)"))
+        dl.addWidget(self.C, 1)
+        dl.addWidget(QtWidgets.QLabel("<b>Structural D</b> (units of K)"))
+        dl.addWidget(self.D, 1)
+        self.damping_page = damping_page
+        tabs.addTab(damping_page, "Damping at O")
         modes_page = QtWidgets.QWidget()
         mlay = QtWidgets.QVBoxLayout(modes_page)
         mlay.setContentsMargins(0, 0, 0, 0)
@@ -143,8 +156,8 @@ class ResultsView(QtWidgets.QWidget):
         ll.addWidget(QtWidgets.QLabel("<b>Principal moments and axes</b> about the CoG"))
         ll.addWidget(self.principal, 2)
         ll.addWidget(tabs, 3)
-        units = QtWidgets.QLabel("DOF order x, y, z, rx, ry, rz at the origin O. K: N/m, N/rad, "
-                                 "N m/m, N m/rad; C: N s/m, N s/rad, N m s/m, N m s/rad.")
+        units = QtWidgets.QLabel("DOF order x, y, z, rx, ry, rz at the origin O. K, D: N/m, "
+                                 "N/rad, N m/m, N m/rad; C: N s/m, N s/rad, N m s/m, N m s/rad.")
         units.setWordWrap(True)
         ll.addWidget(units)
         # --- plots
@@ -233,10 +246,11 @@ class ResultsView(QtWidgets.QWidget):
         if r is None:
             set_verdict(self.verdict, False, f"Identification failed: {a.error}")
             self.summary.setText("Adjust the bands or check the data (see Checks).")
-            for t in (self.inertia, self.principal, self.K, self.C):
+            for t in (self.inertia, self.principal, self.K, self.C, self.D):
                 t.clear()
                 t.setRowCount(0)
             self.uncertainty.hide()
+            self.damping_note.clear()
             return
         self._filling = True
         try:
@@ -264,7 +278,8 @@ class ResultsView(QtWidgets.QWidget):
                 f"{'' if r.converged else ' (NOT converged)'}; mass line "
                 f"{r.mass_band[0]:.2f}-{r.mass_band[1]:.2f} Hz ({len(r.mass_lines)} lines), "
                 f"stiffness {r.stiffness_band[0]:.2f}-{r.stiffness_band[1]:.2f} Hz "
-                f"({len(r.stiffness_lines)} lines). Rigid-body modes: {modes} Hz.")
+                f"({len(r.stiffness_lines)} lines). Rigid-body modes: {modes} Hz. Damping "
+                f"model: {r.damping_model}.")
         if r.warnings:
             text += " Warnings: " + "; ".join(r.warnings)
         self.summary.setText(text)
@@ -283,8 +298,14 @@ class ResultsView(QtWidgets.QWidget):
         fill_table(self.C, ("C at O", *dofs),
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.C, u, "damping"),
                                                 strict=True)])
+        self.damping_note.setText(f"K* = K + jωC + jD; {r.damping_note}."
+                                  if r.damping_note else "K* = K + jωC + jD")
+        fill_table(self.D, ("D at O", *dofs),
+                   [(d, *row) for d, row in zip(dofs, format_matrix(r.D), strict=True)])
         self.K.setToolTip("N/m (translation rows/columns), N/rad, N m/m, N m/rad")
         self.C.setToolTip("N s/m, N s/rad, N m s/m, N m s/rad")
+        self.D.setToolTip("K* = K + j w C + j D: N/m, N/rad, N m/m, N m/rad (zero unless the "
+                          "damping model holds D)")
 
     # --- mount system ----------------------------------------------------------------------------
     def _show_mount_system(self, _mounts: object = None) -> None:

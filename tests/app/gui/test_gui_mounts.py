@@ -72,6 +72,11 @@ def test_mounts_in_plan_and_results(qtbot, make_window, choose_file, tmp_path: P
     res = window.results_view
     ms = res.mount_system
     assert ms is not None and ms.rates is not None
+    # the bench's dampers are viscous: the data choose C, D is shown as zeros
+    assert "Damping model: viscous" in res.summary.text()
+    assert "damping viscous (K + jwC)" in res.damping_note.text()
+    assert res.D.rowCount() == 6 and ms.rates.structural is None
+    assert "loss factor at" in ms.mount_head()[4]
     f = [float(x) for x in _col(res.modes, 1)]
     np.testing.assert_allclose(f, model.rigid_modes().frequency, rtol=2e-3)
     assert res.energy.rowCount() == 6 and res.energy.columnCount() == 7
@@ -149,3 +154,42 @@ def test_run_file_mounts_are_loaded_with_the_run(qtbot, make_window, choose_file
     assert _col(window.plan_view.mounts_table, 0) == ["mount 1", "mount 2", "mount 3"]
     ms = window.results_view.mount_system
     assert ms is not None and ms.rates is not None and ms.rates.stiffness.identifiable.all()
+
+
+def test_rubber_mounts_in_results(qtbot, make_window, choose_file, tmp_path: Path) -> None:
+    """Hysteretic (rubber) mounts of the independent reference model: the data choose the
+    structural damping D, the D tab holds it and each mount's loss factor is d / k (the
+    model's own, noise-free: to the table's 3 decimals)."""
+    from hardware_mocks.reference.mounts import mounts_toml
+    from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
+    from processing.data import FRFSet, Geometry
+
+    sc = build_scenario(ScenarioSpec(seed=2, shape="engine", n_sensors=4, n_forces=12,
+                                     n_mounts=4, elastic_ratio=None, damping="hysteretic"))
+    ids, xyz = sc.geometry()
+    uff, toml = tmp_path / "rubber.uff", tmp_path / "rubber.toml"
+    write_frf_uff(uff, FRFSet(freq=sc.freq, H=sc.H, resp_nodes=sc.sensors.ids,
+                              resp_dirs=sc.sensors.reported_dirs, exc_nodes=sc.forces.ids,
+                              exc_dirs=sc.forces.reported_dirs, geometry=Geometry(ids, xyz)),
+                  binary=True)
+    toml.write_text(mounts_toml(sc.mounts))
+    window: MainWindow = make_window()
+    choose_file(toml)
+    window.plan_view.mounts_button.click()
+    choose_file(uff)
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000):
+        window.open_action.trigger()
+    res = window.results_view
+    ms = res.mount_system
+    assert ms is not None and ms.rates is not None and ms.rates.structural is not None
+    assert "Damping model: hysteretic" in res.summary.text()
+    assert "damping structural (K + jD)" in res.damping_note.text()
+    assert ms.mount_head()[4] == "loss factor d/k"
+    eta = [float(x) for x in _col(res.mount_rates, 4)]
+    np.testing.assert_allclose(eta, np.concatenate([m.loss_factors for m in sc.mounts]),
+                               rtol=0, atol=5.01e-4)
+    window.tabs.setCurrentWidget(res)
+    res.table_tabs.setCurrentWidget(res.mounts_page)
+    _shot(window, "results_mounts_rubber", tmp_path)
+    res.table_tabs.setCurrentWidget(res.damping_page)
+    _shot(window, "results_damping", tmp_path)
