@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 import scipy.linalg
@@ -40,10 +41,11 @@ from processing.data import FRFSet, InputError
 from processing.geometry import GeometryError, excitation_matrix
 from processing.inertia import InertiaProperties, inertia_properties, mass_matrix
 from processing.massline import MassLineFit, MassLineProblem, stack_real
+from processing.montecarlo import MonteCarloModel, build_model, simulate
 from processing.physical import constrain_physical
 from processing.problem import IdentifyOptions, Problem, prepare
 from processing.refine import point_offsets
-from processing.results import IdentificationResult, Method
+from processing.results import IdentificationResult, Method, Uncertainty
 from processing.rigidity import rigidity_check
 from processing.selection import (
     BandChoice,
@@ -61,6 +63,13 @@ from processing.stiffness import (
     stiffness_moments,
 )
 from processing.synthesis import SynthesisFit, synthesis_error, synthesise
+from processing.uncertainty import (
+    FitCovariance,
+    StiffnessMap,
+    combine,
+    draw_variances,
+    fit_covariance,
+)
 from processing.windows import correct_dynamic_stiffness
 
 __all__ = [
@@ -77,6 +86,7 @@ __all__ = [
     "fit",
     "identify",
     "identify_arrays",
+    "uncertainty",
     "weigh_lines",
 ]
 
@@ -232,6 +242,11 @@ class Fit:
     operators: LineOperators
     #: how the mass-line model was chosen, in words
     model_note: str = ""
+    #: the final mass-line problem and its right-hand side (for the fit's covariance)
+    mass_line: MassLineProblem | None = field(default=None, repr=False, compare=False)
+    mass_rhs: NDArray[np.complex128] | None = field(default=None, repr=False, compare=False)
+    #: the stiffness step, M -> (K, C), on the final stiffness lines (affine in M)
+    stiffness_map: StiffnessMap | None = field(default=None, repr=False, compare=False)
 
 
 class _StiffnessStep:
@@ -426,8 +441,10 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
         if enforced:
             theta = theta_c
             K, C = step(mass_matrix(theta), Xs)
+    msel = weights.mass_lines
+    rhs = _mass_line_rhs(problem, problem.X[..., msel], problem.w[msel], K, C)
     return Fit(theta, K, C, best.iterations, best.converged, best.fit.normal, enforced, ops,
-               note)
+               note, mass_line=best.ml, mass_rhs=rhs, stiffness_map=partial(step, Xs=Xs))
 
 
 # --- stage 4: checks -------------------------------------------------------------------------
@@ -474,11 +491,66 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
     return Checks(props, rigid_hz, syn, Ks_line, tuple(warnings))
 
 
-# --- stage 5: results ------------------------------------------------------------------------
+# --- stage 5: uncertainty --------------------------------------------------------------------
+
+
+_COV_SOURCE = ("fit covariance: mass-line residual (block-robust over lines) and "
+               "stiffness-line scatter, propagated to first order")
+
+
+def monte_carlo_model(problem: Problem, weights: LineWeights, fitted: Fit,
+                      node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+                      ) -> MonteCarloModel:
+    """The :class:`~processing.montecarlo.MonteCarloModel` of a fit (improved method, no
+    exponential window), for :func:`processing.montecarlo.simulate`.
+
+    Raises
+    ------
+    InputError
+        For the plain method or windowed data (the fast re-solve does not cover them).
+    """
+    if not problem.improved or problem.window_decay or fitted.mass_line is None:
+        raise InputError("the Monte Carlo of stated test uncertainties needs the improved "
+                         "method on data without an exponential window: drop --method plain "
+                         "or the uncertainty options")
+    msel, ssel = weights.mass_lines, weights.stiffness_lines
+    return build_model(fitted.mass_line, problem.H[..., msel], problem.w[msel],
+                       problem.H[..., ssel], problem.w[ssel], weights.stiffness,
+                       problem.resp_xyz, problem.E[:, :3], problem.exc_xyz, problem.T[:3].T,
+                       problem.row_scale,
+                       problem.options.symmetric, fitted.theta, fitted.K, fitted.C,
+                       *(node_ids if node_ids is not None else (None, None)))
+
+
+def uncertainty(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
+                checks: Checks,
+                node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+                ) -> Uncertainty | None:
+    """Standard deviations of every result: the fit's covariance
+    (:mod:`processing.uncertainty`), plus the Monte Carlo of the stated test uncertainties
+    (:mod:`processing.montecarlo`) when the options state any; None when the fit kept no
+    state for it."""
+    if fitted.mass_line is None or fitted.mass_rhs is None or fitted.stiffness_map is None:
+        return None
+    used = weights.stiffness_lines[bands.in_stiffness]
+    cov: FitCovariance = fit_covariance(
+        fitted.mass_line, fitted.theta, fitted.mass_rhs, fitted.stiffness_map,
+        checks.stiffness_per_line[used], problem.w[weights.stiffness_lines], fitted.K, fitted.C)
+    stated = problem.options.stated
+    sources: tuple[str, ...] = (_COV_SOURCE,)
+    extra = None
+    if stated is not None and stated.stated:
+        draws = simulate(monte_carlo_model(problem, weights, fitted, node_ids), stated)
+        extra = draw_variances(draws.theta, draws.K, draws.C, draws.z, draws.groups)
+        sources = (*sources, stated.describe())
+    return combine(fitted.theta, fitted.K, cov.parts, sources, extra)
+
+
+# --- stage 6: results ------------------------------------------------------------------------
 
 
 def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
-             checks: Checks) -> IdentificationResult:
+             checks: Checks, uncertain: Uncertainty | None = None) -> IdentificationResult:
     """The :class:`IdentificationResult` of the stages."""
     opt, freq = problem.options, problem.freq
     return IdentificationResult(
@@ -509,6 +581,7 @@ def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
         stiffness_per_line=checks.stiffness_per_line,
         band_reason=bands.reason,
         model_note=fitted.model_note,
+        uncertainty=uncertain,
     )
 
 
@@ -560,6 +633,7 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
         coherence=frf.coherence, options=opt, rigid_band_top=rigid_top,
         rigid_band_fallback=rigid_raised,
         exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0 else None,
+        node_ids=(frf.resp_nodes, frf.exc_nodes),
     )
     if notes:
         result = dataclasses.replace(result, warnings=(*result.warnings, *notes))
@@ -579,8 +653,12 @@ def identify_arrays(
     rigid_band_top: float | None = None,
     exponential_tau: float | None = None,
     rigid_band_fallback: float | None = None,
+    node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
 ) -> IdentificationResult:
     """:func:`identify` on plain arrays (shapes as in :class:`FRFSet`).
+
+    ``node_ids`` (response, excitation node ids) name the points in the uncertainty's
+    contributions.
 
     ``rigid_band_top`` (Hz) bounds the automatic mass-line band, ``rigid_band_fallback``
     (Hz) when the first leaves no mass line; ``exponential_tau`` (s) is the time
@@ -595,7 +673,10 @@ def identify_arrays(
     bands = choose_bands(problem, rigid_band_top, rigid_band_fallback)
     weights = weigh_lines(problem, bands)
     fitted = fit(problem, bands, weights)
-    return assemble(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
+    checks = check(problem, bands, weights, fitted)
+    uncertain = (uncertainty(problem, bands, weights, fitted, checks, node_ids)
+                 if opt.uncertainty else None)
+    return assemble(problem, bands, weights, fitted, checks, uncertain)
 
 
 def _refined(
