@@ -175,6 +175,16 @@ class MassLineProblem:
             Zr = Zr - _project(Zr, self._Q)
         return np.asarray(Zr)
 
+    def column_normals(self) -> NDArray[np.float64]:
+        """The normal matrix's share of each excitation column, (n_exc, 10, 10) (they sum to
+        :attr:`normal`)."""
+        n_e = self.shape[1]
+        Xk = self._Xp.reshape(6, n_e, -1)
+        G = np.einsum("akc,bkc->kab", Xk, Xk)
+        s2 = np.ones(6) if self._row_scale is None else self._row_scale**2
+        return np.asarray((_normal_operator_cached(s2) @ G.reshape(n_e, 36).T).T
+                          .reshape(n_e, 10, 10))
+
     @property
     def n_free(self) -> int:
         """Unknowns of the fit: the ten parameters and the free leakage coefficients (one per
@@ -185,12 +195,13 @@ class MassLineProblem:
     def line_scores(self, theta: NDArray[np.float64], B: NDArray[np.complexfloating]) -> (
         NDArray[np.float64]
     ):
-        """Per-line gradient terms of the least squares at theta, (10, n_lines).
+        """Gradient terms of the least squares at theta per excitation column and line,
+        (10, n_exc, n_lines).
 
-        Line j's entry is ``sum_c a_pc r_c`` over the (weighted, row-scaled, projected)
-        equations c of that line (real and imaginary parts, every excitation column), with
-        ``a_p = M_p X`` the regressor of parameter p and ``r = B - M(theta) X`` the residual:
-        they sum to zero at the solution, and their scatter over lines is what a
+        Entry (p, k, j) is ``sum_c a_pc r_c`` over the (weighted, row-scaled, projected)
+        equations c of column k on line j (real and imaginary parts), with ``a_p = M_p X``
+        the regressor of parameter p and ``r = B - M(theta) X`` the residual: they sum to
+        zero at the solution, and their scatter over lines and columns is what a
         heteroscedasticity- and correlation-robust (sandwich) covariance needs.
         """
         n_e, n_l = self.shape[1], self.shape[2]
@@ -201,7 +212,7 @@ class MassLineProblem:
         # sum_i s2_i (M_p Xp)_ic R_ic = sum_ia MBs_p[i, a] R_ic Xp_ac
         MBs = self._MBs.reshape(10, 6, 6)
         per_col = np.einsum("pia,ic,ac->pc", MBs, R, self._Xp, optimize=True)
-        return np.asarray(per_col.reshape(10, n_e, 2, n_l).sum(axis=(1, 2)))
+        return np.asarray(per_col.reshape(10, n_e, 2, n_l).sum(axis=2))
 
     def solve(self, B: NDArray[np.complexfloating]) -> MassLineFit:
         """Ten parameters from ``M(theta) X_j (+ Z b_j) = B_j``, B broadcastable to X."""

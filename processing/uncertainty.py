@@ -54,6 +54,9 @@ __all__ = [
 
 #: number of contiguous line blocks of the cluster-robust covariance (at most)
 DEFAULT_BLOCKS = 16
+#: relative precision of the arithmetic chain (spectra, E^+, solves): the smallest std kept,
+#: relative to each parameter's scale
+NUMERICAL_FLOOR = 1e-10
 
 StiffnessMap = Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
 
@@ -107,23 +110,47 @@ def theta_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
 ):
     """(10, 10) covariance of the mass-line estimate (see the module docstring)."""
     N = ml.normal
-    try:
-        Ninv = np.linalg.inv(N)
-    except np.linalg.LinAlgError:
-        Ninv = np.linalg.pinv(N)
-    scores = ml.line_scores(theta, B)
+    Ninv = np.linalg.pinv(N)
+    scores = ml.line_scores(theta, B)  # (10, n_exc, n_lines)
     dof = max(ml.n_equations - ml.n_free, 1)
     inflate = ml.n_equations / dof
-    robust = Ninv @ block_covariance(scores, n_blocks) @ Ninv * inflate
-    classic = Ninv * ml.residual_ss(theta, B) / dof
-    # per-parameter: whichever is larger, as a congruence (keeps it positive semi-definite)
-    ratio = np.sqrt(np.maximum(np.diag(classic), 0) / np.maximum(np.diag(robust), 1e-300))
-    scale = np.where(np.diag(robust) > 0, np.maximum(ratio, 1.0), 1.0)
-    cov = robust * np.outer(scale, scale)
-    bad = np.diag(robust) <= 0
-    if np.any(bad):
-        cov[bad, :] = classic[bad, :]
-        cov[:, bad] = classic[:, bad]
+    candidates = [
+        excitation_jackknife(ml, scores.sum(axis=2)),
+        Ninv @ block_covariance(scores.sum(axis=1), n_blocks) @ Ninv * inflate,
+        Ninv * ml.residual_ss(theta, B) / dof,
+    ]
+    return _largest(candidates)
+
+
+def excitation_jackknife(ml: MassLineProblem, col_scores: NDArray[np.float64]) -> (
+    NDArray[np.float64]
+):
+    """Delete-one-excitation jackknife covariance of theta, (10, 10).
+
+    Leaving column k out moves the least-squares solution by exactly
+    ``(N - N_k)^-1 s_k`` (``N_k`` its share of the normal matrix, ``s_k`` its gradient
+    terms, (10, n_exc)); their spread is the jackknife variance. An elastic mode, a
+    misplaced hit or a bad force channel makes the columns disagree.
+    """
+    n_e = col_scores.shape[1]
+    if n_e < 2:
+        return np.zeros((10, 10))
+    A = ml.normal[None] - ml.column_normals()
+    D = np.einsum("kpq,qk->kp", np.linalg.pinv(A), col_scores)
+    D -= D.mean(axis=0)
+    return np.asarray((n_e - 1) / n_e * D.T @ D)
+
+
+def _largest(covs: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """The first covariance with each parameter's variance raised to the largest of all
+    (a congruence ``S C S``, so it stays positive semi-definite)."""
+    base = covs[0]
+    d0 = np.diag(base)
+    top = np.max([np.diag(c) for c in covs], axis=0)
+    ok = d0 > 0
+    scale = np.where(ok, np.sqrt(top / np.where(ok, d0, 1.0)), 0.0)
+    cov = base * np.outer(scale, scale)
+    cov[~ok, ~ok] = top[~ok]
     return np.asarray(0.5 * (cov + cov.T))
 
 
@@ -155,6 +182,11 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
     K, C : the fitted stiffness and damping
     """
     cov_t = theta_covariance(ml, theta, B, n_blocks)
+    # floor: the precision of the arithmetic, relative to m, m L and m L^2
+    m = abs(float(theta[0]))
+    L = np.sqrt(max(abs(float(np.sum(theta[4:7]))) / max(m, 1e-300), 1e-12))
+    scale = np.array([m, *(3 * [m * L]), *(6 * [m * L**2])]) * NUMERICAL_FLOOR
+    cov_t = cov_t + np.diag(scale**2)
     M0 = mass_matrix(theta)
     K0, C0 = stiffness_map(M0)
     J = np.empty((72, 10))
@@ -163,6 +195,10 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
         J[:36, p] = (Kp - K0).ravel()
         J[36:, p] = (Cp - C0).ravel()
     scatter = stiffness_scatter(Ks_lines, w_stiff, K, C, n_blocks)
+    dk = np.sqrt(np.abs(np.diag(K)))
+    dc = np.sqrt(np.abs(np.diag(C)))
+    scatter = scatter + np.diag(np.concatenate([np.outer(dk, dk).ravel(),
+                                                np.outer(dc, dc).ravel()]) * NUMERICAL_FLOOR)**2
     A = np.vstack([np.eye(10), J])
     from_theta = A @ cov_t @ A.T
     from_lines = np.zeros((82, 82))
