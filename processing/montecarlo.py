@@ -19,7 +19,8 @@ the projection and weights act on lines and columns while ``E^+`` acts on channe
 every moment the mass-line and stiffness fits need is ``E_d^+ (sum_k f_k^2 Gamma_k)
 E_d^+^T`` with per-excitation channel-space moments ``Gamma_k`` formed once. A draw then
 costs a few 6x6 and 42x42 solves, vectorised over draws; the coupled inertia-stiffness
-iteration of section 2.2 runs to convergence for all draws at once. The leakage
+iteration of section 2.2 is linear in theta on moments, and its fixed point is solved
+directly (one 10x10 solve a draw). The leakage
 cleaning of the stiffness lines is not redone per draw: a draw's result is the nominal
 result plus the change the fast path gives between that draw and the unperturbed
 geometry.
@@ -99,8 +100,6 @@ class MonteCarloModel:
     theta: NDArray[np.float64]  # (10,) nominal result
     K: NDArray[np.float64]
     C: NDArray[np.float64]
-    max_iter: int = 200
-    tol: float = 1e-10
 
 
 @dataclass(frozen=True)
@@ -222,40 +221,44 @@ def _solve_draws(model: MonteCarloModel, dP: NDArray[np.float64], tilt: NDArray[
     P2 = sandwich(m.a2)
     P1 = sandwich(m.a1)
     WT = (T * f[:, None, :]) @ m.hbar.T[None] @ EpT  # (n, 6, 6)
-    MBs = MASS_BASIS * m.s2[None, :, None]  # (10, 6, 6)
-    N = np.einsum("pia,qib,nab->npq", MBs, MASS_BASIS, G)
+    MBs = (MASS_BASIS * m.s2[None, :, None]).reshape(10, 36)
+    op = np.einsum("pia,qib->pqab", MBs.reshape(10, 6, 6), MASS_BASIS).reshape(100, 36)
+    N = (G.reshape(n, 36) @ op.T).reshape(n, 10, 10)
+    NinvMB = (np.linalg.inv(N) @ MBs).reshape(n, 10, 6, 6)  # theta = NinvMB . vec(W)
     Gp = [sandwich(m.gs[q]) for q in range(4)]
     Q2, Q3 = ((Ep @ np.einsum("nk,rk,nik->nri", f, m.hq[q].T, T)) for q in (0, 1))
-    Nb = np.zeros((n, 12, 12))
-    Nb[:, :6, :6], Nb[:, :6, 6:] = Gp[0].real, -Gp[1].imag
-    Nb[:, 6:, :6], Nb[:, 6:, 6:] = Gp[1].imag, Gp[2].real
-    Nfull = np.einsum("i,ij,ntaub->ntiaujb", m.s2, np.eye(6),
-                      Nb.reshape(n, 2, 6, 2, 6)).reshape(n, 72, 72)
+    Nb = np.zeros((n, 2, 6, 2, 6))
+    Nb[:, 0, :, 0], Nb[:, 0, :, 1] = Gp[0].real, -Gp[1].imag
+    Nb[:, 1, :, 0], Nb[:, 1, :, 1] = Gp[1].imag, Gp[2].real
+    Nfull = np.zeros((n, 2, 6, 6, 2, 6, 6))
+    for i in range(6):  # row blocks s2_i Nb on the diagonal of the equation rows
+        Nfull[:, :, i, :, :, i, :] = m.s2[i] * Nb
+    Nfull = Nfull.reshape(n, 72, 72)
     if m.symmetric:
         S = _DUP2[None] @ np.linalg.solve(_DUP2.T[None] @ Nfull @ _DUP2[None], _DUP2.T[None])
     else:
         S = np.linalg.inv(Nfull)
-    Ninv = np.linalg.inv(N)
-    K = np.broadcast_to(m.K, (n, 6, 6)).copy()
-    C = np.broadcast_to(m.C, (n, 6, 6)).copy()
-    theta = np.broadcast_to(m.theta, (n, 10)).copy()
-    done = np.zeros(n, bool)
-    for _ in range(m.max_iter):
-        W = WT + K @ P2 + C @ P1
-        new = np.einsum("npq,qia,nia->np", Ninv, MBs, W)
-        M = np.einsum("np,pij->nij", new, MASS_BASIS)
-        MT = np.swapaxes(M, 1, 2)
-        rK = (Gp[2] @ MT - Q2).real * m.s2[None, None, :]
-        rC = (Gp[3] @ MT - Q3).imag * m.s2[None, None, :]
-        v = np.einsum("nij,nj->ni", S, np.concatenate(
-            [np.swapaxes(rK, 1, 2).reshape(n, 36), np.swapaxes(rC, 1, 2).reshape(n, 36)], 1))
-        K, C = v[:, :36].reshape(n, 6, 6), v[:, 36:].reshape(n, 6, 6)
-        change = np.max(np.abs(new - theta) / np.maximum(np.abs(new), 1e-12 * np.abs(
-            new[:, :1])), axis=1)
-        theta = new
-        done = change < m.tol
-        if np.all(done):
-            break
+
+    def vecs(rK: NDArray[np.float64], rC: NDArray[np.float64]) -> NDArray[np.float64]:
+        """[vec rK^T, vec rC^T] (..., 72) of (..., 6, 6) right-hand sides."""
+        lead = rK.shape[:-2]
+        return np.concatenate([np.swapaxes(rK, -1, -2).reshape(*lead, 36),
+                               np.swapaxes(rC, -1, -2).reshape(*lead, 36)], axis=-1)
+
+    # the coupled fixed point of section 2.2 is linear in theta: solve it directly
+    # theta = t0 + L v, v = [vec K, vec C] = s0 + S_theta theta
+    t0 = np.einsum("npia,nia->np", NinvMB, WT)
+    L = np.concatenate([(NinvMB @ np.swapaxes(P2, 1, 2)[:, None]).reshape(n, 10, 36),
+                        (NinvMB @ np.swapaxes(P1, 1, 2)[:, None]).reshape(n, 10, 36)], axis=2)
+    s0 = np.einsum("nij,nj->ni", S, vecs(-Q2.real * m.s2, -Q3.imag * m.s2))
+    MBT = np.swapaxes(MASS_BASIS, 1, 2)[None]  # (1, 10, 6, 6)
+    R = vecs((Gp[2][:, None] @ MBT).real * m.s2, (Gp[3][:, None] @ MBT).imag * m.s2)
+    S_theta = S @ np.swapaxes(R, 1, 2)  # (n, 72, 10)
+    A = np.eye(10)[None] - L @ S_theta
+    theta = np.linalg.solve(A, (t0 + np.einsum("npv,nv->np", L, s0))[..., None])[..., 0]
+    v = s0 + np.einsum("nvp,np->nv", S_theta, theta)
+    K, C = v[:, :36].reshape(n, 6, 6), v[:, 36:].reshape(n, 6, 6)
+    done = np.all(np.isfinite(theta), axis=1)
     return theta, K, C, done
 
 
