@@ -91,9 +91,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
           f"load {os.getloadavg()[0]:.1f}")
     for name, frf in cases():
-        t_plain = _median_time(lambda f=frf: idm.identify(f, IdentifyOptions(uncertainty=False)),
-                               args.repeat)
-        t_cov = _median_time(lambda f=frf: idm.identify(f), args.repeat)
+        def plain(f: FRFSet = frf) -> object:
+            return idm.identify(f, IdentifyOptions(uncertainty=False))
+
+        def with_cov(f: FRFSet = frf) -> object:
+            return idm.identify(f)
+
+        t_plain = _median_time(plain, args.repeat)
+        t_cov = _median_time(with_cov, args.repeat)
         t_mc = draws_time(frf, stated, args.repeat)
         print(f"{name}: identify {t_plain:.3f} s, with covariance {t_cov:.3f} s "
               f"({t_cov / t_plain:.2f}x); Monte Carlo {args.draws} draws {t_mc:.2f} s", flush=True)

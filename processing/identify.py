@@ -67,6 +67,7 @@ from processing.uncertainty import (
     FitCovariance,
     StiffnessMap,
     combine,
+    draw_covariance,
     draw_variances,
     fit_covariance,
 )
@@ -247,6 +248,9 @@ class Fit:
     mass_rhs: NDArray[np.complex128] | None = field(default=None, repr=False, compare=False)
     #: the stiffness step, M -> (K, C), on the final stiffness lines (affine in M)
     stiffness_map: StiffnessMap | None = field(default=None, repr=False, compare=False)
+    #: theta of the same model fitted to the lower and the upper half of the mass lines
+    half_thetas: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(
+        default=None, repr=False, compare=False)
 
 
 class _StiffnessStep:
@@ -432,8 +436,13 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
         use, note = _upper_residual_chosen(problem, weights, step)
         if use:
             w = problem.w
-            best = _fit_model(problem, weights, step, [(w / w[-1]) ** 2 + 0j])
+            shapes = [(w / w[-1]) ** 2 + 0j]
+            best = _fit_model(problem, weights, step, shapes)
     theta, K, C, Xs = best.theta, best.K, best.C, best.Xs
+    halves = None
+    if opt.uncertainty and np.count_nonzero(weights.mass_lines) >= 8:
+        lo, hi = (_fit_model(problem, w, step, shapes).theta for w in _halves(weights))
+        halves = (lo, hi)
     enforced = False
     if opt.physical:
         theta_c = constrain_physical(theta, best.fit.normal)
@@ -444,7 +453,8 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
     msel = weights.mass_lines
     rhs = _mass_line_rhs(problem, problem.X[..., msel], problem.w[msel], K, C)
     return Fit(theta, K, C, best.iterations, best.converged, best.fit.normal, enforced, ops,
-               note, mass_line=best.ml, mass_rhs=rhs, stiffness_map=partial(step, Xs=Xs))
+               note, mass_line=best.ml, mass_rhs=rhs, stiffness_map=partial(step, Xs=Xs),
+               half_thetas=halves)
 
 
 # --- stage 4: checks -------------------------------------------------------------------------
@@ -535,15 +545,17 @@ def uncertainty(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fi
     used = weights.stiffness_lines[bands.in_stiffness]
     cov: FitCovariance = fit_covariance(
         fitted.mass_line, fitted.theta, fitted.mass_rhs, fitted.stiffness_map,
-        checks.stiffness_per_line[used], problem.w[weights.stiffness_lines], fitted.K, fitted.C)
+        checks.stiffness_per_line[used], problem.w[weights.stiffness_lines], fitted.K, fitted.C,
+        half_thetas=fitted.half_thetas)
     stated = problem.options.stated
     sources: tuple[str, ...] = (_COV_SOURCE,)
-    extra = None
+    extra = extra_cov = None
     if stated is not None and stated.stated:
         draws = simulate(monte_carlo_model(problem, weights, fitted, node_ids), stated)
         extra = draw_variances(draws.theta, draws.K, draws.C, draws.z, draws.groups)
+        extra_cov = draw_covariance(draws.theta, draws.K, draws.C)
         sources = (*sources, stated.describe())
-    return combine(fitted.theta, fitted.K, cov.parts, sources, extra)
+    return combine(fitted.theta, fitted.K, cov.parts, sources, extra, extra_cov)
 
 
 # --- stage 6: results ------------------------------------------------------------------------

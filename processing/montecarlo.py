@@ -230,10 +230,10 @@ def _solve_draws(model: MonteCarloModel, dP: NDArray[np.float64], tilt: NDArray[
     Nb = np.zeros((n, 2, 6, 2, 6))
     Nb[:, 0, :, 0], Nb[:, 0, :, 1] = Gp[0].real, -Gp[1].imag
     Nb[:, 1, :, 0], Nb[:, 1, :, 1] = Gp[1].imag, Gp[2].real
-    Nfull = np.zeros((n, 2, 6, 6, 2, 6, 6))
+    blocks = np.zeros((n, 2, 6, 6, 2, 6, 6))
     for i in range(6):  # row blocks s2_i Nb on the diagonal of the equation rows
-        Nfull[:, :, i, :, :, i, :] = m.s2[i] * Nb
-    Nfull = Nfull.reshape(n, 72, 72)
+        blocks[:, :, i, :, :, i, :] = m.s2[i] * Nb
+    Nfull = blocks.reshape(n, 72, 72)
     if m.symmetric:
         S = _DUP2[None] @ np.linalg.solve(_DUP2.T[None] @ Nfull @ _DUP2[None], _DUP2.T[None])
     else:

@@ -47,9 +47,13 @@ from processing.results import UNCERTAIN_KEYS, Contribution, Uncertainty
 __all__ = [
     "FitCovariance",
     "block_covariance",
+    "combine",
+    "draw_covariance",
+    "draw_variances",
+    "excitation_jackknife",
     "fit_covariance",
     "propagate",
-    "uncertainty_of_fit",
+    "theta_covariance",
 ]
 
 #: number of contiguous line blocks of the cluster-robust covariance (at most)
@@ -171,7 +175,9 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
                    B: NDArray[np.complexfloating], stiffness_map: StiffnessMap,
                    Ks_lines: NDArray[np.complex128], w_stiff: NDArray[np.float64],
                    K: NDArray[np.float64], C: NDArray[np.float64],
-                   n_blocks: int = DEFAULT_BLOCKS) -> FitCovariance:
+                   n_blocks: int = DEFAULT_BLOCKS,
+                   half_thetas: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+                   ) -> FitCovariance:
     """Joint covariance of theta, K and C of one fit.
 
     Parameters
@@ -180,8 +186,15 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
     stiffness_map : M (6, 6) -> (K, C), the fit's stiffness step (affine in M)
     Ks_lines : (n, 6, 6) K* of each stiffness line used, w_stiff (n,) rad/s
     K, C : the fitted stiffness and damping
+    half_thetas : theta of the same model on the lower and upper half of the mass lines:
+        their difference d gives the two-block jackknife ``d d^T / 4`` (the estimate's drift
+        with the band, i.e. model error), a further candidate of the largest-variance rule
     """
     cov_t = theta_covariance(ml, theta, B, n_blocks)
+    if half_thetas is not None:
+        d = np.asarray(half_thetas[1]) - np.asarray(half_thetas[0])
+        if np.all(np.isfinite(d)):
+            cov_t = _largest([cov_t, np.outer(d, d) / 4])
     # floor: the precision of the arithmetic, relative to m, m L and m L^2
     m = abs(float(theta[0]))
     L = np.sqrt(max(abs(float(np.sum(theta[4:7]))) / max(m, 1e-300), 1e-12))
@@ -341,10 +354,10 @@ def contributions(var_parts: dict[str, dict[str, NDArray[np.float64]]], top: int
 def combine(theta: NDArray[np.float64], K: NDArray[np.float64],
             parts: dict[str, NDArray[np.float64]], sources: tuple[str, ...],
             extra_parts: dict[str, dict[str, NDArray[np.float64]]] | None = None,
-            ) -> Uncertainty:
+            extra_cov: NDArray[np.float64] | None = None) -> Uncertainty:
     """:class:`Uncertainty` of independent covariance parts of ``[theta, vec K, vec C]`` plus,
     optionally, per-key variances from elsewhere (a Monte Carlo), keyed like
-    :func:`variance_parts`."""
+    :func:`variance_parts`, and that source's (82, 82) covariance ``extra_cov``."""
     vp = variance_parts(theta, K, parts)
     for key, more in (extra_parts or {}).items():
         vp.setdefault(key, {}).update(more)
@@ -352,15 +365,18 @@ def combine(theta: NDArray[np.float64], K: NDArray[np.float64],
            .reshape(UNCERTAIN_KEYS[key]) for key, v in vp.items()}
     std = {k: np.where(np.isfinite(v), v, np.nan) for k, v in std.items()}
     std = {k: v for k, v in std.items() if np.all(np.isfinite(v))}
-    return Uncertainty(std=std, sources=sources, contributions=contributions(vp))
+    cov = np.sum(list(parts.values()), axis=0)
+    if extra_cov is not None:
+        cov = cov + extra_cov
+    return Uncertainty(std=std, sources=sources, contributions=contributions(vp), covariance=cov)
 
 
-def uncertainty_of_fit(cov: FitCovariance, theta: NDArray[np.float64],
-                       K: NDArray[np.float64]) -> Uncertainty:
-    """The :class:`Uncertainty` of the fit's covariance alone."""
-    return combine(theta, K, cov.parts, (
-        "fit covariance: mass-line residual (block-robust over lines) and stiffness-line "
-        "scatter, propagated to first order",))
+def draw_covariance(theta: NDArray[np.float64], K: NDArray[np.float64],
+                    C: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(82, 82) sample covariance of ``[theta, vec K, vec C]`` over draws."""
+    n = theta.shape[0]
+    p = np.concatenate([theta, K.reshape(n, 36), C.reshape(n, 36)], axis=1)
+    return np.asarray(np.cov(p, rowvar=False))
 
 
 # --- Monte Carlo draws -----------------------------------------------------------------------

@@ -210,7 +210,11 @@ def mount_system(
                            result.properties.cog)
     f_eta = (loss_factor_hz if loss_factor_hz is not None
              else default_loss_factor_hz(modes, result.stiffness_band))
-    rates = identify_mount_rates(mounts.mounts, result.K, result.C, f_eta)
+    cov = result.uncertainty.covariance if result.uncertainty is not None else None
+    rates = identify_mount_rates(
+        mounts.mounts, result.K, result.C, f_eta,
+        K_cov=None if cov is None else cov[10:46, 10:46],
+        C_cov=None if cov is None else cov[46:, 46:])
     tra: TorqueRollAxis | None = None
     try:
         tra = torque_roll_axis(result.M, result.K, mounts.crank_axis)
