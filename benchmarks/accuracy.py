@@ -415,7 +415,9 @@ def write_docs(body: list[list[str]], rows: list[dict[str, Any]], worse: list[st
             lines += [f"Refusals of `{method}` (count, message with its numbers as #, one "
                       "example):", "",
                       *(f"- {n}: `{k}` (e.g. `{ex}`)" for n, k, ex in kinds), ""]
-    DOCS.write_text("\n".join(lines))
+    old = DOCS.read_text() if DOCS.exists() else ""
+    kept = COVERAGE_TITLE + old.split(COVERAGE_TITLE, 1)[1] if COVERAGE_TITLE in old else ""
+    DOCS.write_text("\n".join(lines) + ("\n\n" + kept if kept else ""))
 
 
 if __name__ == "__main__":
