@@ -16,9 +16,17 @@ entry (about O and about the CoG) as % of the largest principal moment, worst K 
 of sqrt(Kii Kjj). The table gives, per family (body shape), per tag and overall, the median
 and 95th percentile over the scenarios a method answered, and its refusals.
 
+Coverage (``--coverage``): the default method with its uncertainty (the fit's covariance
+plus the Monte Carlo of the test uncertainties a user would state for the scenario: its
+location, misalignment/transverse and gain error levels as standard deviations), and per
+parameter group (mass, CoG, inertia about the CoG, K, C of viscous mounts) the fraction of
+scenario x entry cases with ``|error| <= 1.96 std`` and the median ``|error| / std``;
+also over the results that pass their own checks (synthesis error, physical consistency).
+With ``--write-docs`` it writes its own section of docs/accuracy.md.
+
 Run: ``.venv/bin/python benchmarks/accuracy.py [--scenarios 200] [--family engine]
-[--jobs 2] [--write-docs] [--json FILE]``. BLAS runs single-threaded in every process (set
-before numpy is imported); ``--jobs`` runs scenarios in parallel processes.
+[--jobs 2] [--write-docs] [--json FILE] [--coverage]``. BLAS runs single-threaded in every
+process (set before numpy is imported); ``--jobs`` runs scenarios in parallel processes.
 """
 
 from __future__ import annotations
@@ -56,7 +64,10 @@ from hardware_mocks.reference.scenarios import (  # noqa: E402
     build_scenario,
     suite,
 )
-from processing.data import FRFSet, Geometry  # noqa: E402
+from processing.data import FRFSet, Geometry, InputError  # noqa: E402
+from processing.geometry import GeometryError  # noqa: E402
+from processing.identify import IdentifyOptions, identify  # noqa: E402
+from processing.montecarlo import StatedUncertainty  # noqa: E402
 
 METHODS = ("default", "plain", "article")
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "accuracy.md"
@@ -108,6 +119,148 @@ def evaluate(spec: ScenarioSpec) -> dict[str, Any]:
     except ArticleRefusalError as err:
         row["article"] = {"refused": str(err)}
     return row
+
+
+#: parameter groups of the coverage table
+COVERAGE_GROUPS = ("mass", "cog", "inertia", "K", "C")
+#: draws of the Monte Carlo in the coverage benchmark
+COVERAGE_DRAWS = 300
+
+
+def stated_for(spec: ScenarioSpec) -> StatedUncertainty:
+    """The standard uncertainties a user would state for a scenario: its error levels as
+    standard deviations (uniform +-a -> a / sqrt 3; a rotation of angle uniform in 0-a about a
+    random axis -> a / 3 about each axis; transverse sensitivity t along a random
+    perpendicular -> t / sqrt 2 about each perpendicular axis)."""
+    angle = float(np.hypot(np.deg2rad(spec.misalignment_deg) / 3, spec.transverse / np.sqrt(2)))
+    return StatedUncertainty(location=spec.location_error / np.sqrt(3), angle=angle,
+                             gain=spec.gain_error / np.sqrt(3), draws=COVERAGE_DRAWS)
+
+
+def evaluate_coverage(spec: ScenarioSpec) -> dict[str, Any]:
+    """|error| / std of every entry of each group for one scenario (default method with its
+    uncertainty), whether its checks pass, and the identification times with and without
+    the covariance part."""
+    sc = build_scenario(spec)
+    frf = frfset_of(sc)
+    row: dict[str, Any] = {"name": spec.name, "family": spec.family, "tags": list(spec.tags)}
+    try:
+        t0 = time.perf_counter()
+        identify(frf, IdentifyOptions(uncertainty=False))
+        t1 = time.perf_counter()
+        r = identify(frf, IdentifyOptions(stated=stated_for(spec)))
+        t2 = time.perf_counter()
+        identify(frf)
+        t3 = time.perf_counter()
+    except (InputError, GeometryError) as err:
+        row["refused"] = str(err)
+        return row
+    except (np.linalg.LinAlgError, ValueError) as err:  # the CLI reports these as refusals
+        row["refused"] = f"{type(err).__name__}: {err}"
+        return row
+    u = r.uncertainty
+    assert u is not None
+    tr, p = sc.truth, r.properties
+    iu3, iu6 = np.triu_indices(3), np.triu_indices(6)
+    pairs: dict[str, tuple[Any, Any, Any]] = {
+        "mass": (p.mass, tr.mass, u.std["mass"]), "cog": (p.cog, tr.cog, u.std["cog"]),
+        "inertia": (p.inertia_cog[iu3], tr.inertia_cog[iu3], u.std["inertia_cog"][iu3]),
+        "K": (r.K[iu6], tr.K[iu6], u.std["stiffness"][iu6])}
+    if spec.damping == "viscous":
+        pairs["C"] = (r.C[iu6], tr.C[iu6], u.std["damping"][iu6])
+    row["ratio"] = {g: (np.abs(np.ravel(e) - np.ravel(t)) / np.maximum(np.ravel(s), 1e-300)
+                        ).tolist() for g, (e, t, s) in pairs.items()}
+    checks = r.checks()
+    row["checks_pass"] = bool(checks["reconstruction_error"]["pass"]
+                              and checks["physical_consistency"]["pass"])
+    row["seconds"] = {"plain": t1 - t0, "with_mc": t2 - t1, "covariance": t3 - t2}
+    return row
+
+
+def coverage_table(rows: list[dict[str, Any]]) -> list[list[str]]:
+    """Rows: group, cases, coverage, median |error|/std, then the same over passing checks."""
+    out = []
+    for g in COVERAGE_GROUPS:
+        cells = [g]
+        for subset in (rows, [r for r in rows if r.get("checks_pass")]):
+            v = np.concatenate([np.asarray(r["ratio"][g]) for r in subset
+                                if "ratio" in r and g in r["ratio"]] or [np.zeros(0)])
+            cells += ([f"{v.size}", f"{np.mean(v <= 1.96) * 100:.1f} %", f"{np.median(v):.3g}"]
+                      if v.size else ["0", "-", "-"])
+        out.append(cells)
+    return out
+
+
+COVERAGE_HEADER = ["group", "cases", "within 1.96 std", "median abs(error)/std",
+                   "cases (checks pass)", "within 1.96 std (checks pass)",
+                   "median abs(error)/std (checks pass)"]
+
+
+def main_coverage(specs: list[ScenarioSpec], args: argparse.Namespace) -> int:
+    console = Console()
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        rows = list(pool.map(evaluate_coverage, specs, chunksize=1))
+    elapsed = time.perf_counter() - t0
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1, default=float))
+    body = coverage_table(rows)
+    table = Table(title=f"Coverage of the 95 % intervals on {len(rows)} scenarios "
+                        f"({elapsed:.0f} s)")
+    for h in COVERAGE_HEADER:
+        table.add_column(h)
+    for cells in body:
+        table.add_row(*cells)
+    console.print(table)
+    times = [r["seconds"] for r in rows if "seconds" in r]
+    ratio = np.array([t["covariance"] / t["plain"] for t in times])
+    mc = np.array([t["with_mc"] - t["covariance"] for t in times])
+    refused = sum(1 for r in rows if "refused" in r)
+    passing = sum(1 for r in rows if r.get("checks_pass"))
+    timing = (f"identification with / without the covariance part: median "
+              f"{np.median(ratio):.2f}x, max {np.max(ratio):.2f}x; Monte Carlo of "
+              f"{COVERAGE_DRAWS} draws: median {np.median(mc):.2f} s")
+    console.print(f"{refused} refused, {passing} pass their checks; {timing}")
+    if args.write_docs:
+        write_coverage_docs(body, len(rows), refused, passing, timing, elapsed, args)
+        console.print(f"written to {DOCS}")
+    return 0
+
+
+COVERAGE_TITLE = "## Coverage of the stated uncertainty"
+
+
+def write_coverage_docs(body: list[list[str]], n: int, refused: int, passing: int,
+                        timing: str, elapsed: float, args: argparse.Namespace) -> None:
+    """Replace (or append) the coverage section of docs/accuracy.md."""
+    text = DOCS.read_text() if DOCS.exists() else ""
+    head = text.split(COVERAGE_TITLE)[0].rstrip("\n")
+    shown = [a for i, a in enumerate(sys.argv[1:])
+             if a != "--json" and (i == 0 or sys.argv[i] != "--json")]
+    lines = [
+        "", "", COVERAGE_TITLE, "",
+        "Produced by `benchmarks/accuracy.py --coverage` (do not edit by hand). The default "
+        "method with its uncertainty (docs/uncertainty.md): the fit's covariance plus the "
+        f"Monte Carlo ({COVERAGE_DRAWS} draws) of the test uncertainties a user would state "
+        "for the scenario, i.e. its own location, misalignment/transverse and gain error "
+        "levels as standard deviations (`stated_for`). A case is one entry of one group in "
+        "one scenario (mass; CoG x, y, z; the six entries of the tensor about the CoG; the 21 "
+        "of K; the 21 of C for viscous mounts only, hysteretic ones have no viscous truth); "
+        "it is covered when |error| <= 1.96 std. 'checks pass': the result's synthesis "
+        "error and physical-consistency checks pass (what a test engineer would sign off).",
+        "",
+        f"- date: {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}",
+        f"- command: `python benchmarks/accuracy.py {' '.join(shown)}` ({elapsed:.0f} s)",
+        f"- {n} scenarios, {refused} refused, {passing} pass their checks",
+        f"- {timing}",
+        "",
+        "| " + " | ".join(COVERAGE_HEADER) + " |",
+        "| " + " | ".join("---" if i == 0 else "---:" for i in range(len(COVERAGE_HEADER)))
+        + " |",
+        *("| " + " | ".join(c) + " |" for c in body),
+        "",
+    ]
+    DOCS.write_text(head + "\n".join(lines))
 
 
 def worse_than_article(row: dict[str, Any]) -> bool:
@@ -171,9 +324,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--verbose", action="store_true", help="print each scenario's errors")
     p.add_argument("--json", type=Path, metavar="FILE",
                    help="also write every scenario's errors, bands and refusals here")
+    p.add_argument("--coverage", action="store_true",
+                   help="coverage of the 95 %% intervals instead of the accuracy table")
     args = p.parse_args(argv)
     specs = [s for s in suite(args.scenarios, args.seed)
              if args.family is None or s.family == args.family]
+    if args.coverage:
+        return main_coverage(specs, args)
     console = Console()
     t0 = time.perf_counter()
     rows: list[dict[str, Any]] = []
@@ -258,7 +415,9 @@ def write_docs(body: list[list[str]], rows: list[dict[str, Any]], worse: list[st
             lines += [f"Refusals of `{method}` (count, message with its numbers as #, one "
                       "example):", "",
                       *(f"- {n}: `{k}` (e.g. `{ex}`)" for n, k, ex in kinds), ""]
-    DOCS.write_text("\n".join(lines))
+    old = DOCS.read_text() if DOCS.exists() else ""
+    kept = COVERAGE_TITLE + old.split(COVERAGE_TITLE, 1)[1] if COVERAGE_TITLE in old else ""
+    DOCS.write_text("\n".join(lines) + ("\n\n" + kept if kept else ""))
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
@@ -42,10 +42,11 @@ from processing.data import FRFSet, InputError
 from processing.geometry import GeometryError, excitation_matrix
 from processing.inertia import InertiaProperties, inertia_properties, mass_matrix
 from processing.massline import MassLineFit, MassLineProblem, stack_real
+from processing.montecarlo import MonteCarloModel, build_model, simulate
 from processing.physical import constrain_physical
 from processing.problem import IdentifyOptions, Problem, prepare
 from processing.refine import point_offsets
-from processing.results import IdentificationResult, Method
+from processing.results import IdentificationResult, Method, Uncertainty
 from processing.rigidity import rigidity_check
 from processing.selection import (
     BandChoice,
@@ -66,6 +67,14 @@ from processing.stiffness import (
     stiffness_moments,
 )
 from processing.synthesis import SynthesisFit, synthesis_error, synthesise
+from processing.uncertainty import (
+    FitCovariance,
+    StiffnessMap,
+    combine,
+    draw_covariance,
+    draw_variances,
+    fit_covariance,
+)
 from processing.windows import correct_dynamic_stiffness
 
 __all__ = [
@@ -82,6 +91,7 @@ __all__ = [
     "fit",
     "identify",
     "identify_arrays",
+    "uncertainty",
     "weigh_lines",
 ]
 
@@ -254,6 +264,14 @@ class Fit:
     damping_model: DampingModel = "viscous"
     #: how the damping model was chosen, in words
     damping_note: str = ""
+    #: the final mass-line problem and its right-hand side (for the fit's covariance)
+    mass_line: MassLineProblem | None = field(default=None, repr=False, compare=False)
+    mass_rhs: NDArray[np.complex128] | None = field(default=None, repr=False, compare=False)
+    #: the stiffness step, M -> (K, C), on the final stiffness lines (affine in M)
+    stiffness_map: StiffnessMap | None = field(default=None, repr=False, compare=False)
+    #: theta of the same model fitted to the lower and the upper half of the mass lines
+    half_thetas: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(
+        default=None, repr=False, compare=False)
 
 
 class _StiffnessStep:
@@ -497,6 +515,10 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
                 break
             tried.add(model)
     theta, K, C, D, Xs = best.theta, best.K, best.C, best.D, best.Xs
+    halves = None
+    if opt.uncertainty and np.count_nonzero(weights.mass_lines) >= 8:
+        lo, hi = (_fit_model(problem, w, step, shapes).theta for w in _halves(weights))
+        halves = (lo, hi)
     enforced = False
     if opt.physical:
         theta_c = constrain_physical(theta, best.fit.normal)
@@ -504,8 +526,16 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
         if enforced:
             theta = theta_c
             K, C, D = step(mass_matrix(theta), Xs)
+    msel = weights.mass_lines
+    rhs = _mass_line_rhs(problem, problem.X[..., msel], problem.w[msel], K, C, D)
+
+    def stiffness_map(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        K_, C_, _D = step(M, Xs)
+        return K_, C_
+
     return Fit(theta, K, C, best.iterations, best.converged, best.fit.normal, enforced, ops,
-               note, D, step.model, damping_note)
+               note, D, step.model, damping_note, mass_line=best.ml, mass_rhs=rhs,
+               stiffness_map=stiffness_map, half_thetas=halves)
 
 
 # --- stage 4: checks -------------------------------------------------------------------------
@@ -552,11 +582,68 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
     return Checks(props, rigid_hz, syn, Ks_line, tuple(warnings))
 
 
-# --- stage 5: results ------------------------------------------------------------------------
+# --- stage 5: uncertainty --------------------------------------------------------------------
+
+
+_COV_SOURCE = ("fit covariance: mass-line residual (block-robust over lines) and "
+               "stiffness-line scatter, propagated to first order")
+
+
+def monte_carlo_model(problem: Problem, weights: LineWeights, fitted: Fit,
+                      node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+                      ) -> MonteCarloModel:
+    """The :class:`~processing.montecarlo.MonteCarloModel` of a fit (improved method, no
+    exponential window), for :func:`processing.montecarlo.simulate`.
+
+    Raises
+    ------
+    InputError
+        For the plain method or windowed data (the fast re-solve does not cover them).
+    """
+    if not problem.improved or problem.window_decay or fitted.mass_line is None:
+        raise InputError("the Monte Carlo of stated test uncertainties needs the improved "
+                         "method on data without an exponential window: drop --method plain "
+                         "or the uncertainty options")
+    msel, ssel = weights.mass_lines, weights.stiffness_lines
+    return build_model(fitted.mass_line, problem.H[..., msel], problem.w[msel],
+                       problem.H[..., ssel], problem.w[ssel], weights.stiffness,
+                       problem.resp_xyz, problem.E[:, :3], problem.exc_xyz, problem.T[:3].T,
+                       problem.row_scale,
+                       problem.options.symmetric, fitted.theta, fitted.K, fitted.C,
+                       *(node_ids if node_ids is not None else (None, None)))
+
+
+def uncertainty(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
+                checks: Checks,
+                node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+                ) -> Uncertainty | None:
+    """Standard deviations of every result: the fit's covariance
+    (:mod:`processing.uncertainty`), plus the Monte Carlo of the stated test uncertainties
+    (:mod:`processing.montecarlo`) when the options state any; None when the fit kept no
+    state for it."""
+    if fitted.mass_line is None or fitted.mass_rhs is None or fitted.stiffness_map is None:
+        return None
+    used = weights.stiffness_lines[bands.in_stiffness]
+    cov: FitCovariance = fit_covariance(
+        fitted.mass_line, fitted.theta, fitted.mass_rhs, fitted.stiffness_map,
+        checks.stiffness_per_line[used], problem.w[weights.stiffness_lines], fitted.K, fitted.C,
+        half_thetas=fitted.half_thetas)
+    stated = problem.options.stated
+    sources: tuple[str, ...] = (_COV_SOURCE,)
+    extra = extra_cov = None
+    if stated is not None and stated.stated:
+        draws = simulate(monte_carlo_model(problem, weights, fitted, node_ids), stated)
+        extra = draw_variances(draws.theta, draws.K, draws.C, draws.z, draws.groups)
+        extra_cov = draw_covariance(draws.theta, draws.K, draws.C)
+        sources = (*sources, stated.describe())
+    return combine(fitted.theta, fitted.K, cov.parts, sources, extra, extra_cov)
+
+
+# --- stage 6: results ------------------------------------------------------------------------
 
 
 def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
-             checks: Checks) -> IdentificationResult:
+             checks: Checks, uncertain: Uncertainty | None = None) -> IdentificationResult:
     """The :class:`IdentificationResult` of the stages."""
     opt, freq = problem.options, problem.freq
     return IdentificationResult(
@@ -591,6 +678,7 @@ def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
         D=fitted.D,
         damping_model=fitted.damping_model,
         damping_note=fitted.damping_note,
+        uncertainty=uncertain,
     )
 
 
@@ -642,6 +730,7 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
         coherence=frf.coherence, options=opt, rigid_band_top=rigid_top,
         rigid_band_fallback=rigid_raised,
         exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0 else None,
+        node_ids=(frf.resp_nodes, frf.exc_nodes),
     )
     if notes:
         result = dataclasses.replace(result, warnings=(*result.warnings, *notes))
@@ -661,8 +750,12 @@ def identify_arrays(
     rigid_band_top: float | None = None,
     exponential_tau: float | None = None,
     rigid_band_fallback: float | None = None,
+    node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
 ) -> IdentificationResult:
     """:func:`identify` on plain arrays (shapes as in :class:`FRFSet`).
+
+    ``node_ids`` (response, excitation node ids) name the points in the uncertainty's
+    contributions.
 
     ``rigid_band_top`` (Hz) bounds the automatic mass-line band, ``rigid_band_fallback``
     (Hz) when the first leaves no mass line; ``exponential_tau`` (s) is the time
@@ -677,7 +770,10 @@ def identify_arrays(
     bands = choose_bands(problem, rigid_band_top, rigid_band_fallback)
     weights = weigh_lines(problem, bands)
     fitted = fit(problem, bands, weights)
-    return assemble(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
+    checks = check(problem, bands, weights, fitted)
+    uncertain = (uncertainty(problem, bands, weights, fitted, checks, node_ids)
+                 if opt.uncertainty else None)
+    return assemble(problem, bands, weights, fitted, checks, uncertain)
 
 
 def _refined(

@@ -165,6 +165,55 @@ class MassLineProblem:
         s2 = np.ones(6) if self._row_scale is None else self._row_scale**2
         return float(np.sum(s2 * np.sum(R * R, axis=1)))
 
+    def stacked(self, Z: NDArray[np.complexfloating], *, project: bool) -> NDArray[np.float64]:
+        """Z (n, n_exc, n_lines) real-stacked and weighted as the equations are, (n, n_exc,
+        2 n_lines); with ``project`` also without its components along the leakage shapes."""
+        Zr = stack_real(Z)
+        if self._sw is not None:
+            Zr = Zr * self._sw
+        if project and self._Q is not None:
+            Zr = Zr - _project(Zr, self._Q)
+        return np.asarray(Zr)
+
+    def column_normals(self) -> NDArray[np.float64]:
+        """The normal matrix's share of each excitation column, (n_exc, 10, 10) (they sum to
+        :attr:`normal`)."""
+        n_e = self.shape[1]
+        Xk = self._Xp.reshape(6, n_e, -1)
+        G = np.einsum("akc,bkc->kab", Xk, Xk)
+        s2 = np.ones(6) if self._row_scale is None else self._row_scale**2
+        return np.asarray((_normal_operator_cached(s2) @ G.reshape(n_e, 36).T).T
+                          .reshape(n_e, 10, 10))
+
+    @property
+    def n_free(self) -> int:
+        """Unknowns of the fit: the ten parameters and the free leakage coefficients (one per
+        equation row, excitation column and kept shape)."""
+        n_s = 0 if self.shapes is None else self.shapes.shape[0]
+        return 10 + 6 * self.shape[1] * n_s
+
+    def line_scores(self, theta: NDArray[np.float64], B: NDArray[np.complexfloating]) -> (
+        NDArray[np.float64]
+    ):
+        """Gradient terms of the least squares at theta per excitation column and line,
+        (10, n_exc, n_lines).
+
+        Entry (p, k, j) is ``sum_c a_pc r_c`` over the (weighted, row-scaled, projected)
+        equations c of column k on line j (real and imaginary parts), with ``a_p = M_p X``
+        the regressor of parameter p and ``r = B - M(theta) X`` the residual: they sum to
+        zero at the solution, and their scatter over lines and columns is what a
+        heteroscedasticity- and correlation-robust (sandwich) covariance needs.
+        """
+        n_e, n_l = self.shape[1], self.shape[2]
+        Bw = self._weighted(B).reshape(6, n_e, -1)
+        if self._Q is not None:
+            Bw = Bw - _project(Bw, self._Q)
+        R = Bw.reshape(6, -1) - mass_matrix(theta) @ self._Xp  # (6, n_cols)
+        # sum_i s2_i (M_p Xp)_ic R_ic = sum_ia MBs_p[i, a] R_ic Xp_ac
+        MBs = self._MBs.reshape(10, 6, 6)
+        per_col = np.einsum("pia,ic,ac->pc", MBs, R, self._Xp, optimize=True)
+        return np.asarray(per_col.reshape(10, n_e, 2, n_l).sum(axis=2))
+
     def solve(self, B: NDArray[np.complexfloating]) -> MassLineFit:
         """Ten parameters from ``M(theta) X_j (+ Z b_j) = B_j``, B broadcastable to X."""
         return self._finish(self._weighted(B) @ self._Xp.T, B)

@@ -36,7 +36,9 @@ Uncertainty
     Residual-based covariance of the linear least-squares fit,
     ``cov = s^2 (D_w^T D_w)^+`` with ``s^2 = |r_w|^2 / (21 - rank)`` (or ``s = 1`` when
     ``K_std`` weights are given), restricted to the identifiable rates; undetermined rates
-    get no standard deviation (``nan``).
+    get no standard deviation (``nan``). With the identification's covariance of K
+    (``K_cov``), its first-order image ``P cov(vec K) P^T`` through the unconstrained fit is
+    added: the residual sees only the part of K's error outside the design's span.
 """
 
 from __future__ import annotations
@@ -236,6 +238,7 @@ def fit_mount_rates(
     mounts: Sequence[MountGeometry],
     K: ArrayLike,
     K_std: ArrayLike | None = None,
+    K_cov: ArrayLike | None = None,
 ) -> MountFit:
     """Non-negative rates of each mount's three springs that best reproduce K at O.
 
@@ -244,6 +247,10 @@ def fit_mount_rates(
     mounts : the mounts' positions and axes
     K : (6, 6) identified stiffness at O (or damping C: the rates are then N s/m)
     K_std : optional (6, 6) standard deviations of K's entries (weights 1 / std)
+    K_cov : optional (36, 36) covariance of K's entries (row-major vec), e.g. the
+        identification's: carried through the fit to first order and added to the
+        residual-based variance (K's own scatter reaches the rates in full, not only the
+        part the 21 - rank residual degrees of freedom see)
 
     Returns
     -------
@@ -297,7 +304,15 @@ def fit_mount_rates(
         s2 = float(rnorm**2 / dof)
     else:
         s2 = float("nan")
-    std = np.sqrt(np.clip(np.diag(inv), 0.0, None) * s2) / scale
+    var = np.clip(np.diag(inv), 0.0, None) * s2 / scale**2
+    if K_cov is not None:
+        P = _rate_operator(mounts, Dn, scale, None if K_std is None else 1.0 / vech(
+            np.asarray(K_std, dtype=float)))
+        Sigma = np.asarray(K_cov, dtype=float)
+        if Sigma.shape != (36, 36) or not np.all(np.isfinite(Sigma)):
+            raise MountGeometryError("K_cov must be a finite 36x36 covariance of vec(K)")
+        var = np.fmax(var, np.einsum("rj,jk,rk->r", P, Sigma, P))
+    std = np.sqrt(var)
     std = np.where(ident, std, np.nan)
     ynorm = float(np.linalg.norm(y))
     return MountFit(
@@ -312,6 +327,21 @@ def fit_mount_rates(
         dof=dof,
         known_variance=K_std is not None,
     )
+
+
+def _rate_operator(mounts: Sequence[MountGeometry], Dn: NDArray[np.float64],
+                   scale: NDArray[np.float64], w: NDArray[np.float64] | None,
+                   ) -> NDArray[np.float64]:
+    """(3n, 36) first-order map from vec(K) (row-major) to the rates of the unconstrained
+    weighted least squares (``w``: the entry weights, else the centroid scaling)."""
+    E = np.eye(36).reshape(36, 6, 6)
+    Ks = 0.5 * (E + np.swapaxes(E, 1, 2))  # symmetrised unit matrices
+    if w is None:
+        W = _centroid_scaling(mounts)
+        Y = vech(np.einsum("ki,nkl,lm->nim", W, Ks, W)) * _OFF  # (36, 21)
+    else:
+        Y = vech(Ks) * w
+    return np.asarray((np.linalg.pinv(Dn) @ Y.T) / scale[:, None])
 
 
 @dataclass(frozen=True)
@@ -372,6 +402,8 @@ def identify_mount_rates(
     C_std: ArrayLike | None = None,
     D: ArrayLike | None = None,
     D_std: ArrayLike | None = None,
+    K_cov: ArrayLike | None = None,
+    C_cov: ArrayLike | None = None,
 ) -> MountRates:
     """Rates from K, viscous rates from C, structural rates from D and the loss factors
     ``(d + 2 pi f c) / k``.
@@ -385,6 +417,8 @@ def identify_mount_rates(
     D : (6, 6) structural damping at O (``K* = K + j w C + j D``), or None (or all zero:
         no structural part)
     D_std : optional (6, 6) standard deviations of D
+    K_cov, C_cov : optional (36, 36) covariances of vec K and vec C (see
+        :func:`fit_mount_rates`)
 
     Raises
     ------
@@ -394,8 +428,8 @@ def identify_mount_rates(
     if not loss_factor_hz > 0:
         raise MountGeometryError(
             f"the loss-factor frequency must be > 0 Hz, got {loss_factor_hz:g}")
-    kf = fit_mount_rates(mounts, K, K_std)
-    cf = fit_mount_rates(mounts, C, C_std) if C is not None else None
+    kf = fit_mount_rates(mounts, K, K_std, K_cov)
+    cf = fit_mount_rates(mounts, C, C_std, C_cov) if C is not None else None
     has_d = D is not None and bool(np.any(np.asarray(D, dtype=float) != 0))
     df = fit_mount_rates(mounts, D, D_std) if D is not None and has_d else None
     if cf is None and df is None:

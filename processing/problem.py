@@ -10,7 +10,7 @@ weights, fit, checks) take the :class:`Problem` and return their own results.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -27,6 +27,7 @@ from processing.geometry import (
     response_matrix,
     scaling,
 )
+from processing.montecarlo import StatedUncertainty
 from processing.results import Method
 from processing.selection import ElasticPeak, elastic_peaks, reconstruction_error
 
@@ -56,6 +57,10 @@ class IdentifyOptions:
     refine_points: int = 0
     #: bound the automatic mass-line band by the rigidity check (article section 5.1)
     use_rigidity: bool = True
+    #: standard deviations of the results from the fit's covariance (:mod:`processing.uncertainty`)
+    uncertainty: bool = True
+    #: stated test uncertainties propagated by Monte Carlo (:mod:`processing.montecarlo`)
+    stated: StatedUncertainty | None = None
 
 
 @dataclass(frozen=True)
@@ -103,6 +108,9 @@ class Problem:
     row_scale: NDArray[np.float64] | None
     exponential_tau: float | None
     warnings: tuple[str, ...]
+    #: (n_resp, 3), (n_exc, 3) the points as given, m
+    resp_xyz: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    exc_xyz: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def improved(self) -> bool:
@@ -275,4 +283,5 @@ def prepare(
         noise=noise_level(rel_err, freq, peaks, n_r), col_weights=colw, line_ok=line_ok,
         row_scale=1.0 / scaling(geo.length) if options.method == "improved" else None,
         exponential_tau=exponential_tau, warnings=tuple(warnings),
+        resp_xyz=np.asarray(resp_xyz, float), exc_xyz=np.asarray(exc_xyz, float),
     )

@@ -69,6 +69,9 @@ class Uncertainty:
     ci95: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     sources: tuple[str, ...] = ()
     contributions: tuple[Contribution, ...] = ()
+    #: (82, 82) joint covariance of ``[theta (10), vec K (36), vec C (36)]`` (row-major),
+    #: SI, when known (not written to the JSON; e.g. the mount-rate fit uses it)
+    covariance: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for table, extra in ((self.std, ()), (self.ci95, (2,))):

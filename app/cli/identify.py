@@ -25,9 +25,11 @@ from app.cli.frf import add_processing_arguments, open_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
 from app.pipeline import TIME_UFF, detect_format
+from app.pipeline.settings import TestUncertaintySettings
 from app.report.mount_system import mount_system
 from processing.data import FRFSet
 from processing.identify import IdentificationResult, IdentifyOptions, identify
+from processing.montecarlo import StatedUncertainty
 from processing.mounts import check_mounts
 
 
@@ -49,10 +51,46 @@ def add_parser(sub: Any) -> None:
                    help="improved (default) or the article's plain method")
     p.add_argument("--refine-points", type=int, default=0, metavar="N",
                    help="rounds of response-point location refinement from the data (e.g. 3)")
+    add_uncertainty_arguments(p)
     add_mount_arguments(p)
     add_processing_arguments(p.add_argument_group(
         "time data (UFF 58 time records instead of FRFs: FRFs are computed first)"))
     p.set_defaults(run=run)
+
+
+def add_uncertainty_arguments(p: Any) -> None:
+    """``--location-uncertainty``, ``--angle-uncertainty``, ``--gain-uncertainty``, ``--draws``,
+    ``--no-uncertainty``."""
+    g = p.add_argument_group(
+        "uncertainty (standard deviations: the fit's covariance always; a Monte Carlo of the "
+        "test's own uncertainties when stated; docs/uncertainty.md)")
+    g.add_argument("--location-uncertainty", metavar="LEN",
+                   help="standard deviation of each coordinate of each point, with its unit "
+                        "(e.g. 3mm)")
+    g.add_argument("--angle-uncertainty", metavar="ANGLE",
+                   help="standard deviation of each sensor channel's direction, with its unit "
+                        "(e.g. 2deg)")
+    g.add_argument("--gain-uncertainty", metavar="REL",
+                   help="standard deviation of each channel's gain (e.g. 2%%)")
+    g.add_argument("--draws", type=int, metavar="N",
+                   help="Monte Carlo draws of the stated uncertainties (default 1000)")
+    g.add_argument("--no-uncertainty", action="store_true",
+                   help="skip the uncertainty (no std in the result)")
+
+
+def stated_from(args: argparse.Namespace) -> StatedUncertainty | None:
+    """The stated test uncertainties of the command line (checked, one line each), or None."""
+    s = TestUncertaintySettings(args.location_uncertainty, args.angle_uncertainty,
+                                args.gain_uncertainty, args.draws)
+    if not s.stated:
+        return None
+    if args.no_uncertainty:
+        raise UserError("--no-uncertainty contradicts the stated uncertainties: drop one")
+    if args.method == "plain":
+        raise UserError("the Monte Carlo of stated uncertainties runs with the improved method: "
+                        "drop --method plain or the uncertainty options")
+    return StatedUncertainty(location=s.location, angle=s.angle, gain=s.gain,
+                             draws=s.draws or 1000)
 
 
 def add_mount_arguments(p: Any) -> None:
@@ -92,6 +130,8 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
         physical=args.physical,
         refine_points=args.refine_points,
         coherence_threshold=args.coherence,
+        uncertainty=not args.no_uncertainty,
+        stated=args.stated,
     )
 
 
@@ -99,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     if args.refine_points < 0:
         raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
     settings = settings_from(args)  # every option checked before any file is read
+    args.stated = stated_from(args)
     args.mounts_file = mounts_from(args)
     fmt = detect_format(args.file)
     if fmt == TIME_UFF:
@@ -119,6 +160,8 @@ def _report(args: argparse.Namespace, frf: FRFSet, result: IdentificationResult)
                   f"{frf.H.shape[1]} excitations, {frf.freq.size} lines "
                   f"{frf.freq[0]:g}-{frf.freq[-1]:g} Hz")
     print_result(result, console)
+    if result.uncertainty is not None:
+        console.print("uncertainty: " + "; ".join(result.uncertainty.sources))
     ms = mount_system(result, args.mounts_file, args.excitation_hz, args.loss_factor_hz)
     print_mount_system(ms, console)
     if args.out:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -11,7 +12,7 @@ import scipy.signal
 
 from processing.data import InputError
 
-__all__ = ["OpenError", "RunReport", "Settings"]
+__all__ = ["OpenError", "RunReport", "Settings", "TestUncertaintySettings", "parse_quantity"]
 
 #: largest accepted --nperseg (samples), --record (s) and --fmax (Hz): far beyond any test,
 #: small enough that a typo is refused before memory is asked for
@@ -149,3 +150,74 @@ class OpenError(InputError):
 def n_skipped(reports: Sequence[RunReport]) -> int:
     """How many runs, points or columns the reports leave out."""
     return sum(1 for r in reports if r.skipped)
+
+
+#: unit suffixes of the stated test uncertainties and their SI factors
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6}
+ANGLE_UNITS = {"rad": 1.0, "mrad": 1e-3, "deg": math.pi / 180}
+RELATIVE_UNITS = {"%": 1e-2, "": 1.0}
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-z%]*)\s*$")
+
+
+def parse_quantity(option: str, text: str, units: dict[str, float], example: str,
+                   upper: float) -> float:
+    """``text`` (a number with one of ``units``' suffixes, e.g. ``3mm``) in SI units.
+
+    Raises
+    ------
+    InputError
+        One line naming the option, what was given and an example, when the text is not a
+        number with a known unit, or the value is negative, not finite or above ``upper``
+        (in the unit typed).
+    """
+    match = _QUANTITY.match(text)
+    allowed = ", ".join(u or "no unit" for u in units)
+    if match is None or match.group(2) not in units:
+        raise InputError(f"{option} {text!r} is not a number with a unit ({allowed}): "
+                         f"give e.g. {example}")
+    value, unit = float(match.group(1)), match.group(2)
+    if not (math.isfinite(value) and 0 <= value * units[unit] <= upper):
+        raise InputError(f"{option} must be from 0 to {upper / units[unit]:g}{unit} (a standard "
+                         f"deviation), got {text}")
+    return value * units[unit]
+
+
+@dataclass(frozen=True)
+class TestUncertaintySettings:
+    """The stated test uncertainties as typed (``--location-uncertainty 3mm``,
+    ``--angle-uncertainty 2deg``, ``--gain-uncertainty 2%``, ``--draws N``), checked here
+    in the user's units; SI values in ``location`` (m), ``angle`` (rad), ``gain``."""
+
+    location_text: str | None = None
+    angle_text: str | None = None
+    gain_text: str | None = None
+    draws: int | None = None
+
+    @property
+    def location(self) -> float:
+        return (0.0 if self.location_text is None else parse_quantity(
+            "--location-uncertainty", self.location_text, LENGTH_UNITS, "3mm", 0.5))
+
+    @property
+    def angle(self) -> float:
+        return (0.0 if self.angle_text is None else parse_quantity(
+            "--angle-uncertainty", self.angle_text, ANGLE_UNITS, "2deg", math.radians(30)))
+
+    @property
+    def gain(self) -> float:
+        return (0.0 if self.gain_text is None else parse_quantity(
+            "--gain-uncertainty", self.gain_text, RELATIVE_UNITS, "2%", 0.5))
+
+    @property
+    def stated(self) -> bool:
+        """True when any uncertainty was given."""
+        return any(t is not None for t in (self.location_text, self.angle_text,
+                                           self.gain_text))
+
+    def __post_init__(self) -> None:
+        _ = self.location, self.angle, self.gain  # every text checked now, one line each
+        if self.draws is not None:
+            if not self.stated:
+                raise InputError("--draws needs --location-uncertainty, --angle-uncertainty "
+                                 "or --gain-uncertainty: say what to draw")
+            _between("--draws", self.draws, 2, 1_000_000, "draws")

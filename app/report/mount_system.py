@@ -216,7 +216,11 @@ def mount_system(
              else default_loss_factor_hz(modes, result.stiffness_band))
     # the damping model's parts only: C for viscous, D for structural, both for both
     C = result.C if np.any(result.C) else None
-    rates = identify_mount_rates(mounts.mounts, result.K, C, f_eta, D=result.D)
+    cov = result.uncertainty.covariance if result.uncertainty is not None else None
+    rates = identify_mount_rates(
+        mounts.mounts, result.K, C, f_eta, D=result.D,
+        K_cov=None if cov is None else cov[10:46, 10:46],
+        C_cov=None if cov is None or C is None else cov[46:, 46:])
     tra: TorqueRollAxis | None = None
     try:
         tra = torque_roll_axis(result.M, result.K, mounts.crank_axis)

@@ -103,7 +103,7 @@ def test_modes_and_decoupling_of_the_true_system() -> None:
 
 
 def test_rates_at_noise_within_their_stated_uncertainty(tmp_path: Path) -> None:
-    z = []
+    z: list[float] = []
     for seed in range(6):
         sc = _stiff(10 + seed, ("block", "engine", "gearbox")[seed % 3], noise=0.015)
         code, r = _identify(sc, tmp_path, mounts_toml(sc.mounts))
@@ -112,13 +112,14 @@ def test_rates_at_noise_within_their_stated_uncertainty(tmp_path: Path) -> None:
         std = np.array([m["std"]["rates"] for m in r["mounts"]])
         ok = np.array([m["identifiable"] for m in r["mounts"]])
         z += list((np.abs(got - _rates(sc)) / std)[ok])
-    z = np.array(z)
-    # measured: 72 % of the rates within their 95 % interval, all within 4.4 std: the std
-    # from the rate fit's residual alone is too small by about 1.5-2x (the identification
-    # does not pass K's own uncertainty on yet); these bounds guard against getting worse
-    assert np.mean(z < 1.96) >= 0.65, np.round(np.sort(z), 2)
-    assert np.mean(z < 3.0) >= 0.85, np.round(np.sort(z), 2)
-    assert np.max(z) < 6.0, np.round(np.sort(z), 2)
+    zs = np.array(z)
+    # the rates' std carry K's covariance from the identification (processing.uncertainty):
+    # measured 72 of 72 rates within 1.96 std, largest 1.78 std, median 0.44 (over 12 seeds:
+    # 97.9 % at 1.5 % noise, 95.8 % at 2 %); from the rate fit's residual alone it was 72 %
+    assert np.mean(zs < 1.96) >= 0.93, np.round(np.sort(zs), 2)
+    assert np.max(zs) < 2.5, np.round(np.sort(zs), 2)
+    # not inflated beyond use: a normal error has median 0.67 std
+    assert 0.25 < np.median(zs) < 0.9, np.round(np.sort(zs), 2)
 
 
 def test_undetermined_geometry_flagged_and_refused(tmp_path: Path,
