@@ -119,6 +119,10 @@ class BlockAnalysis:
         self._data[hit_id] = data
         return verdict
 
+    def point_of(self, hit_id: int) -> int:
+        """The excitation point of stored block ``hit_id``."""
+        return self._point_of[hit_id]
+
     def set_used(self, hit_id: int, used: bool) -> None:
         self._accepted[hit_id] = used and hit_id in self._data
 
