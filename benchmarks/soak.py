@@ -62,6 +62,9 @@ class Report:
     rss_mb_first_minute: list[float] = field(default_factory=list)
     rss_mb_peak: list[float] = field(default_factory=list)
     rss_growth_mb: float = 0.0
+    rss_mb_max: float = 0.0
+    rss_growth_hour_mb: float = 0.0
+    stop_s: list[float] = field(default_factory=list)
     crashes: list[str] = field(default_factory=list)
 
 
@@ -194,14 +197,18 @@ def soak(minutes: float, seed: int, folder: Path, console: Console) -> Report:
                 if bench.fault(device, name, on):
                     time.sleep(rng.uniform(1.0, 4.0))
                     bench.fault(device, name, off)
+            t_int = None
             if acq.poll() is None and time.monotonic() >= end:
                 acq.send_signal(signal.SIGINT)  # the operator stops the run: records kept
+                t_int = time.monotonic()
             try:
                 _, err = acq.communicate(timeout=120)
             except subprocess.TimeoutExpired:
                 acq.kill()
                 _, err = acq.communicate()
                 report.crashes.append("acquire did not stop within 120 s")
+            if t_int is not None:
+                report.stop_s.append(time.monotonic() - t_int)
             lines = [ln for ln in err.splitlines() if ln.strip()]
             if any("Traceback" in ln or "internal error" in ln for ln in lines):
                 report.crashes.append(lines[-1])
@@ -226,6 +233,10 @@ def soak(minutes: float, seed: int, folder: Path, console: Console) -> Report:
     growth = [p - f for f, p in zip(report.rss_mb_first_minute, report.rss_mb_peak,
                                     strict=True)]
     report.rss_growth_mb = float(max(growth)) if growth else 0.0
+    if report.rss_mb_peak:
+        report.rss_mb_max = float(max(report.rss_mb_peak))
+        # over the hour: the highest peak of any segment above the first segment's first minute
+        report.rss_growth_hour_mb = report.rss_mb_max - report.rss_mb_first_minute[0]
     return report
 
 
@@ -241,6 +252,13 @@ def table(report: Report) -> Table:
                  ("bench restarts", report.bench_restarts),
                  ("memory growth after the first minute, MB (worst segment)",
                   f"{report.rss_growth_mb:.1f}"),
+                 ("memory growth over the run, MB (highest peak - first segment's first "
+                  "minute)", f"{report.rss_growth_hour_mb:.1f}"),
+                 ("resident memory, MB: first minute (first, last segment) / peak",
+                  f"{report.rss_mb_first_minute[0]:.0f}, {report.rss_mb_first_minute[-1]:.0f}"
+                  f" / {report.rss_mb_max:.0f}" if report.rss_mb_first_minute else "-"),
+                 ("seconds from Ctrl-C to exit", ", ".join(f"{s:.1f}" for s in report.stop_s)
+                  or "-"),
                  ("crashes (traceback, internal error, hang)", len(report.crashes))):
         t.add_row(k, str(v))
     for k, v in sorted(report.faults.items()):
