@@ -18,9 +18,11 @@ import pytest
 from numpy.testing import assert_array_equal
 from numpy.typing import NDArray
 
-from app.acquire import load_plan
+from app.acquire import HammerProcedure, RunState, load_plan
 from app.acquire.analysis import RunAnalysis, hit_result, margin_samples, point_result
 from app.acquire.plan import TestPlan
+from app.io.runfile import read_run
+from app.mockbench.bench import InProcessBench, plan_for_bench
 from processing.impact import ImpactResult
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,13 +65,13 @@ def _assert_same(a: ImpactResult | None, b: ImpactResult | None) -> None:
 
 
 def test_memory_does_not_grow_with_the_records(plan: TestPlan) -> None:
-    """340 hits at one point: the analysis holds their average, not their spectra.
+    """220 hits at one point: the analysis holds their average, not their spectra.
 
     Holding each hit's result (spectra, H, coherence of 12 responses on 769 lines) costs
     about 450 kB a hit; the running sums cost the hit's verdict and book-keeping only.
     """
     ana = RunAnalysis(plan, NAMES, None)
-    warm, more = 40, 300
+    warm, more = 20, 200
     base = _record(plan, 0)
     noise = np.random.default_rng(1)
 
@@ -151,3 +153,24 @@ def test_a_rebuild_needs_the_stored_records(plan: TestPlan) -> None:
     ana.set_used(0, False)
     with pytest.raises(RuntimeError, match="loader"):
         ana.point(0)
+
+
+def test_the_procedure_keeps_no_samples(tmp_path: Path) -> None:
+    """The listeners get each hit's samples; the procedure keeps its verdicts only (the
+    samples are in the run file, where an override reads them back)."""
+    seen: list[bool] = []
+
+    class Listener:
+        def on_hit(self, hit: object) -> None:
+            seen.append(getattr(hit, "data", None) is not None)
+
+    plan = plan_for_bench("engine-rigid", points=[0], hits=3, length=0.5)
+    path = tmp_path / "run.h5"
+    with InProcessBench("engine-rigid") as bench:
+        proc = HammerProcedure(plan, bench.station, path, partial=True,
+                               listeners=[bench.operator, Listener()])
+        proc.start()
+        assert proc.wait(60) is RunState.FINISHED, proc.message
+    assert len(proc.hits) == len(read_run(path, with_data=False).records) >= 3
+    assert seen and all(seen)
+    assert all(h.data is None for h in proc.hits)

@@ -104,6 +104,7 @@ def _check_stopped(path: Path, at_least: int, err: str) -> int:
     return n
 
 
+@pytest.mark.slow
 def test_sigint_while_acquiring(bench: Path, plan: Path, tmp_path: Path) -> None:
     out = tmp_path / "run.h5"
     t_start = time.monotonic()
@@ -144,6 +145,7 @@ def _grow(path: Path, n: int) -> None:
                 ds[k:] = values[idx[k:]]
 
 
+@pytest.mark.slow
 def test_sigint_while_resuming_a_long_run(bench: Path, plan: Path, tmp_path: Path) -> None:
     """A resume reads every stored record back; Ctrl-C then must not wait for the end."""
     out = tmp_path / "run.h5"
