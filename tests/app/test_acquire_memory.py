@@ -167,8 +167,10 @@ def test_the_procedure_keeps_no_samples(tmp_path: Path) -> None:
     plan = plan_for_bench("engine-rigid", points=[0], hits=3, length=0.5)
     path = tmp_path / "run.h5"
     with InProcessBench("engine-rigid") as bench:
+        # patient replies: the machine may be loaded (this is no test of timeouts)
         proc = HammerProcedure(plan, bench.station, path, partial=True,
-                               listeners=[bench.operator, Listener()])
+                               listeners=[bench.operator, Listener()], device_options={
+                                   "frontend": {"reply_timeout": 5.0, "stall_timeout": 5.0}})
         proc.start()
         assert proc.wait(60) is RunState.FINISHED, proc.message
     assert len(proc.hits) == len(read_run(path, with_data=False).records) >= 3
