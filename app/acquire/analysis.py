@@ -8,13 +8,13 @@ same FRFs and the same identification, bit for bit.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from app.acquire.blocks import BlockAnalysis, shaker_frfset
+from app.acquire.blocks import BlockAnalysis, RecordLoader, shaker_frfset
 from app.acquire.plan import RecordSettings, TestPlan
 from app.io.runfile import RunData
 from processing.data import FRFSet, Geometry, InputError
@@ -113,10 +113,6 @@ class RecordAnalysis(Protocol):
     def set_used(self, hit_id: int, used: bool) -> None: ...
     def n_used(self, point: int) -> int: ...
     def point(self, point: int, max_averages: int | None = None) -> PointColumn | None: ...
-
-
-#: reads stored records: given record numbers, yields ``(number, data)`` one at a time
-RecordLoader = Callable[[Sequence[int]], Iterable[tuple[int, NDArray[np.float64]]]]
 
 
 class RunAnalysis:
@@ -269,8 +265,9 @@ def analyse_blocks(run: RunData) -> tuple[TestPlan, BlockAnalysis]:
     off) keeps that verdict: the stored automatic verdict can be confirmed, never upgraded.
     """
     plan, names, ranges = _run_setup(run)
-    blocks = BlockAnalysis(plan, names, ranges)
     rec = run.records
+    blocks = BlockAnalysis(plan, names, ranges,
+                           loader=lambda ids: ((i, rec.data[i]) for i in ids))
     for i in range(len(rec)):
         v = blocks.add(i, int(rec.point[i]), rec.data[i], rec.override[i])
         auto = bool(rec.auto_accepted[i]) and v is not None and v[0]

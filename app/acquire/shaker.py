@@ -114,7 +114,8 @@ class ShakerProcedure(RecordingProcedure):
         self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
         self._resolve(force_channel, shaker)
         self.analysis = BlockAnalysis(plan, [c.name for c in self.rows], np.array(
-            [c.full_scale for c in self.rows]))
+            [c.full_scale for c in self.rows]),
+            loader=lambda ids: iter_record_data(self.path, ids))
         self.frontend: AcquisitionFrontEnd | None = None
         self.drive: ShakerDrive | None = None
         self.stream: BlockStream | None = None

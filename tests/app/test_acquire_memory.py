@@ -20,10 +20,12 @@ from numpy.typing import NDArray
 
 from app.acquire import HammerProcedure, RunState, load_plan
 from app.acquire.analysis import RunAnalysis, hit_result, margin_samples, point_result
+from app.acquire.blocks import BlockAnalysis
 from app.acquire.plan import TestPlan
 from app.io.runfile import read_run
 from app.mockbench.bench import InProcessBench, plan_for_bench
 from processing.impact import ImpactResult
+from processing.spectral import frf
 
 ROOT = Path(__file__).resolve().parents[2]
 NAMES = ["F", *(f"a{i}" for i in range(12))]
@@ -176,3 +178,70 @@ def test_the_procedure_keeps_no_samples(tmp_path: Path) -> None:
     assert len(proc.hits) == len(read_run(path, with_data=False).records) >= 3
     assert seen and all(seen)
     assert all(h.data is None for h in proc.hits)
+
+
+def _shaker_plan() -> TestPlan:
+    return plan_for_bench("engine-rigid", points=[0, 1], fs=1024.0, method="shaker", shaker={
+        "waveform": "random", "nperseg": 256, "averages": 4, "f_start": 2.0,
+        "f_stop": 400.0, "ramp": 0.2, "settle": 1.5})
+
+
+def _block(seed: int) -> NDArray[np.float64]:
+    """A block of 13 rows (force, 12 responses) of seeded noise, 256 samples."""
+    rng = np.random.default_rng(seed)
+    f = rng.standard_normal(256)
+    return np.vstack([f, f * np.arange(1, 13)[:, None] + 0.1 * rng.standard_normal((12, 256))])
+
+
+def test_shaker_blocks_memory_does_not_grow() -> None:
+    """200 blocks: the analysis holds each point's accumulator, not the blocks (26 kB each)."""
+    ana = BlockAnalysis(_shaker_plan(), NAMES, None)
+    blocks = [_block(s) for s in range(8)]
+    for i in range(20):
+        ana.add(i, 0, blocks[i % 8])
+        ana.set_used(i, True)
+        assert ana.point(0) is not None
+    gc.collect()
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        for i in range(20, 220):
+            ana.add(i, 0, blocks[i % 8].copy())
+            ana.set_used(i, True)
+            assert ana.point(0) is not None
+        gc.collect()
+        after = tracemalloc.get_traced_memory()[0]
+    finally:
+        tracemalloc.stop()
+    assert ana.n_used(0) == 220
+    assert after - before < 200 * 4096, f"{(after - before) / 200:.0f} bytes a block"
+
+
+def test_shaker_blocks_rebuild_equals_feeding_at_once() -> None:
+    plan = _shaker_plan()
+    blocks = [_block(s) for s in range(7)]
+    blocks[3][2, 10] = np.nan  # lost samples: never used
+    points = [0, 1, 0, 0, 1, 0, 0]
+    ana = BlockAnalysis(plan, NAMES, None, loader=lambda ids: ((i, blocks[i]) for i in ids))
+
+    def expected(ids: Sequence[int]) -> NDArray[np.complex128]:
+        acc = ana._accumulator()
+        for i in ids:
+            acc.update(blocks[i])
+        return frf(acc.spectra(), plan.record.estimator)[0]
+
+    for i, p in enumerate(points):
+        v = ana.add(i, p, blocks[i])
+        ana.set_used(i, v is not None and v[0])
+    assert (ana.n_used(0), ana.n_used(1)) == (4, 2)
+    col = ana.point(0)
+    assert col is not None and col.n_accepted == 4
+    assert_array_equal(col.H, expected([0, 2, 5, 6]))
+    ana.add(2, 0, blocks[2], "reject")  # an older block rejected: rebuilt without it
+    ana.set_used(2, False)
+    col = ana.point(0)
+    assert col is not None and col.n_accepted == 3
+    assert_array_equal(col.H, expected([0, 5, 6]))
+    col = ana.point(0, max_averages=2)
+    assert col is not None
+    assert_array_equal(col.H, expected([0, 5]))
