@@ -19,7 +19,13 @@ from numpy.testing import assert_array_equal
 from numpy.typing import NDArray
 
 from app.acquire import HammerProcedure, RunState, load_plan
-from app.acquire.analysis import RunAnalysis, hit_result, margin_samples, point_result
+from app.acquire.analysis import (
+    RunAnalysis,
+    hit_result,
+    margin_samples,
+    point_result,
+    run_frfs,
+)
 from app.acquire.blocks import BlockAnalysis
 from app.acquire.plan import TestPlan
 from app.io.runfile import read_run
@@ -166,7 +172,7 @@ def test_the_procedure_keeps_no_samples(tmp_path: Path) -> None:
         def on_hit(self, hit: object) -> None:
             seen.append(getattr(hit, "data", None) is not None)
 
-    plan = plan_for_bench("engine-rigid", points=[0], hits=3, length=0.5)
+    plan = plan_for_bench("engine-rigid", points=[0, 1], hits=3, length=0.5)
     path = tmp_path / "run.h5"
     with InProcessBench("engine-rigid") as bench:
         # patient replies: the machine may be loaded (this is no test of timeouts)
@@ -175,9 +181,15 @@ def test_the_procedure_keeps_no_samples(tmp_path: Path) -> None:
                                    "frontend": {"reply_timeout": 5.0, "stall_timeout": 5.0}})
         proc.start()
         assert proc.wait(60) is RunState.FINISHED, proc.message
-    assert len(proc.hits) == len(read_run(path, with_data=False).records) >= 3
+    run = read_run(path)
+    assert len(proc.hits) == len(run.records) >= 3
     assert seen and all(seen)
     assert all(h.data is None for h in proc.hits)
+    # the running sums give the replay's FRFs (all records at once), bit for bit
+    frf, _ = run_frfs(run)
+    assert proc.frf is not None and run.frf is not None
+    assert_array_equal(frf.H, proc.frf.H)
+    assert_array_equal(frf.H, run.frf.H)
 
 
 def _shaker_plan() -> TestPlan:
