@@ -167,7 +167,9 @@ class SerialLink:
 def _brief(err: BaseException) -> str:
     """The first line of an exception's text (some libraries put a traceback in it)."""
     lines = str(err).strip().splitlines()
-    return lines[0][:200] if lines else type(err).__name__
+    # python-can's socketcand client appends "  Traceback (most recent call last):" to it
+    first = lines[0].split("Traceback (most recent call last)")[0].strip() if lines else ""
+    return first[:200] or type(err).__name__
 
 
 class CanLink:

@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from app.acquire.blocks import BlockAnalysis, shaker_frfset
+from app.acquire.blocks import BlockAnalysis, RecordLoader, shaker_frfset
 from app.acquire.plan import RecordSettings, TestPlan
 from app.io.runfile import RunData
 from processing.data import FRFSet, Geometry, InputError
@@ -27,9 +27,9 @@ from processing.impact import (
     process_impacts,
 )
 
-__all__ = ["PointColumn", "RecordAnalysis", "RunAnalysis", "analyse_blocks", "analyse_records",
-           "analyse_run", "check_identifiable", "frfset", "hit_result", "host_timed",
-           "impact_settings", "margin_samples", "point_result", "run_frfs"]
+__all__ = ["PointColumn", "RecordAnalysis", "RecordLoader", "RunAnalysis", "analyse_blocks",
+           "analyse_records", "analyse_run", "check_identifiable", "frfset", "hit_result",
+           "host_timed", "impact_settings", "margin_samples", "point_result", "run_frfs"]
 
 
 def margin_samples(fs: float) -> int:
@@ -118,46 +118,120 @@ class RecordAnalysis(Protocol):
 class RunAnalysis:
     """FRFs of a run, point by point, kept up to date as hits come and verdicts change.
 
+    Memory does not grow with the records: each point keeps the running average of its
+    used hits' spectra (:func:`processing.spectral.combine`, the sums the H1/H2 FRFs and
+    the coherence come from), folded in acquisition order as hits come; per hit, only its
+    point, override and verdict in force. A change that cannot be folded in (a verdict
+    changed on an older hit, an override) marks the point, whose average is then rebuilt
+    from the stored records, read one at a time with ``loader``, in acquisition order: the
+    result is the same, bit for bit, as averaging the point's used hits at once
+    (:func:`point_result`).
+
     Parameters
     ----------
     plan : TestPlan
     names : channel names of the record rows (force first)
     ranges : full-scale range of each row in its unit (for overload checks)
+    loader : callable, optional
+        ``loader(ids)`` yields ``(id, data)`` for the stored records ``ids`` (e.g.
+        :func:`app.io.runfile.iter_record_data` of the run file). Without it, a rebuild
+        raises RuntimeError.
     """
 
     def __init__(self, plan: TestPlan, names: Sequence[str],
-                 ranges: NDArray[np.float64] | None) -> None:
+                 ranges: NDArray[np.float64] | None, loader: RecordLoader | None = None
+                 ) -> None:
         self.plan = plan
         self.names = tuple(names)
         self.ranges = ranges
-        self._results: dict[int, ImpactResult | None] = {}
+        self.loader = loader
         self._point_of: dict[int, int] = {}
+        self._override: dict[int, str] = {}
         self._accepted: dict[int, bool] = {}
+        self._n_used: dict[int, int] = {}
+        self._sum: dict[int, ImpactResult] = {}  # point -> its used hits averaged so far
+        self._last: dict[int, int] = {}  # point -> the last hit folded into its average
+        self._stale: set[int] = set()  # points whose average must be rebuilt
+        self._pending: tuple[int, ImpactResult | None] | None = None  # added, verdict to come
 
     def add(self, hit_id: int, point: int, data: NDArray[np.float64],
             override: str = "") -> ImpactResult | None:
-        """Process a stored record; returns its result (None if it has lost samples)."""
+        """Process a stored record; returns its result (None if it has lost samples).
+
+        The result counts in its point's average once :meth:`set_used` says so."""
         try:
             res: ImpactResult | None = hit_result(data, self.plan.record, self.names,
                                                   self.ranges, override)
         except InputError:
             res = None
-        self._results[hit_id] = res
+        if hit_id in self._point_of and (self._accepted.get(hit_id)
+                                         or self._point_of[hit_id] != point):
+            self._stale.add(self._point_of[hit_id])  # a used hit judged again
         self._point_of[hit_id] = point
+        self._override[hit_id] = override
+        self._pending = (hit_id, res)
         return res
 
+    def point_of(self, hit_id: int) -> int:
+        """The excitation point of stored hit ``hit_id``."""
+        return self._point_of[hit_id]
+
     def set_used(self, hit_id: int, used: bool) -> None:
+        """Whether hit ``hit_id`` (added before) counts in its point's average."""
+        point = self._point_of[hit_id]
+        was = self._accepted.get(hit_id, False)
         self._accepted[hit_id] = used
+        self._n_used[point] = self._n_used.get(point, 0) + int(used) - int(was)
+        pending, self._pending = self._pending, None
+        if not used and not was:
+            return
+        res = pending[1] if pending is not None and pending[0] == hit_id else None
+        if (used and not was and res is not None and res.H is not None
+                and point not in self._stale and hit_id > self._last.get(point, -1)):
+            old = self._sum.get(point)
+            self._sum[point] = merge_results([res] if old is None else [old, res])
+            self._last[point] = hit_id
+        else:
+            self._stale.add(point)
 
     def point(self, point: int, max_averages: int | None = None) -> ImpactResult | None:
         """The point's FRF column from its used hits (the first ``max_averages`` of them,
         in acquisition order, when given); None if it has none."""
-        ids = sorted(h for h, p in self._point_of.items() if p == point)
-        used = [r for h in ids if self._accepted.get(h) and (r := self._results[h]) is not None]
-        return point_result(used if max_averages is None else used[:max_averages])
+        if max_averages is None and point not in self._stale:
+            return self._sum.get(point)
+        ids = sorted(h for h, p in self._point_of.items() if p == point and self._accepted[h])
+        if max_averages is not None:
+            ids = ids[:max_averages]
+        total = self._rebuild(ids)
+        if max_averages is None:
+            self._stale.discard(point)
+            self._last[point] = ids[-1] if ids else -1
+            if total is None:
+                self._sum.pop(point, None)
+            else:
+                self._sum[point] = total
+        return total
+
+    def _rebuild(self, ids: Sequence[int]) -> ImpactResult | None:
+        """The average of hits ``ids`` read back from the stored records, in order."""
+        if not ids:
+            return None
+        if self.loader is None:
+            raise RuntimeError("rebuilding a point's average needs the stored records: give "
+                               "RunAnalysis a loader")
+        total: ImpactResult | None = None
+        for i, data in self.loader(ids):
+            try:
+                res = hit_result(data, self.plan.record, self.names, self.ranges,
+                                 self._override.get(i, ""))
+            except InputError:
+                continue
+            if res.H is not None:
+                total = merge_results([res] if total is None else [total, res])
+        return total
 
     def n_used(self, point: int) -> int:
-        return sum(1 for h, p in self._point_of.items() if p == point and self._accepted.get(h))
+        return self._n_used.get(point, 0)
 
 
 def _run_setup(run: RunData) -> tuple[TestPlan, list[str], NDArray[np.float64]]:
@@ -173,8 +247,9 @@ def analyse_records(run: RunData) -> tuple[TestPlan, RunAnalysis]:
     """Recompute every stored record's verdict and spectra (no FRF set, no identification);
     ``RunAnalysis.point(j)`` is then point ``j``'s FRF column or None."""
     plan, names, ranges = _run_setup(run)
-    ana = RunAnalysis(plan, names, ranges)
     rec = run.records
+    ana = RunAnalysis(plan, names, ranges,
+                      loader=lambda ids: ((i, rec.data[i]) for i in ids))
     for i in range(len(rec)):
         res = ana.add(i, int(rec.point[i]), rec.data[i], rec.override[i])
         auto = res is not None and bool(res.verdicts) and res.verdicts[0].accepted
@@ -190,8 +265,9 @@ def analyse_blocks(run: RunData) -> tuple[TestPlan, BlockAnalysis]:
     off) keeps that verdict: the stored automatic verdict can be confirmed, never upgraded.
     """
     plan, names, ranges = _run_setup(run)
-    blocks = BlockAnalysis(plan, names, ranges)
     rec = run.records
+    blocks = BlockAnalysis(plan, names, ranges,
+                           loader=lambda ids: ((i, rec.data[i]) for i in ids))
     for i in range(len(rec)):
         v = blocks.add(i, int(rec.point[i]), rec.data[i], rec.override[i])
         auto = bool(rec.auto_accepted[i]) and v is not None and v[0]

@@ -14,7 +14,7 @@ block), which are leakage-free.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,7 +24,8 @@ from app.acquire.plan import ShakerSettings, TestPlan
 from processing.data import FRFSet, Geometry, InputError
 from processing.spectral import CrossSpectra, SpectralAccumulator, frf
 
-__all__ = ["WINDOWS", "BlockAnalysis", "BlockResult", "block_verdict", "shaker_frfset"]
+__all__ = ["WINDOWS", "BlockAnalysis", "BlockResult", "RecordLoader", "block_verdict",
+           "shaker_frfset"]
 
 #: window of each waveform's blocks (scipy window names)
 WINDOWS = {"random": "hann", "burst-random": "boxcar", "chirp": "boxcar"}
@@ -77,11 +78,19 @@ class _Point:
     ids: list[int] = field(default_factory=list)
 
 
+#: reads stored records: given record numbers, yields ``(number, data)`` one at a time
+RecordLoader = Callable[[Sequence[int]], Iterable[tuple[int, NDArray[np.float64]]]]
+
+
 class BlockAnalysis:
     """FRFs of a shaker run, point by point, kept up to date as blocks and verdicts change.
 
     Same interface as :class:`app.acquire.analysis.RunAnalysis`: :meth:`add` a stored
     block, :meth:`set_used` its verdict in force, :meth:`point` the averaged column.
+    Memory does not grow with the blocks: each point keeps its spectral accumulator, fed
+    a used block as it comes; per block, only its point and verdict. A change that cannot
+    be fed in order (a verdict changed on an older block) rebuilds the point's accumulator
+    from the stored blocks, read one at a time with ``loader``, in acquisition order.
 
     Parameters
     ----------
@@ -89,17 +98,25 @@ class BlockAnalysis:
         Its ``[shaker]`` section gives the waveform (window) and ``nperseg``.
     names : channel names of the record rows (force first)
     ranges : full-scale range of each row in its unit (for overload checks)
+    loader : callable, optional
+        ``loader(ids)`` yields ``(id, data)`` for the stored blocks ``ids``. Without it, a
+        rebuild raises RuntimeError.
     """
 
     def __init__(self, plan: TestPlan, names: Sequence[str],
-                 ranges: NDArray[np.float64] | None) -> None:
+                 ranges: NDArray[np.float64] | None, loader: RecordLoader | None = None
+                 ) -> None:
         self.plan = plan
         self.names = tuple(names)
         self.ranges = ranges
-        self._data: dict[int, NDArray[np.float64]] = {}
+        self.loader = loader
         self._point_of: dict[int, int] = {}
+        self._finite: dict[int, bool] = {}
         self._accepted: dict[int, bool] = {}
+        self._n_used: dict[int, int] = {}
         self._points: dict[int, _Point] = {}
+        self._stale: set[int] = set()
+        self._pending: tuple[int, NDArray[np.float64]] | None = None  # verdict to come
 
     def _accumulator(self) -> SpectralAccumulator:
         s: ShakerSettings = self.plan.shaker
@@ -111,37 +128,75 @@ class BlockAnalysis:
     def add(self, hit_id: int, point: int, data: NDArray[np.float64],
             override: str = "") -> tuple[bool, str, float] | None:
         """Judge a stored block; returns its verdict (None if it has lost samples)."""
+        if hit_id in self._point_of and self._point_of[hit_id] != point:
+            self._stale.add(self._point_of[hit_id])
         self._point_of[hit_id] = point
         verdict = block_verdict(data, self.names, self.ranges)
-        if not np.all(np.isfinite(data)):
-            self._data.pop(hit_id, None)
-            return None
-        self._data[hit_id] = data
-        return verdict
+        finite = bool(np.all(np.isfinite(data)))
+        self._finite[hit_id] = finite
+        self._pending = (hit_id, data) if finite else None
+        return verdict if finite else None
+
+    def point_of(self, hit_id: int) -> int:
+        """The excitation point of stored block ``hit_id``."""
+        return self._point_of[hit_id]
 
     def set_used(self, hit_id: int, used: bool) -> None:
-        self._accepted[hit_id] = used and hit_id in self._data
+        point = self._point_of[hit_id]
+        used = used and self._finite[hit_id]
+        was = self._accepted.get(hit_id, False)
+        self._accepted[hit_id] = used
+        self._n_used[point] = self._n_used.get(point, 0) + int(used) - int(was)
+        pending, self._pending = self._pending, None
+        if used == was:
+            return
+        st = self._points.get(point)
+        if (used and pending is not None and pending[0] == hit_id and point not in self._stale
+                and (st is None or hit_id > st.ids[-1])):
+            if st is None:
+                st = self._points[point] = _Point(self._accumulator())
+            st.acc.update(pending[1])  # one block per update, in acquisition order
+            st.ids.append(hit_id)
+        else:
+            self._stale.add(point)
 
     def n_used(self, point: int) -> int:
-        return sum(1 for h, p in self._point_of.items() if p == point and self._accepted.get(h))
+        return self._n_used.get(point, 0)
 
     def point(self, point: int, max_averages: int | None = None) -> BlockResult | None:
         """The averaged column of ``point`` from its accepted blocks (the first
         ``max_averages`` of them when given; None if none)."""
-        ids = sorted(h for h, p in self._point_of.items() if p == point and self._accepted.get(h))
-        if max_averages is not None:
-            ids = ids[:max_averages]
-        if not ids:
-            return None
         st = self._points.get(point)
-        if st is None or st.ids != ids[: len(st.ids)]:  # a block left: start again
-            st = self._points[point] = _Point(self._accumulator())
-        for h in ids[len(st.ids):]:  # one block per update, in acquisition order
-            st.acc.update(self._data[h])
-            st.ids.append(h)
+        if max_averages is not None or point in self._stale:
+            ids = sorted(h for h, p in self._point_of.items()
+                         if p == point and self._accepted.get(h))
+            if max_averages is not None:
+                ids = ids[:max_averages]
+            st = self._rebuild(ids)
+            if max_averages is None:
+                self._stale.discard(point)
+                if st is None:
+                    self._points.pop(point, None)
+                else:
+                    self._points[point] = st
+        if st is None:
+            return None
         sp = st.acc.spectra()
         H, coh = frf(sp, self.plan.record.estimator)
-        return BlockResult(sp.freq, H, coh, sp, len(ids))
+        return BlockResult(sp.freq, H, coh, sp, len(st.ids))
+
+    def _rebuild(self, ids: Sequence[int]) -> _Point | None:
+        """An accumulator of blocks ``ids`` read back from the stored records, in order."""
+        if not ids:
+            return None
+        if self.loader is None:
+            raise RuntimeError("rebuilding a point's average needs the stored blocks: give "
+                               "BlockAnalysis a loader")
+        st = _Point(self._accumulator())
+        for i, data in self.loader(ids):
+            st.acc.update(data)
+            st.ids.append(i)
+        return st
 
 
 def shaker_frfset(plan: TestPlan, points: Sequence[BlockResult | None], geometry: Geometry,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -21,9 +21,10 @@ from numpy.typing import NDArray
 from app.acquire.analysis import RunAnalysis, frfset, host_timed, margin_samples
 from app.acquire.events import HitRecord
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
+from app.acquire.procedure import StopRequestedError
 from app.acquire.recording import RecordingProcedure
 from app.acquire.streams import HitStreams, RawHit
-from app.io.runfile import RunWriter, read_run
+from app.io.runfile import RunWriter, iter_record_data, read_run
 from drivers.base import AcquisitionFrontEnd, ChannelConfig
 from drivers.errors import DeviceError
 from drivers.registry import create_device
@@ -116,7 +117,7 @@ class HammerProcedure(RecordingProcedure):
         self.devices: dict[str, AcquisitionFrontEnd] = {}
         self.writer: RunWriter | None = None
         self.analysis = RunAnalysis(plan, [c.name for c in self.rows], np.array(
-            [c.full_scale for c in self.rows]))
+            [c.full_scale for c in self.rows]), loader=self._load_records)
         self.point_index = 0
         self.frf: FRFSet | None = None
         self.result: IdentificationResult | None = None
@@ -186,15 +187,18 @@ class HammerProcedure(RecordingProcedure):
         margin = margin_samples(rec.fs)
         n_store = rec.n_samples + 2 * margin
         if self.resume_file:
-            run = read_run(self.path)
+            run = read_run(self.path, with_data=False)
             stored = tuple(c.name for c in run.channels)
             if stored != tuple(c.name for c in self.rows):
                 raise PlanError(f"{self.path}: recorded channels {', '.join(stored)} differ from "
                                 "the station's; resume with the same station")
             self.writer = RunWriter.resume(self.path)
             recs = run.records
-            for i in range(len(recs)):
-                res = self.analysis.add(i, int(recs.point[i]), recs.data[i], recs.override[i])
+            # the points' averages rebuilt from the stored records, read one at a time
+            for i, data in iter_record_data(self.path, range(len(recs))):
+                if self.stop_asked:  # a long run takes a while to read back: stop now
+                    raise StopRequestedError
+                res = self.analysis.add(i, int(recs.point[i]), data, recs.override[i])
                 self.analysis.set_used(i, bool(recs.accepted[i]) and res is not None)
             self._t_offset = float(recs.time.max()) + 1.0 if len(recs) else 0.0
             return
@@ -290,6 +294,10 @@ class HammerProcedure(RecordingProcedure):
         self._report(HitRecord(hit_id, point.index, t, peak, auto, reason, "", raw.bad_frames,
                                raw.missing, data=raw.data, fs=self.plan.record.fs))
 
+    def _load_records(self, ids: Sequence[int]) -> Iterator[tuple[int, NDArray[np.float64]]]:
+        """Stored records ``ids`` read back from the run file, one at a time."""
+        return iter_record_data(self.path, ids)
+
     def _records_needed(self) -> int:
         return self.plan.hits
 
@@ -301,9 +309,8 @@ class HammerProcedure(RecordingProcedure):
             self.emit("on_error", f"no hit {hit_id} to override")
             return
         old = self.hits[hit_id] if hit_id < len(self.hits) else None
-        run_point = old.point if old is not None else self.analysis._point_of[hit_id]
-        data = old.data if old is not None and old.data is not None else read_run(
-            self.path).records.data[hit_id]
+        run_point = old.point if old is not None else self.analysis.point_of(hit_id)
+        data = next(iter(self._load_records([hit_id])))[1]
         res = self.analysis.add(hit_id, run_point, data, override)
         if override == "accept" and res is None:
             self.emit("on_error", f"hit {hit_id} lost samples and cannot be used")

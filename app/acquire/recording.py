@@ -86,14 +86,15 @@ class RecordingProcedure(Procedure):
         return names[0]
 
     def _report(self, hit: HitRecord) -> None:
-        """Keep ``hit`` (new, or a re-judged one), then send on_hit, the point's FRF and
-        the progress."""
+        """Keep ``hit`` (new, or a re-judged one) without its samples (they are in the run
+        file), then send on_hit (with the samples), the point's FRF and the progress."""
         hit = HitRecord(**{**hit.__dict__, "point_accepted": self.analysis.n_used(hit.point),
                            "point_needed": self._records_needed()})
+        kept = HitRecord(**{**hit.__dict__, "data": None})  # the samples are in the run file
         if hit.hit_id < len(self.hits):
-            self.hits[hit.hit_id] = hit
+            self.hits[hit.hit_id] = kept
         else:
-            self.hits.append(hit)
+            self.hits.append(kept)
         if not hit.accepted:
             logger.info("%s %d at %s rejected: %s", self.record_word, hit.hit_id, hit.point,
                         hit.reason)

@@ -39,9 +39,10 @@ from app.acquire.blocks import WINDOWS, BlockAnalysis, block_verdict, shaker_frf
 from app.acquire.events import HitRecord
 from app.acquire.hammer import station_summary
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
+from app.acquire.procedure import StopRequestedError
 from app.acquire.recording import RecordingProcedure
 from app.acquire.shaker_io import BlockStream, ShakerDrive
-from app.io.runfile import RunWriter, read_run
+from app.io.runfile import RunWriter, iter_record_data, read_run
 from drivers.base import AcquisitionFrontEnd, ChannelConfig, ExcitationDevice
 from drivers.errors import DeviceError
 from drivers.registry import create_device, get_backend
@@ -113,7 +114,8 @@ class ShakerProcedure(RecordingProcedure):
         self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
         self._resolve(force_channel, shaker)
         self.analysis = BlockAnalysis(plan, [c.name for c in self.rows], np.array(
-            [c.full_scale for c in self.rows]))
+            [c.full_scale for c in self.rows]),
+            loader=lambda ids: iter_record_data(self.path, ids))
         self.frontend: AcquisitionFrontEnd | None = None
         self.drive: ShakerDrive | None = None
         self.stream: BlockStream | None = None
@@ -180,14 +182,16 @@ class ShakerProcedure(RecordingProcedure):
     def _open_file(self) -> None:
         s = self.plan.shaker
         if self.resume_file:
-            run = read_run(self.path)
+            run = read_run(self.path, with_data=False)
             if tuple(c.name for c in run.channels) != tuple(c.name for c in self.rows):
                 raise PlanError(f"{self.path}: recorded channels differ from the station's; "
                                 "resume with the same station")
             self.writer = RunWriter.resume(self.path)
             rec = run.records
-            for i in range(len(rec)):
-                self._replay_row(i, int(rec.point[i]), rec.data[i], bool(rec.auto_accepted[i]),
+            for i, data in iter_record_data(self.path, range(len(rec))):
+                if self.stop_asked:  # a long run takes a while to read back: stop now
+                    raise StopRequestedError
+                self._replay_row(i, int(rec.point[i]), data, bool(rec.auto_accepted[i]),
                                  rec.override[i])
             self._t_offset = float(rec.time.max()) + 1.0 if len(rec) else 0.0
             return
@@ -304,11 +308,8 @@ class ShakerProcedure(RecordingProcedure):
             self.emit("on_error", f"no block {hit_id} to override")
             return
         old = self.hits[hit_id] if hit_id < len(self.hits) else None
-        if old is not None and old.data is not None:
-            point, data = old.point, old.data
-        else:
-            rec = read_run(self.path).records
-            point, data = int(rec.point[hit_id]), rec.data[hit_id]
+        point = old.point if old is not None else self.analysis.point_of(hit_id)
+        data = next(iter(iter_record_data(self.path, [hit_id])))[1]
         if override == "accept" and not np.all(np.isfinite(data)):
             self.emit("on_error", f"block {hit_id} lost samples and cannot be used")
             return

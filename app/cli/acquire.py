@@ -48,6 +48,8 @@ if TYPE_CHECKING:  # the mock bench is imported by --mock and --mock-operator on
 
 #: what a pause that waits for the operator to attach the shaker says first
 ATTACH = "attach the shaker"
+#: seconds a stopped run has to end (its devices released, its file closed) before we exit
+STOP_WAIT = 15.0
 
 class _Bars(Listener):
     def __init__(self, progress: Progress, n_points: int, console: Console) -> None:
@@ -246,6 +248,15 @@ def _check_paths(args: argparse.Namespace) -> None:
                         "path")
 
 
+def _stop(proc: RecordingProcedure, path: Path) -> None:
+    """Stop the run and wait for it to end, :data:`STOP_WAIT` s at most (a UserError then:
+    every record written so far is on the disk, the file is left as interrupted)."""
+    proc.stop()
+    proc.wait(STOP_WAIT)
+    if proc.running:
+        raise UserError(f"the run did not stop within {STOP_WAIT:g} s: {_kept(path)}")
+
+
 def run(args: argparse.Namespace) -> int:
     _check_paths(args)
     if args.mock_operator and (args.mock or args.station is None):
@@ -288,15 +299,13 @@ def run(args: argparse.Namespace) -> int:
                                                  or proc.state is RunState.PAUSED):
                         # nobody at the bench to fix and resume: stop, the records are kept
                         gave_up = operator.error or f"run paused: {proc.message}"
-                        proc.stop()
-                        proc.wait()
+                        _stop(proc, args.out)
                     elif proc.state is RunState.PAUSED and bars.paused.startswith(ATTACH):
                         bars.paused = ""
                         console.input(f"{proc.message}: press Enter ")
                         proc.resume()
             except KeyboardInterrupt:
-                proc.stop()
-                proc.wait()
+                _stop(proc, args.out)
     if gave_up:
         raise UserError(f"{gave_up}; the run stopped, {_kept(args.out)}")
     hits: list[HitRecord] = proc.hits

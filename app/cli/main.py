@@ -52,7 +52,9 @@ class _OneLine(logging.Formatter):
 
     def format(self, record: logging.LogRecord) -> str:
         text = f"{record.levelname} {record.name}: {record.getMessage()}"
-        return text.splitlines()[0] if text else text
+        first = text.splitlines()[0] if text else text
+        # some libraries (python-can's socketcand client) put a traceback in the message
+        return first.split("Traceback (most recent call last)")[0].rstrip()
 
 
 class _Stderr(logging.StreamHandler):

@@ -38,7 +38,7 @@ from drivers.base import ChannelConfig
 from processing.data import FRFSet, Geometry
 
 __all__ = ["SCHEMA_VERSION", "ChannelInfo", "RecordTable", "RunData", "RunFileError",
-           "RunWriter", "read_run", "repair", "write_mounts"]
+           "RunWriter", "iter_record_data", "read_run", "repair", "write_mounts"]
 
 SCHEMA_VERSION = 1
 FORMAT = "insitu-run"
@@ -447,6 +447,38 @@ def read_run(path: str | Path, with_data: bool = True) -> RunData:
             raise
         first = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise RunFileError(f"{p}: damaged run file: {first}") from err
+    finally:
+        f.close()
+
+
+def iter_record_data(path: str | Path, indices: Sequence[int] | None = None
+                     ) -> Iterator[tuple[int, NDArray[np.float64]]]:
+    """The samples of a run file's records, one record at a time: ``(index, data)``.
+
+    ``data`` is (n_channels, n_samples) float64, force (N) then responses (m/s^2), as in
+    :attr:`RecordTable.data`; ``indices`` picks records (default: every complete one, in
+    order). Only one record is in memory at a time, whatever the run's length. Raises
+    :class:`RunFileError` (one line) when the file cannot be read.
+    """
+    p = Path(path)
+    f = _open(p)
+    try:
+        try:
+            rec = f["records"]
+            ds = rec["data"]
+            n = min([rec[c].shape[0] for c in _COLUMNS] + [ds.shape[0]])
+            if ds.ndim != 3 or ds.dtype.kind != "f":
+                raise RunFileError(f"{p}: damaged run file: /records/data is {ds.dtype} of "
+                                   f"shape {ds.shape}, expected float (records, channels, "
+                                   "samples)")
+        except (KeyError, OSError, ValueError, TypeError, AttributeError) as err:
+            if isinstance(err, RunFileError):
+                raise
+            raise RunFileError(f"{p}: damaged run file: {str(err).splitlines()[0]}") from err
+        for i in range(n) if indices is None else indices:
+            if not 0 <= i < n:
+                raise RunFileError(f"{p}: no record {i} (the file holds {n})")
+            yield int(i), np.asarray(ds[i], dtype=float)
     finally:
         f.close()
 

@@ -125,3 +125,18 @@ def test_piped_output_keeps_every_digit_and_shows_progress(
     assert out.count("of 18 done)") == 18  # one line per point in a log, not silence
     assert "run file demo-run-2.h5 kept" in out and "…" not in out
     assert len(read_run(tmp_path / "demo-run-2.h5", with_data=False).records) == 18
+
+
+def test_a_log_message_holding_a_traceback_is_one_line_without_it() -> None:
+    """python-can's socketcand client logs ``Failed to receive: ERR  Traceback (most
+    recent call last):`` and the traceback; the terminal shows the first part only."""
+    import logging
+
+    from app.cli.main import _OneLine
+
+    record = logging.LogRecord(
+        "can.interfaces.socketcand.socketcand", logging.ERROR, __file__, 1,
+        "Failed to receive: [Errno 104] Connection reset by peer  Traceback (most recent "
+        "call last):\n  File \"x.py\", line 1, in f\nConnectionResetError: reset", None, None)
+    assert _OneLine().format(record) == ("ERROR can.interfaces.socketcand.socketcand: Failed "
+                                         "to receive: [Errno 104] Connection reset by peer")
