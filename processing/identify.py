@@ -499,7 +499,9 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
             shapes = [(w / w[-1]) ** 2 + 0j]
             best = _fit_model(problem, weights, step, shapes)
     damping_note = "damping viscous (K + jwC): the article's model (plain method)"
-    if problem.improved:
+    if problem.improved and opt.damping == "viscous":
+        damping_note = "damping viscous (K + jwC): asked for"
+    elif problem.improved:
         # chosen at the converged M; a fit with another model moves M, so the choice is
         # made again there until it stands (at most three models to try)
         tried: set[str] = {"viscous"}
@@ -627,7 +629,7 @@ def uncertainty(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fi
     cov: FitCovariance = fit_covariance(
         fitted.mass_line, fitted.theta, fitted.mass_rhs, fitted.stiffness_map,
         checks.stiffness_per_line[used], problem.w[weights.stiffness_lines], fitted.K, fitted.C,
-        half_thetas=fitted.half_thetas)
+        half_thetas=fitted.half_thetas, D=fitted.D)
     stated = problem.options.stated
     sources: tuple[str, ...] = (_COV_SOURCE,)
     extra = extra_cov = None

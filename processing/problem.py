@@ -59,6 +59,8 @@ class IdentifyOptions:
     use_rigidity: bool = True
     #: standard deviations of the results from the fit's covariance (:mod:`processing.uncertainty`)
     uncertainty: bool = True
+    #: damping model of K*: chosen from the data ("auto") or viscous K + jwC only
+    damping: Literal["auto", "viscous"] = "auto"
     #: stated test uncertainties propagated by Monte Carlo (:mod:`processing.montecarlo`)
     stated: StatedUncertainty | None = None
 

@@ -160,11 +160,14 @@ def _largest(covs: list[NDArray[np.float64]]) -> NDArray[np.float64]:
 
 def stiffness_scatter(Ks_lines: NDArray[np.complex128], w: NDArray[np.float64],
                       K: NDArray[np.float64], C: NDArray[np.float64],
-                      n_blocks: int = DEFAULT_BLOCKS) -> NDArray[np.float64]:
+                      n_blocks: int = DEFAULT_BLOCKS,
+                      D: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """(72, 72) covariance of [vec K, vec C] from the scatter of ``K*_j`` (n, 6, 6) about
-    ``K + j w_j C`` over the stiffness lines ``w`` (rad/s)."""
+    ``K + j w_j C + j D`` over the stiffness lines ``w`` (rad/s)."""
     n = w.size
     E = Ks_lines - (K[None] + 1j * w[:, None, None] * C[None])
+    if D is not None:
+        E = E - 1j * D[None]
     terms = np.concatenate([E.real.reshape(n, 36).T / n,
                             (w[:, None] * E.imag.reshape(n, 36)).T / np.sum(w**2)])
     dof = max(n - 2, 1)
@@ -177,6 +180,7 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
                    K: NDArray[np.float64], C: NDArray[np.float64],
                    n_blocks: int = DEFAULT_BLOCKS,
                    half_thetas: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+                   D: NDArray[np.float64] | None = None,
                    ) -> FitCovariance:
     """Joint covariance of theta, K and C of one fit.
 
@@ -207,7 +211,7 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
         Kp, Cp = stiffness_map(M0 + MASS_BASIS[p])
         J[:36, p] = (Kp - K0).ravel()
         J[36:, p] = (Cp - C0).ravel()
-    scatter = stiffness_scatter(Ks_lines, w_stiff, K, C, n_blocks)
+    scatter = stiffness_scatter(Ks_lines, w_stiff, K, C, n_blocks, D)
     dk = np.sqrt(np.abs(np.diag(K)))
     dc = np.sqrt(np.abs(np.diag(C)))
     scatter = scatter + np.diag(np.concatenate([np.outer(dk, dk).ravel(),

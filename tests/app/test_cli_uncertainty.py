@@ -11,7 +11,7 @@ from rich.console import Console
 
 from app.cli.summary import print_result
 from hardware_mocks.benches import get_bench
-from processing.identify import IdentificationResult, identify
+from processing.identify import IdentificationResult, IdentifyOptions, identify
 from processing.results import Contribution, Uncertainty
 
 
@@ -37,7 +37,8 @@ def with_uncertainty(r: IdentificationResult) -> IdentificationResult:
 
 @pytest.fixture(scope="module")
 def result() -> IdentificationResult:
-    return identify(get_bench("engine-rigid").frfset(noise=0.01, seed=1))
+    return identify(get_bench("engine-rigid").frfset(noise=0.01, seed=1),
+                    IdentifyOptions(uncertainty=False))
 
 
 def _text(r: IdentificationResult) -> str:

@@ -56,6 +56,11 @@ def test_results_view_and_report_show_uncertainty(qtbot, make_window, choose_fil
     a: Analysis = blocker.args[0]
     assert a.result is not None
     res = window.results_view
+    assert a.result.uncertainty is not None  # the fit's covariance, on by default
+    assert "±" in _cell(res.inertia, 0, 2) and res.uncertainty.isVisibleTo(res)
+    a = replace(a, result=replace(a.result, uncertainty=None))
+    window.session.analysis = a
+    window.session.analysis_changed.emit(a)
     plain = _cell(res.inertia, 0, 2)
     assert "±" not in plain and not res.uncertainty.isVisibleTo(res)
     # the identification's result with an uncertainty, shown as the session shows any result
