@@ -8,7 +8,6 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 from PySide6 import QtWidgets
 
 from app.gui.main_window import MainWindow
@@ -16,27 +15,9 @@ from app.io.uff import write_frf_uff
 from app.report.analysis import Analysis
 from app.report.html import build_report
 from hardware_mocks.benches import get_bench
-from processing.identify import IdentificationResult
-from processing.results import Contribution, Uncertainty
+from tests.app.test_cli_uncertainty import with_uncertainty
 
 DOC_SHOTS = Path(__file__).resolve().parents[3] / "docs" / "screenshots"
-
-
-def _with_uncertainty(r: IdentificationResult) -> IdentificationResult:
-    """1 % std plus a distinct offset per entry; an asymmetric interval for J about the CoG."""
-    p = r.properties
-    values = {"mass": p.mass, "cog": p.cog, "inertia_cog": p.inertia_cog,
-              "inertia_origin": p.inertia_origin, "principal_moments": p.principal_moments,
-              "stiffness": r.K, "damping": r.C, "rigid_modes_hz": r.rigid_modes_hz}
-    std = {k: 0.01 * np.abs(v) + 1e-3 * (1 + np.arange(np.size(v))).reshape(np.shape(v))
-           for k, v in values.items()}
-    J = p.inertia_cog
-    ci = np.stack([J - 2 * std["inertia_cog"], J + 3 * std["inertia_cog"]], axis=-1)
-    return replace(r, uncertainty=Uncertainty(
-        std=std, ci95={"inertia_cog": ci},
-        sources=("fit covariance (FRF noise)", "Monte Carlo of point locations ± 2 mm"),
-        contributions=(Contribution("cog z", "point 3 location", 0.7),
-                       Contribution("inertia_cog xy", "fit (noise)", 0.55))))
 
 
 def _cell(table: QtWidgets.QTableWidget, row: int, col: int) -> str:
@@ -64,7 +45,7 @@ def test_results_view_and_report_show_uncertainty(qtbot, make_window, choose_fil
     plain = _cell(res.inertia, 0, 2)
     assert "±" not in plain and not res.uncertainty.isVisibleTo(res)
     # the identification's result with an uncertainty, shown as the session shows any result
-    r = _with_uncertainty(a.result)
+    r = with_uncertainty(a.result)
     u = r.uncertainty
     assert u is not None
     b = replace(a, result=r)
