@@ -70,7 +70,7 @@ def test_results_view_and_report_show_uncertainty(qtbot, make_window, choose_fil
     assert res.uncertainty.isVisibleTo(res)
     assert res.uncertainty.text().splitlines()[1:] == [
         "Largest contributions to the variance:", "CoG z: 70 % from point 3 location",
-        "J_xy about the CoG: 55 % from fit (noise)"]
+        "J_xy about the CoG: 55 % from fit (noise)", "mass: 40 % from gain of channel 4"]
     window.tabs.setCurrentWidget(res)
     QtWidgets.QApplication.processEvents()
     folder = DOC_SHOTS if os.environ.get("INSITU_SCREENSHOTS") == "1" else tmp_path / "shots"
