@@ -574,7 +574,7 @@ class ImpactDefaults:
     decay: float
     record: float
     exp_tau: float | None
-    ratio: float = float(np.e)
+    ratio: float = float(np.exp(1.0))
 
 
 #: shortest default record, s (lines 0.5 Hz apart: a mount mode of a few Hz needs lines below it)
