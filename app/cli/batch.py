@@ -31,7 +31,9 @@ from app.cli.frf import add_processing_arguments, settings_from
 #: the ``insitu identify`` options a campaign takes, with identify's own definitions and
 #: defaults (those of the FRFs from time data are added from identify's parser too); an option
 #: is listed here once :func:`run` passes it on to :func:`app.batch.campaign.identify_file`
-_IDENTIFY = {"mass_band", "stiffness_band", "physical", "method", "refine_points"}
+_IDENTIFY = {"mass_band", "stiffness_band", "physical", "method", "refine_points",
+             "no_uncertainty", "location_uncertainty", "angle_uncertainty", "gain_uncertainty",
+             "draws"}
 
 
 class _Capture:
@@ -81,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"no such file: {', '.join(missing[:5])}"
                         + (f" and {len(missing) - 5} more" if len(missing) > 5 else ""))
     settings = settings_from(args)  # every option checked before any work is sent
+    args.stated = identify_verb.stated_from(args)
     options = identify_verb.options_from(args)
     console = Console()
     t0 = time.perf_counter()

@@ -13,13 +13,14 @@ import pytest
 
 from app.batch.campaign import result_row, write_tables
 from hardware_mocks.benches import get_bench
-from processing.identify import identify
+from processing.identify import IdentifyOptions, identify
 from processing.results import Uncertainty
 
 
 def test_rows_and_tables_carry_the_uncertainty(tmp_path: Path) -> None:
     f = get_bench("engine-rigid").frfset(noise=0.01, seed=3)
-    r = identify(replace(f, freq=f.freq[::4], H=f.H[:, :, ::4]))
+    r = identify(replace(f, freq=f.freq[::4], H=f.H[:, :, ::4]),
+                 IdentifyOptions(uncertainty=False))
     p = r.properties
     std = {"mass": np.array(0.2), "cog": np.array([1e-3, 2e-3, 3e-3]),
            "inertia_cog": np.full((3, 3), 0.01), "rigid_modes_hz": np.arange(1.0, 7.0) / 10}

@@ -92,9 +92,6 @@ def test_default_answers_where_the_article_answers(index: int, tmp_path: Path) -
     assert _insitu(_uff(sc, tmp_path)) is not None
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12 part 3: on a noise-free engine with its first "
-                   "elastic mode at 20x the highest rigid mode, default's automatic mass line "
-                   "runs across the elastic modes (mass error ~100 %, the article's 17 %)")
 def test_default_not_worse_than_the_article_on_a_clean_flexible_engine(tmp_path: Path) -> None:
     sc = build_scenario(SPECS[25])
     assert sc.spec.is_clean and sc.spec.shape == "engine"
