@@ -91,6 +91,7 @@ __all__ = [
     "fit",
     "identify",
     "identify_arrays",
+    "settle_mass_band",
     "uncertainty",
     "weigh_lines",
 ]
@@ -473,6 +474,75 @@ def _upper_residual_chosen(problem: Problem, weights: LineWeights,
                  f"half-band disagreement {with_:.2%} with it, {without:.2%} without")
 
 
+#: candidate tops of the automatic mass line tried by :func:`settle_mass_band`
+BAND_CANDIDATES = 6
+#: a wider candidate is preferred while its disagreement is within this factor of the least
+BAND_TOLERANCE = 1.5
+#: convergence of the candidates' fits (relative change of theta) and their iterations
+SCORE_TOL, SCORE_ITER = 1e-4, 6
+
+
+def _band_score(problem: Problem, weights: LineWeights, step: _StiffnessStep,
+                shapes: list[NDArray[np.complex128]]) -> float:
+    """Half-band disagreement of the better of the two mass-line models (with the given
+    leakage shapes, and with an upper ``w^2`` residual added)."""
+    if shapes:  # elastic modes and the upper residual modelled
+        return _spread(problem, weights, step, shapes)
+    w = problem.w
+    return min(_spread(problem, weights, step, []),
+               _spread(problem, weights, step, [(w / w[-1]) ** 2 + 0j]))
+
+
+def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tuple[
+    Bands, LineWeights
+]:
+    """The automatic mass line's top chosen by the stability of the estimate.
+
+    An elastic mode the residual does not show (its shape looks rigid at the sensors, or it
+    sits at the edge of the data) still bends the mass line: the estimate then drifts with
+    the band. The chosen band's top and ``BAND_CANDIDATES - 1`` lower tops (geometric, down
+    to 1.5x its bottom and at least 16 lines) are each fitted on the two halves of their
+    lines; the widest whose halves disagree at most ``BAND_TOLERANCE`` times the least
+    disagreement is kept, and the reason says so. Bands given in the options, the plain
+    method and mass lines under 32 lines are left as they are.
+    """
+    if problem.options.mass_band is not None or not problem.improved:
+        return bands, weights
+    freq, idx = problem.freq, np.flatnonzero(weights.mass_lines)
+    if idx.size < 32:
+        return bands, weights
+    lo, hi = bands.mass_band
+    least = float(freq[idx[15]])
+    if least >= hi:
+        return bands, weights
+    tops = np.geomspace(hi, least, BAND_CANDIDATES)
+    ins = bands.in_stiffness
+    # the candidates are compared, not reported: a loose convergence suffices
+    rough = dataclasses.replace(problem, options=dataclasses.replace(
+        problem.options, tol=SCORE_TOL, max_iter=SCORE_ITER))
+    step = _StiffnessStep(rough, weights, line_operators(problem.X[..., ins], problem.T,
+                                                         problem.w[ins]),
+                          weights.stiffness_lines[ins])
+    shapes = _leakage_shapes(problem, bands)
+    trials = []
+    for top in tops:
+        keep = freq[idx] <= top * (1 + 1e-9)
+        lines = np.zeros_like(weights.mass_lines)
+        lines[idx[keep]] = True
+        trial = dataclasses.replace(weights, mass_lines=lines, mass=weights.mass[:, keep])
+        trials.append((float(top), trial, _band_score(rough, trial, step, shapes)))
+    best = min(score for *_, score in trials)
+    top, chosen, score = next(t for t in trials if t[2] <= BAND_TOLERANCE * best)
+    if top >= hi * (1 - 1e-9):
+        return bands, weights
+    reason = (f"{bands.reason}; mass line ended at {top:.1f} Hz, where the estimate is "
+              f"stable (half-band disagreement {score:.2%}, {trials[0][2]:.2%} to "
+              f"{hi:.1f} Hz)")
+    in_mass = bands.in_mass & (freq <= top * (1 + 1e-9))
+    return dataclasses.replace(bands, mass_band=(lo, top), in_mass=in_mass,
+                               reason=reason), chosen
+
+
 def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
     """Inertia, K and C (and D): the article's fixed point solved directly (plain, no
     window), else the iteration of section 2.2; then projected onto consistent inertia if
@@ -771,6 +841,7 @@ def identify_arrays(
                       options=opt, exponential_tau=exponential_tau)
     bands = choose_bands(problem, rigid_band_top, rigid_band_fallback)
     weights = weigh_lines(problem, bands)
+    bands, weights = settle_mass_band(problem, bands, weights)
     fitted = fit(problem, bands, weights)
     checks = check(problem, bands, weights, fitted)
     uncertain = (uncertainty(problem, bands, weights, fitted, checks, node_ids)
