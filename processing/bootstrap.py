@@ -1,0 +1,421 @@
+"""Bootstrap over hits (hammer) or blocks (shaker): how far the FRFs' own noise moves a result.
+
+A point's FRF column from time data is a ratio of averaged spectra: H1 is
+``sum_u S_fx,u / sum_u S_ff,u`` over the point's averaging units ``u`` (the accepted hits
+of a hammer test, the blocks of a shaker test), H2 ``sum S_xx / sum conj(S_fx)``. The
+units are independent measurements of the same column, so resampling them with
+replacement (each point on its own: the points were measured apart) and forming the
+FRFs again gives draws of what another test of the same engine, as noisy, could have
+given (Efron's bootstrap). Each resample is identified again with everything the main
+fit chose held fixed: bands, lines, coherence weights, leakage shapes, damping model
+(band selection is not re-run), and the spread of each result over the resamples is its
+bootstrap uncertainty.
+
+Units
+    :class:`processing.units.TimeUnits` (per column, the spectra of each unit), attached by
+    the pipeline to ``FRFSet.meta["time_units"]``.
+
+Re-identification
+    Without modelled leakage the coupled inertia-stiffness iteration (section 2.2) is an
+    affine map of theta for fixed data (the mass-line solve is linear in K, C, D and the
+    stiffness step affine in M), so each resample's fixed point is found exactly from
+    eleven evaluations of one iteration step and one 10x10 solve; with leakage shapes the
+    iteration itself runs, from the main fit's solution. The FRFs of all resamples and
+    their rigid-body accelerances are formed at once (vectorised over resamples).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.data import InputError
+from processing.identify import Bands, Fit, LineWeights, _iterate, _StiffnessStep
+from processing.inertia import MASS_BASIS, mass_matrix
+from processing.massline import MassLineProblem, stack_real
+from processing.physical import constrain_physical
+from processing.problem import COHERENCE_NOISE_FLOOR, Problem
+from processing.results import UNCERTAIN_KEYS
+from processing.spectral import CrossSpectra, frf
+from processing.stiffness import _BLOCKS, _DUP, line_operators
+from processing.uncertainty import derived_of_draws, draw_covariance
+from processing.units import TimeUnits, UnitKind
+
+__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "accelerance_operator", "resample"]
+
+#: resamples when none are asked for
+DEFAULT_RESAMPLES = 200
+
+# --- resampling ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Bootstrap:
+    """Resampled identifications: theta (n, 10), K, C (n, 6, 6); ``counts`` (n, n_units)
+    how often each unit was drawn; ``groups`` the column label of each unit."""
+
+    theta: NDArray[np.float64]
+    K: NDArray[np.float64]
+    C: NDArray[np.float64]
+    counts: NDArray[np.float64]
+    groups: tuple[str, ...]
+    kind: UnitKind
+    units: tuple[int, ...]
+
+    @property
+    def n(self) -> int:
+        return int(self.theta.shape[0])
+
+    def describe(self) -> str:
+        """One line: what was resampled."""
+        return (f"bootstrap over {self.kind}s ({self.n} resamples; {min(self.units)}-"
+                f"{max(self.units)} {self.kind}s a point; bands, weights and models held fixed)")
+
+    def values(self) -> dict[str, NDArray[np.float64]]:
+        """Every key of :data:`UNCERTAIN_KEYS` for each resample, (n, *shape)."""
+        return derived_of_draws(self.theta, self.K, self.C)
+
+    def covariance(self) -> NDArray[np.float64]:
+        """(82, 82) covariance of ``[theta, vec K, vec C]`` over the resamples."""
+        return draw_covariance(self.theta, self.K, self.C)
+
+    def variances(self) -> dict[str, dict[str, NDArray[np.float64]]]:
+        """Per key, the variance of each entry over the resamples split by column.
+
+        First order: a linear regression of the resamples on the counts; column g gets
+        the variance of its fitted linear part ``z_g beta_g``; what the linear part leaves
+        is ``"bootstrap (non-linear part)"``. Parts are scaled down when the regression's
+        noise makes them exceed the total. Entries with a non-finite resample (rigid modes
+        of a resample whose M is not positive definite) are left out.
+        """
+        values = self.values()
+        keys = list(values)
+        flat = np.concatenate([values[k].reshape(self.n, -1) for k in keys], axis=1)
+        ok = np.all(np.isfinite(flat), axis=0)
+        y = np.where(ok, flat, 0.0)
+        y = y - y.mean(axis=0)
+        z = self.counts - self.counts.mean(axis=0)
+        total = np.var(y, axis=0, ddof=1)
+        beta = np.linalg.lstsq(z, y, rcond=None)[0]
+        names = list(dict.fromkeys(self.groups))
+        gidx = np.array([names.index(g) for g in self.groups])
+        per = np.stack([np.var(z[:, gidx == i] @ beta[gidx == i], axis=0, ddof=1)
+                        for i in range(len(names))])
+        lin = per.sum(axis=0)
+        per *= np.where(lin > total, total / np.maximum(lin, 1e-300), 1.0)
+        rest = np.clip(total - per.sum(axis=0), 0.0, None)
+        out: dict[str, dict[str, NDArray[np.float64]]] = {}
+        col = 0
+        for k in keys:
+            shape = UNCERTAIN_KEYS[k]
+            sl = slice(col, col + int(np.prod(shape, dtype=int)))
+            col = sl.stop
+            if not np.all(ok[sl]):
+                continue
+            parts = {g: per[i, sl].reshape(shape) for i, g in enumerate(names)}
+            parts["bootstrap (non-linear part)"] = rest[sl].reshape(shape)
+            out[k] = parts
+        return out
+
+    def intervals(self, theta: NDArray[np.float64], K: NDArray[np.float64],
+                  C: NDArray[np.float64], std: dict[str, NDArray[np.float64]],
+                  ) -> dict[str, NDArray[np.float64]]:
+        """Asymmetric 95 % intervals (shape + (2,)) of the keys in ``std`` about the result
+        ``theta``, ``K``, ``C``: the percentile interval of the resamples, ``[q2.5, q97.5]``,
+        widened about the result's value ``x`` to ``x + r (q - x)`` by the ratio ``r`` of
+        ``std`` (every source) to the resamples' own std when that is above 1; the value
+        always lies inside.
+        """
+        nominal = {k: v[0] for k, v in derived_of_draws(theta[None], K[None], C[None]).items()}
+        out: dict[str, NDArray[np.float64]] = {}
+        for k, v in self.values().items():
+            x = nominal[k]
+            if k not in std or not (np.all(np.isfinite(v)) and np.all(np.isfinite(x))):
+                continue
+            q = np.percentile(v, [2.5, 97.5], axis=0)
+            sb = np.std(v, axis=0, ddof=1)
+            r = np.maximum(np.where(sb > 0, std[k] / np.where(sb > 0, sb, 1.0), 1.0), 1.0)
+            lo = np.minimum(x + r * (q[0] - x), x)
+            hi = np.maximum(x + r * (q[1] - x), x)
+            out[k] = np.stack([lo, hi], axis=-1)
+        return out
+
+
+def accelerance_operator(problem: Problem) -> NDArray[np.float64]:
+    """(n_exc, n_f, 6, n_resp) linear map from each column's FRFs to its rigid-body
+    accelerances at O on each line, as :func:`processing.problem.prepare` forms ``X``: the
+    coherence-weighted least squares of its responses (weights held at the main fit's), or
+    ``E^+`` without coherence."""
+    E, H, coh = problem.E, problem.H, problem.coherence
+    n_r, n_e, n_f = H.shape
+    if coh is None:
+        return np.broadcast_to(problem.Epinv, (n_e, n_f, 6, n_r))
+    g = np.clip(coh, 1e-12, 1.0)
+    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(H) ** 2, axis=(0, 1))))
+    W = 1.0 / (np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300))
+    W = W / np.max(W, axis=0, keepdims=True)
+    A = np.einsum("ri,ref,rj->efij", E, W, E)
+    return np.asarray(np.linalg.solve(A, np.einsum("ri,ref->efir", E, W)))
+
+
+def _line_index(units_freq: NDArray[np.float64], freq: NDArray[np.float64]) -> (
+    NDArray[np.int64] | None
+):
+    """Index into ``units_freq`` of each line of ``freq`` (None when one is missing)."""
+    idx = np.clip(np.searchsorted(units_freq, freq), 0, units_freq.size - 1)
+    lo = np.clip(idx - 1, 0, None)
+    idx = np.where(np.abs(units_freq[lo] - freq) < np.abs(units_freq[idx] - freq), lo, idx)
+    tol = 1e-6 * max(float(np.max(np.abs(freq))), 1.0)
+    return idx if np.all(np.abs(units_freq[idx] - freq) <= tol) else None
+
+
+def _resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
+        NDArray[np.float64]]) -> NDArray[np.complex128] | None:
+    """FRFs (n_exc, n_lines, n_resp, n) of the resamples on ``lines`` (Hz): each column's
+    units weighted by how often each was drawn; None when a column lacks a line."""
+    cols = []
+    for col, c in zip(units.columns, counts, strict=True):
+        li = _line_index(col.freq, lines)
+        if li is None:
+            return None
+        cw = c * col.weight  # (n, n_u)
+        cw = (cw / cw.sum(axis=1, keepdims=True)).T
+        n, n_l, n_r = cw.shape[1], li.size, col.Sfx.shape[1]
+        Sfx = np.moveaxis(col.Sfx[..., li], 0, -1) @ cw  # (n_r, n_l, n)
+        est = units.estimator.upper()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if est == "H1":
+                H = Sfx / (col.Sff[:, li].T @ cw)[None]
+            elif est == "H2":
+                H = (np.moveaxis(col.Sxx[..., li], 0, -1) @ cw) / np.conj(Sfx)
+            else:  # Hv (and any other): the estimator itself on the resampled spectra
+                Sxx = np.moveaxis(col.Sxx[..., li], 0, -1) @ cw
+                sp = CrossSpectra(np.zeros(n * n_l), (col.Sff[:, li].T @ cw).reshape(1, 1, -1)
+                                  + 0j, Sfx.reshape(1, n_r, -1), Sxx.reshape(n_r, -1), 1, (0,),
+                                  tuple(range(1, n_r + 1)))
+                H = frf(sp, units.estimator)[0][:, 0].reshape(n_r, n_l, n)
+        cols.append(np.moveaxis(H, 0, 1))  # (n_l, n_r, n)
+    return np.stack(cols)
+
+
+Triple = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+
+def _line_inverses(Xs: NDArray[np.complex128], T: NDArray[np.float64]) -> (
+    NDArray[np.complex128]
+):
+    """Apparent masses ``B_j = T X_j^+`` (n, n_l, 6, 6) of resamples' lines Xs (n, 6, n_e, n_l)
+    (:func:`processing.stiffness.line_operators`, vectorised over resamples)."""
+    Xl = np.moveaxis(Xs, -1, 1)  # (n, n_l, 6, n_e)
+    Xh = np.conj(np.swapaxes(Xl, -1, -2))
+    try:
+        Xp = Xh @ np.linalg.inv(Xl @ Xh)
+    except np.linalg.LinAlgError:
+        Xp = np.linalg.pinv(Xl)
+    return np.asarray(T @ Xp)
+
+
+def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
+                      Xs: NDArray[np.complex128]) -> tuple[Triple, Triple]:
+    """The stiffness step of the main fit, M -> (K, C, D), for resamples' stiffness lines Xs
+    (n, 6, n_e, n_l): it is affine in M, returned as its value at M = 0, (K, C, D) each
+    (n, 6, 6), and its change per unit of each parameter, each (n, 10, 6, 6)
+    (``_StiffnessStep``, vectorised over resamples)."""
+    n = Xs.shape[0]
+    w = problem.w[weights.stiffness_lines]
+    a, T, opt = problem.window_decay, problem.T, problem.options
+    MB = MASS_BASIS[None]  # (1, 10, 6, 6), symmetric
+    zero, zl = np.zeros((n, 6, 6)), np.zeros((n, 10, 6, 6))
+    if a or not problem.improved:
+        B = _line_inverses(Xs, T)
+        if a:  # P_j = -s_j^2 (M - B_j); C: least squares of Im P = w C; K = mean Re P - a C
+            sq = (1j * w + a) ** 2
+            C0 = np.einsum("l,nlij->nij", w, (sq[:, None, None] * B).imag) / np.sum(w**2)
+            K0 = np.mean((sq[:, None, None] * B).real, axis=1) - a * C0
+            cc = float(np.sum(w * (-sq).imag) / np.sum(w**2))
+            kk = float(np.mean((-sq).real)) - a * cc
+            Kl, Cl = np.broadcast_to(kk * MB, zl.shape), np.broadcast_to(cc * MB, zl.shape)
+            if opt.symmetric:
+                K0, C0 = 0.5 * (K0 + np.swapaxes(K0, 1, 2)), 0.5 * (C0 + np.swapaxes(C0, 1, 2))
+            return (K0, C0, zero), (Kl, Cl, zl)
+        # the article's line average of eq. 14: K = mean(w^2) M - mean(w^2 Re B), C
+        K0 = -np.mean((w**2)[:, None, None] * B.real, axis=1)
+        C0 = -np.mean(w[:, None, None] * B.imag, axis=1)
+        return (K0, C0, zero), (np.broadcast_to(np.mean(w**2) * MB, zl.shape), zl, zl)
+    # improved: the direct fit from 6x6 moments (processing.stiffness.fit_stiffness)
+    wt = weights.stiffness.ravel()
+    Xf = Xs.reshape(n, 6, -1)
+    wl = np.broadcast_to(w, weights.stiffness.shape).ravel()
+    Tf = np.broadcast_to(T[:, :, None], Xs.shape[1:]).reshape(6, -1)
+    Xw = np.conj(Xf) * wt
+    G = [(Xw * wl**p) @ np.swapaxes(Xf, 1, 2) for p in range(4)]
+    Q2, Q3 = (np.asarray((Xw * wl**p) @ Tf.T, dtype=np.complex128) for p in (2, 3))
+    s2 = (np.ones(6) if problem.row_scale is None
+          else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
+    G0r, G0i, G1r, G1i = G[0].real, G[0].imag, G[1].real, G[1].imag
+    full = [[G0r, -G1i, -G0i], [G1i, G[2].real, G1r], [G0i, G1r, G0r]]
+    blocks = _BLOCKS[model]
+    k = len(blocks)
+    Nb = np.concatenate([np.concatenate([full[r][c] for c in blocks], axis=2)
+                         for r in blocks], axis=1)  # (n, 6k, 6k)
+    Nfull = np.einsum("i,ij,ntaub->ntiaujb", s2, np.eye(6),
+                      Nb.reshape(n, k, 6, k, 6)).reshape(n, 36 * k, 36 * k)
+    if opt.symmetric:
+        dup = np.kron(np.eye(k), _DUP)
+        S = np.asarray(dup @ np.linalg.solve(dup.T @ Nfull @ dup,
+                                             np.broadcast_to(dup.T, (n, *dup.T.shape))))
+    else:
+        S = np.asarray(np.linalg.inv(Nfull))
+
+    def rhs(R0: NDArray[Any], R1: NDArray[Any]) -> NDArray[np.float64]:
+        parts = (R0.real, R1.imag, R0.imag)
+        return np.concatenate([np.swapaxes(parts[b] * s2, -1, -2).reshape(*R0.shape[:-2], 36)
+                               for b in blocks], axis=-1)
+
+    v0 = np.einsum("nij,nj->ni", S, rhs(-Q2, -Q3))
+    vl = np.einsum("nij,npj->npi", S, rhs(G[2][:, None] @ (MB + 0j), G[3][:, None] @ (MB + 0j)))
+    const, lin = [zero] * 3, [zl] * 3
+    for j, b in enumerate(blocks):
+        const[b] = v0[:, 36 * j:36 * (j + 1)].reshape(n, 6, 6)
+        lin[b] = vl[..., 36 * j:36 * (j + 1)].reshape(n, 10, 6, 6)
+    return (const[0], const[1], const[2]), (lin[0], lin[1], lin[2])
+
+
+def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
+                 Xm: NDArray[np.complex128], Xs: NDArray[np.complex128]) -> Triple:
+    """theta (n, 10), K, C (n, 6, 6) of resamples' accelerances on the mass lines Xm
+    (n, 6, n_e, n_lm) and on the stiffness lines Xs (n, 6, n_e, n_ls): the main
+    fit's model (no leakage shapes) with its lines, weights and damping model, solved for
+    the fixed point of the inertia-stiffness iteration directly.
+
+    For fixed data the iteration (:func:`processing.identify._iterate`) is affine in theta:
+    the stiffness step is affine in M, the mass-line solve linear in K, C, D. So
+    ``theta = t0 + L theta`` is one 10x10 solve a resample.
+    """
+    n = Xm.shape[0]
+    wm = problem.w[weights.mass_lines]
+    a, T = problem.window_decay, problem.T
+    sw = np.sqrt(weights.mass)  # (n_e, n_lm)
+    Xw = (Xm * sw).reshape(n, 6, -1)
+    XwH = np.conj(np.swapaxes(Xw, 1, 2))
+
+    def moment(Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
+        """``sum Re(z) Re(x) + Im(z) Im(x)`` over the weighted equations (the real-stacked
+        moments of :class:`~processing.massline.MassLineProblem`), (n, 6, 6)."""
+        Z = np.broadcast_to(Z, (*Z.shape[:-3], *Xm.shape[1:]))
+        return np.asarray(((Z * sw).reshape(*Z.shape[:-3], 6, -1) @ XwH).real)
+
+    s2 = (np.ones(6) if problem.row_scale is None
+          else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
+    MBs = (MASS_BASIS * s2[None, :, None]).reshape(10, 36)
+    op = np.einsum("pia,qib->pqab", MASS_BASIS * s2[None, :, None], MASS_BASIS).reshape(100, 36)
+    N = (moment(Xm).reshape(n, 36) @ op.T).reshape(n, 10, 10)
+    solver = np.linalg.solve(N, np.broadcast_to(MBs, (n, 10, 36)))
+    WT = moment(T[:, :, None] + 0j)
+    if a:  # B = T - ((K + a C) X + j w C X) / s^2
+        s_2 = (1j * wm + a) ** 2
+        AK = -moment(Xm / s_2)
+        AC = a * AK - moment(1j * wm * Xm / s_2)
+        AD = np.zeros_like(AK)
+    else:  # B = T + (K + j w C + j D) X / w^2
+        AK = moment(Xm / wm**2)
+        AC = moment(1j * Xm / wm)
+        AD = moment(1j * Xm / wm**2)
+    (K0, C0, D0), (Kl, Cl, Dl) = _stiffness_affine(problem, weights, fitted.damping_model, Xs)
+    W0 = WT + K0 @ AK + C0 @ AC + D0 @ AD
+    Wl = Kl @ AK[:, None] + Cl @ AC[:, None] + Dl @ AD[:, None]  # (n, 10, 6, 6)
+    t0 = np.einsum("npq,nq->np", solver, W0.reshape(n, 36))
+    L = np.einsum("npq,nkq->npk", solver, Wl.reshape(n, 10, 36))
+    theta = np.linalg.solve(np.eye(10)[None] - L, t0[..., None])[..., 0]
+    if problem.options.physical:  # few resamples leave the consistent set: one at a time
+        theta = np.array([constrain_physical(t, Nk) for t, Nk in zip(theta, N, strict=True)])
+    K = K0 + np.einsum("np,npij->nij", theta, Kl)
+    C = C0 + np.einsum("np,npij->nij", theta, Cl)
+    return theta, K, C
+
+
+def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: Bands,
+                    X: NDArray[np.complex128]) -> Triple:
+    """:func:`_solve_batch` for a fit with leakage shapes (the cleaning of the accelerances
+    makes the iteration non-linear): the iteration itself, from the main fit's solution,
+    resample by resample."""
+    from processing.identify import _leakage_shapes
+
+    msel, ins = weights.mass_lines, bands.in_stiffness
+    shapes = _leakage_shapes(problem, bands)
+    if not shapes:  # the upper residual the fit chose
+        shapes = [(problem.w / problem.w[-1]) ** 2 + 0j]
+    stacked = np.array([stack_real(sh[msel]) for sh in shapes])
+    opt = dataclasses.replace(problem.options, tol=max(problem.options.tol, 1e-9))
+    out = []
+    for Xb in X:  # the iteration is not affine here: one resample at a time
+        pb = dataclasses.replace(problem, X=Xb, options=opt)
+        ops = (fitted.operators if problem.improved
+               else line_operators(Xb[..., ins], problem.T, problem.w[ins]))
+        step = _StiffnessStep(pb, weights, ops, weights.stiffness_lines[ins])
+        step.model = fitted.damping_model
+        ml = MassLineProblem(Xb[..., msel], weights=weights.mass, row_scale=problem.row_scale,
+                             shapes=stacked)
+        Xs = Xb[..., weights.stiffness_lines]
+        theta = _iterate(pb, weights, ml, step, shapes, (fitted.theta, Xs))[1]
+        if problem.options.physical:
+            theta = constrain_physical(theta, ml.normal)
+        K, C, _D = step(mass_matrix(theta), Xs)
+        out.append((theta, K, C))
+    return np.array([o[0] for o in out]), np.array([o[1] for o in out]), np.array(
+        [o[2] for o in out])
+
+
+def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
+             units: TimeUnits, n: int = DEFAULT_RESAMPLES, seed: int = 0) -> Bootstrap | str:
+    """Bootstrap the main fit over the time data's units; or, when it cannot run, why not.
+
+    Parameters
+    ----------
+    problem, bands, weights, fitted : the main identification's stages
+    units : the units of the problem's columns, in its column order
+    n : resamples (at least 2)
+    seed : of the resampling (the same seed gives the same resamples)
+    """
+    if n < 2:
+        raise InputError(f"the bootstrap needs at least 2 resamples, got {n}")
+    few = [(lab, c.n_units) for lab, c in zip(units.labels(), units.columns, strict=True)
+           if c.n_units < 2]
+    if few:
+        return (f"no bootstrap over {units.kind}s: {few[0][0]} has {few[0][1]} "
+                f"(at least 2 needed)")
+    used = weights.mass_lines | bands.in_stiffness
+    rng = np.random.default_rng([seed, 15])
+    counts = [rng.multinomial(c.n_units, np.full(c.n_units, 1.0 / c.n_units), size=n)
+              .astype(float) for c in units.columns]
+    # the units must give the FRFs the fit used (the nominal: every unit once)
+    H0 = _resampled_frfs(units, problem.freq[used], [np.ones((1, c.n_units))
+                                                     for c in units.columns])
+    if H0 is None:
+        return f"no bootstrap over {units.kind}s: their lines differ from the FRFs'"
+    ref = problem.H[..., used]
+    if not np.allclose(np.moveaxis(H0[..., 0], (0, 1, 2), (1, 2, 0)), ref, rtol=1e-6,
+                       atol=1e-9 * float(np.max(np.abs(ref)))):
+        return f"no bootstrap over {units.kind}s: their spectra do not give the FRFs identified"
+    H = _resampled_frfs(units, problem.freq[used], counts)
+    assert H is not None
+    op = accelerance_operator(problem)[:, used]  # (n_e, n_l, 6, n_r)
+    X = np.ascontiguousarray(np.moveaxis(op @ H, -1, 0).transpose(0, 3, 1, 2))  # (n, 6, e, l)
+    lines = np.flatnonzero(used)
+    if fitted.mass_line is not None and fitted.mass_line.shapes is not None:
+        Xall = np.broadcast_to(problem.X, (n, *problem.X.shape)).copy()
+        Xall[..., used] = X
+        theta, K, C = _solve_iterated(problem, weights, fitted, bands, Xall)
+    else:
+        theta, K, C = _solve_batch(problem, weights, fitted,
+                                   X[..., np.isin(lines, np.flatnonzero(weights.mass_lines))],
+                                   X[..., np.isin(lines, np.flatnonzero(weights.stiffness_lines))])
+    labels = units.labels()
+    groups = tuple(lab for lab, c in zip(labels, units.columns, strict=True)
+                   for _ in range(c.n_units))
+    return Bootstrap(theta, K, C, np.concatenate(counts, axis=1),
+                     groups, units.kind, tuple(c.n_units for c in units.columns))
