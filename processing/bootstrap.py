@@ -33,19 +33,20 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from processing.data import InputError
+from processing.data import FRFSet, InputError
 from processing.identify import Bands, Fit, LineWeights, _iterate, _StiffnessStep
 from processing.inertia import MASS_BASIS, mass_matrix
 from processing.massline import MassLineProblem, stack_real
 from processing.physical import constrain_physical
-from processing.problem import COHERENCE_NOISE_FLOOR, Problem
+from processing.problem import COHERENCE_NOISE_FLOOR, IdentifyOptions, Problem, prepare
 from processing.results import UNCERTAIN_KEYS
 from processing.spectral import CrossSpectra, frf
 from processing.stiffness import _BLOCKS, _DUP, line_operators
 from processing.uncertainty import derived_of_draws, draw_covariance
 from processing.units import TimeUnits, UnitKind
 
-__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "accelerance_operator", "resample"]
+__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "bootstrap_identify", "resample",
+           "weighted_accelerances"]
 
 #: resamples when none are asked for
 DEFAULT_RESAMPLES = 200
@@ -145,21 +146,34 @@ class Bootstrap:
         return out
 
 
-def accelerance_operator(problem: Problem) -> NDArray[np.float64]:
-    """(n_exc, n_f, 6, n_resp) linear map from each column's FRFs to its rigid-body
-    accelerances at O on each line, as :func:`processing.problem.prepare` forms ``X``: the
-    coherence-weighted least squares of its responses (weights held at the main fit's), or
-    ``E^+`` without coherence."""
-    E, H, coh = problem.E, problem.H, problem.coherence
-    n_r, n_e, n_f = H.shape
-    if coh is None:
-        return np.broadcast_to(problem.Epinv, (n_e, n_f, 6, n_r))
-    g = np.clip(coh, 1e-12, 1.0)
-    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(H) ** 2, axis=(0, 1))))
-    W = 1.0 / (np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300))
-    W = W / np.max(W, axis=0, keepdims=True)
-    A = np.einsum("ri,ref,rj->efij", E, W, E)
-    return np.asarray(np.linalg.solve(A, np.einsum("ri,ref->efir", E, W)))
+def weighted_accelerances(problem: Problem, H: NDArray[np.complex128],
+                          coherence: NDArray[np.float64] | None,
+                          ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
+    """Rigid-body accelerances X (n, 6, n_e, n_l) and column weights (n, n_e, n_l) of
+    resamples' FRFs ``H`` and coherence (n_e, n_l, n_resp, n), as
+    :func:`processing.problem.prepare` forms them (``_weighted_accelerances``: each FRF value
+    weighted by the inverse of its H1 variance ``|H|^2 (1 - g) / g`` plus the main fit's
+    noise floor; the column weights on the main fit's scale), or ``E^+ H`` and equal weights
+    without coherence."""
+    E = problem.E
+    if coherence is None or problem.coherence is None:
+        X = np.einsum("ir,elrn->niel", problem.Epinv, H)
+        return X, np.ones((H.shape[-1], *H.shape[:2]))
+    H0 = problem.H
+    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(H0) ** 2, axis=(0, 1))))
+    g = np.clip(coherence, 1e-12, 1.0)
+    var = np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300)
+    W = 1.0 / var  # (n_e, n_l, n_r, n)
+    top = np.max(W, axis=2, keepdims=True)
+    W = W / top
+    A = np.einsum("ri,elrn,rj->elnij", E, W, E)
+    b = np.einsum("ri,elrn->elni", E, W * H)
+    Ainv = np.linalg.inv(A)
+    X = np.einsum("elnij,elnj->niel", Ainv, b)
+    dvar = np.diagonal(Ainv, axis1=-2, axis2=-1) / np.moveaxis(top, 2, -1)  # (e, l, n, 6)
+    L = problem.geometry.length
+    v = dvar[..., :3].sum(-1) + L**2 * dvar[..., 3:].sum(-1)  # (n_e, n_l, n)
+    return X, np.moveaxis(1.0 / v, -1, 0)
 
 
 def _line_index(units_freq: NDArray[np.float64], freq: NDArray[np.float64]) -> (
@@ -174,32 +188,40 @@ def _line_index(units_freq: NDArray[np.float64], freq: NDArray[np.float64]) -> (
 
 
 def _resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
-        NDArray[np.float64]]) -> NDArray[np.complex128] | None:
-    """FRFs (n_exc, n_lines, n_resp, n) of the resamples on ``lines`` (Hz): each column's
-    units weighted by how often each was drawn; None when a column lacks a line."""
-    cols = []
+        NDArray[np.float64]]) -> tuple[NDArray[np.complex128], NDArray[np.float64]] | None:
+    """FRFs and coherence (n_exc, n_lines, n_resp, n) of the resamples on ``lines`` (Hz):
+    each column's units weighted by how often each was drawn; None when a column lacks a
+    line."""
+    cols, cohs = [], []
     for col, c in zip(units.columns, counts, strict=True):
         li = _line_index(col.freq, lines)
         if li is None:
             return None
+        mean = col.weight / col.weight.sum()
         cw = c * col.weight  # (n, n_u)
-        cw = (cw / cw.sum(axis=1, keepdims=True)).T
+        cw = cw / cw.sum(axis=1, keepdims=True)
+        # a resample's deviation from the mean, scaled by sqrt(n / (n - 1)): the bootstrap's
+        # variance of a mean of n units is (n - 1) / n of the unbiased estimate
+        cw = (mean + np.sqrt(col.n_units / (col.n_units - 1)) * (cw - mean)).T
         n, n_l, n_r = cw.shape[1], li.size, col.Sfx.shape[1]
         Sfx = np.moveaxis(col.Sfx[..., li], 0, -1) @ cw  # (n_r, n_l, n)
+        Sxx = np.moveaxis(col.Sxx[..., li], 0, -1) @ cw
+        Sff = (col.Sff[:, li].T @ cw)[None]
         est = units.estimator.upper()
         with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.clip(np.abs(Sfx) ** 2 / (Sff * Sxx), 0.0, 1.0)
             if est == "H1":
-                H = Sfx / (col.Sff[:, li].T @ cw)[None]
+                H = Sfx / Sff
             elif est == "H2":
-                H = (np.moveaxis(col.Sxx[..., li], 0, -1) @ cw) / np.conj(Sfx)
+                H = Sxx / np.conj(Sfx)
             else:  # Hv (and any other): the estimator itself on the resampled spectra
-                Sxx = np.moveaxis(col.Sxx[..., li], 0, -1) @ cw
-                sp = CrossSpectra(np.zeros(n * n_l), (col.Sff[:, li].T @ cw).reshape(1, 1, -1)
-                                  + 0j, Sfx.reshape(1, n_r, -1), Sxx.reshape(n_r, -1), 1, (0,),
+                sp = CrossSpectra(np.zeros(n * n_l), Sff.reshape(1, 1, -1) + 0j,
+                                  Sfx.reshape(1, n_r, -1), Sxx.reshape(n_r, -1), 1, (0,),
                                   tuple(range(1, n_r + 1)))
                 H = frf(sp, units.estimator)[0][:, 0].reshape(n_r, n_l, n)
         cols.append(np.moveaxis(H, 0, 1))  # (n_l, n_r, n)
-    return np.stack(cols)
+        cohs.append(np.moveaxis(g, 0, 1))
+    return np.stack(cols), np.stack(cohs)
 
 
 Triple = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
@@ -220,10 +242,12 @@ def _line_inverses(Xs: NDArray[np.complex128], T: NDArray[np.float64]) -> (
 
 
 def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
-                      Xs: NDArray[np.complex128]) -> tuple[Triple, Triple]:
+                      Xs: NDArray[np.complex128], ws_: NDArray[np.float64],
+                      ) -> tuple[Triple, Triple]:
     """The stiffness step of the main fit, M -> (K, C, D), for resamples' stiffness lines Xs
-    (n, 6, n_e, n_l): it is affine in M, returned as its value at M = 0, (K, C, D) each
-    (n, 6, 6), and its change per unit of each parameter, each (n, 10, 6, 6)
+    (n, 6, n_e, n_l) with column weights ``ws_`` (n, n_e, n_l): it is affine in M, returned
+    as its value at M = 0, (K, C, D) each (n, 6, 6), and its change per unit of each
+    parameter, each (n, 10, 6, 6)
     (``_StiffnessStep``, vectorised over resamples)."""
     n = Xs.shape[0]
     w = problem.w[weights.stiffness_lines]
@@ -247,7 +271,7 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
         C0 = -np.mean(w[:, None, None] * B.imag, axis=1)
         return (K0, C0, zero), (np.broadcast_to(np.mean(w**2) * MB, zl.shape), zl, zl)
     # improved: the direct fit from 6x6 moments (processing.stiffness.fit_stiffness)
-    wt = weights.stiffness.ravel()
+    wt = ws_.reshape(n, 1, -1)
     Xf = Xs.reshape(n, 6, -1)
     wl = np.broadcast_to(w, weights.stiffness.shape).ravel()
     Tf = np.broadcast_to(T[:, :, None], Xs.shape[1:]).reshape(6, -1)
@@ -286,11 +310,13 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
 
 
 def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
-                 Xm: NDArray[np.complex128], Xs: NDArray[np.complex128]) -> Triple:
+                 Xm: NDArray[np.complex128], Xs: NDArray[np.complex128],
+                 wm_: NDArray[np.float64], ws_: NDArray[np.float64]) -> Triple:
     """theta (n, 10), K, C (n, 6, 6) of resamples' accelerances on the mass lines Xm
-    (n, 6, n_e, n_lm) and on the stiffness lines Xs (n, 6, n_e, n_ls): the main
-    fit's model (no leakage shapes) with its lines, weights and damping model, solved for
-    the fixed point of the inertia-stiffness iteration directly.
+    (n, 6, n_e, n_lm) and on the stiffness lines Xs (n, 6, n_e, n_ls), with their column
+    weights ``wm_`` (n, n_e, n_lm) and ``ws_`` (n, n_e, n_ls): the main fit's model (no
+    leakage shapes) with its lines and damping model, solved for the fixed point of the
+    inertia-stiffness iteration directly.
 
     For fixed data the iteration (:func:`processing.identify._iterate`) is affine in theta:
     the stiffness step is affine in M, the mass-line solve linear in K, C, D. So
@@ -299,15 +325,15 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
     n = Xm.shape[0]
     wm = problem.w[weights.mass_lines]
     a, T = problem.window_decay, problem.T
-    sw = np.sqrt(weights.mass)  # (n_e, n_lm)
+    sw = np.sqrt(wm_)[:, None]  # (n, 1, n_e, n_lm)
     Xw = (Xm * sw).reshape(n, 6, -1)
     XwH = np.conj(np.swapaxes(Xw, 1, 2))
 
     def moment(Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
         """``sum Re(z) Re(x) + Im(z) Im(x)`` over the weighted equations (the real-stacked
         moments of :class:`~processing.massline.MassLineProblem`), (n, 6, 6)."""
-        Z = np.broadcast_to(Z, (*Z.shape[:-3], *Xm.shape[1:]))
-        return np.asarray(((Z * sw).reshape(*Z.shape[:-3], 6, -1) @ XwH).real)
+        Z = np.broadcast_to(Z, Xm.shape)
+        return np.asarray(((Z * sw).reshape(n, 6, -1) @ XwH).real)
 
     s2 = (np.ones(6) if problem.row_scale is None
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
@@ -325,7 +351,8 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
         AK = moment(Xm / wm**2)
         AC = moment(1j * Xm / wm)
         AD = moment(1j * Xm / wm**2)
-    (K0, C0, D0), (Kl, Cl, Dl) = _stiffness_affine(problem, weights, fitted.damping_model, Xs)
+    (K0, C0, D0), (Kl, Cl, Dl) = _stiffness_affine(problem, weights, fitted.damping_model, Xs,
+                                                   ws_)
     W0 = WT + K0 @ AK + C0 @ AC + D0 @ AD
     Wl = Kl @ AK[:, None] + Cl @ AC[:, None] + Dl @ AD[:, None]  # (n, 10, 6, 6)
     t0 = np.einsum("npq,nq->np", solver, W0.reshape(n, 36))
@@ -339,7 +366,8 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
 
 
 def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: Bands,
-                    X: NDArray[np.complex128]) -> Triple:
+                    X: NDArray[np.complex128], wm_: NDArray[np.float64],
+                    ws_: NDArray[np.float64]) -> Triple:
     """:func:`_solve_batch` for a fit with leakage shapes (the cleaning of the accelerances
     makes the iteration non-linear): the iteration itself, from the main fit's solution,
     resample by resample."""
@@ -352,7 +380,8 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     stacked = np.array([stack_real(sh[msel]) for sh in shapes])
     opt = dataclasses.replace(problem.options, tol=max(problem.options.tol, 1e-9))
     out = []
-    for Xb in X:  # the iteration is not affine here: one resample at a time
+    for Xb, wmb, wsb in zip(X, wm_, ws_, strict=True):  # not affine: one at a time
+        weights = dataclasses.replace(weights, mass=wmb, stiffness=wsb)
         pb = dataclasses.replace(problem, X=Xb, options=opt)
         ops = (fitted.operators if problem.improved
                else line_operators(Xb[..., ins], problem.T, problem.w[ins]))
@@ -393,29 +422,62 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     counts = [rng.multinomial(c.n_units, np.full(c.n_units, 1.0 / c.n_units), size=n)
               .astype(float) for c in units.columns]
     # the units must give the FRFs the fit used (the nominal: every unit once)
-    H0 = _resampled_frfs(units, problem.freq[used], [np.ones((1, c.n_units))
-                                                     for c in units.columns])
-    if H0 is None:
+    lines = problem.freq[used]
+    nominal = _resampled_frfs(units, lines, [np.ones((1, c.n_units)) for c in units.columns])
+    if nominal is None:
         return f"no bootstrap over {units.kind}s: their lines differ from the FRFs'"
     ref = problem.H[..., used]
-    if not np.allclose(np.moveaxis(H0[..., 0], (0, 1, 2), (1, 2, 0)), ref, rtol=1e-6,
+    if not np.allclose(np.moveaxis(nominal[0][..., 0], (0, 1, 2), (1, 2, 0)), ref, rtol=1e-6,
                        atol=1e-9 * float(np.max(np.abs(ref)))):
         return f"no bootstrap over {units.kind}s: their spectra do not give the FRFs identified"
-    H = _resampled_frfs(units, problem.freq[used], counts)
-    assert H is not None
-    op = accelerance_operator(problem)[:, used]  # (n_e, n_l, 6, n_r)
-    X = np.ascontiguousarray(np.moveaxis(op @ H, -1, 0).transpose(0, 3, 1, 2))  # (n, 6, e, l)
-    lines = np.flatnonzero(used)
+    drawn = _resampled_frfs(units, lines, counts)
+    assert drawn is not None
+    coh = None if problem.coherence is None else drawn[1]
+    X, colw = weighted_accelerances(problem, drawn[0], coh)  # (n, 6, e, l), (n, e, l)
+    idx = np.flatnonzero(used)
+    mass = np.isin(idx, np.flatnonzero(weights.mass_lines))
+    stiff = np.isin(idx, np.flatnonzero(weights.stiffness_lines))
+    wm_ = colw[..., mass] * (weights.mass > 0)  # a column the main fit dropped stays out
+    ws_ = colw[..., stiff] * (weights.stiffness > 0)
     if fitted.mass_line is not None and fitted.mass_line.shapes is not None:
         Xall = np.broadcast_to(problem.X, (n, *problem.X.shape)).copy()
         Xall[..., used] = X
-        theta, K, C = _solve_iterated(problem, weights, fitted, bands, Xall)
+        theta, K, C = _solve_iterated(problem, weights, fitted, bands, Xall, wm_, ws_)
     else:
-        theta, K, C = _solve_batch(problem, weights, fitted,
-                                   X[..., np.isin(lines, np.flatnonzero(weights.mass_lines))],
-                                   X[..., np.isin(lines, np.flatnonzero(weights.stiffness_lines))])
+        theta, K, C = _solve_batch(problem, weights, fitted, X[..., mass], X[..., stiff],
+                                   wm_, ws_)
     labels = units.labels()
     groups = tuple(lab for lab, c in zip(labels, units.columns, strict=True)
                    for _ in range(c.n_units))
     return Bootstrap(theta, K, C, np.concatenate(counts, axis=1),
                      groups, units.kind, tuple(c.n_units for c in units.columns))
+
+
+def bootstrap_identify(frf: FRFSet, options: IdentifyOptions | None = None,
+                       n: int = DEFAULT_RESAMPLES, seed: int = 0,
+                       ) -> tuple[Fit, Bootstrap | str]:
+    """The main fit of ``identify(frf, options)`` and its bootstrap over the units in
+    ``frf.meta["time_units"]`` alone (without the other sources): for studies of the
+    bootstrap itself. Bands as :func:`processing.identify.identify` takes or chooses them;
+    no point refinement."""
+    from processing.identify import _rigid_band_tops, choose_bands, fit, weigh_lines
+
+    opt = options or IdentifyOptions()
+    units = frf.meta.get("time_units")
+    if not isinstance(units, TimeUnits):
+        raise InputError("the FRFs carry no per-hit or per-block spectra (time data only)")
+    aligned = units.aligned(frf.exc_nodes, frf.exc_dirs)
+    if aligned is None:
+        raise InputError("the time data's units do not cover every excitation column")
+    tops: tuple[float | None, float | None] = (None, None)
+    if opt.use_rigidity and (opt.mass_band is None or opt.stiffness_band is None):
+        tops = _rigid_band_tops(frf)[:2]
+    tau = frf.meta.get("exponential_tau")
+    problem = prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
+                      coherence=frf.coherence, options=opt,
+                      exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0
+                      else None)
+    bands = choose_bands(problem, *tops)
+    weights = weigh_lines(problem, bands)
+    fitted = fit(problem, bands, weights)
+    return fitted, resample(problem, bands, weights, fitted, aligned, n, seed)

@@ -28,7 +28,7 @@ __all__ = ["MIN_UNITS", "TimeUnits", "UnitKind", "UnitSpectra", "record_units", 
 MIN_UNITS = 3
 #: continuous random records: at most this many blocks a run, of at least WELCH_MIN_SEGMENTS
 WELCH_BLOCKS = 20
-WELCH_MIN_SEGMENTS = 4
+WELCH_MIN_SEGMENTS = 2
 
 UnitKind = Literal["hit", "block"]
 
