@@ -390,10 +390,10 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
         ml = MassLineProblem(Xb[..., msel], weights=weights.mass, row_scale=problem.row_scale,
                              shapes=stacked)
         Xs = Xb[..., weights.stiffness_lines]
-        theta = _iterate(pb, weights, ml, step, shapes, (fitted.theta, Xs))[1]
-        if problem.options.physical:
+        _, theta, K, C, _D, Xc, _, _ = _iterate(pb, weights, ml, step, shapes, (fitted.theta, Xs))
+        if problem.options.physical:  # K, C on the cleaned lines, as the main fit
             theta = constrain_physical(theta, ml.normal)
-        K, C, _D = step(mass_matrix(theta), Xs)
+            K, C, _D = step(mass_matrix(theta), Xc)
         out.append((theta, K, C))
     return np.array([o[0] for o in out]), np.array([o[1] for o in out]), np.array(
         [o[2] for o in out])
