@@ -71,12 +71,14 @@ def _frfset(sc: Scenario, freq: np.ndarray, H: list[np.ndarray], coh: list[np.nd
                   {"time_units": units, "exponential_tau": tau})
 
 
-def hammer_frfs(sc: Scenario, seed: int, hits: int = 5) -> FRFSet:
+def hammer_frfs(sc: Scenario, seed: int, hits: int = 5, clean: bool = False) -> FRFSet:
     """A hammer test of ``sc`` (seed ``seed``) processed with fixed settings: trigger 20 N,
     2 s records, 10 ms pre-trigger, no exponential window (mounts damped x3: the responses
-    have decayed), H1 over the accepted hits, per-hit spectra kept."""
+    have decayed), H1 over the accepted hits, per-hit spectra kept. ``clean``: no force
+    offset, response drift or IEPE settling (white noise only)."""
+    slow = {"offset": 0.0, "drift": 0.0, "settling": 0.0} if clean else {}
     t = hammer_test(sc, HammerSpec(seed=seed, hits=hits, spacing=3.0, damping=3.0,
-                                   noise_force=1e-3, noise_response=1e-3))
+                                   noise_force=1e-3, noise_response=1e-3, **slow))
     settings = ImpactSettings(level=20.0, record_length=round(2.0 * t.fs),
                               pretrigger=round(0.01 * t.fs))
     cols = []
@@ -91,10 +93,14 @@ def hammer_frfs(sc: Scenario, seed: int, hits: int = 5) -> FRFSet:
                    [c.coherence for c in cols if c.coherence is not None], units, None)
 
 
-def shaker_frfs(sc: Scenario, seed: int, duration: float = 40.0) -> FRFSet:
+def shaker_frfs(sc: Scenario, seed: int, duration: float = 40.0, clean: bool = False,
+                ) -> FRFSet:
     """A continuous-random shaker test of ``sc`` processed by Welch (1024-sample Hann
-    segments, half overlap), H1, blocks of segments kept (:func:`welch_units`)."""
-    t = shaker_test(sc, ShakerSpec(seed=seed, kind="random", duration=duration, damping=3.0))
+    segments, half overlap), H1, blocks of segments kept (:func:`welch_units`). ``clean``:
+    as :func:`hammer_frfs`."""
+    slow = {"offset": 0.0, "drift": 0.0, "settling": 0.0} if clean else {}
+    t = shaker_test(sc, ShakerSpec(seed=seed, kind="random", duration=duration, damping=3.0,
+                                   **slow))
     H, coh, parts = [], [], []
     for r in t.runs:
         sp, u = welch_units(SpectralAccumulator(t.fs, 1024), np.vstack([r.forces, r.responses]))
@@ -111,16 +117,20 @@ def _value(v: dict[str, np.ndarray], key: str, idx: tuple[int, ...]) -> np.ndarr
     return v[key][(slice(None), *idx)]
 
 
-def calibrate(kind: str, tests: int, resamples: int = 200) -> dict[str, Any]:
+def calibrate(kind: str, tests: int, resamples: int = 200, clean: bool = False,
+              ) -> dict[str, Any]:
     """Per quantity: the std of the estimate over ``tests`` independent tests, and the median
     and quartiles over tests of (bootstrap std / that std) and (covariance std / that std)."""
     sc = scenario()
-    make = hammer_frfs if kind == "hammer" else shaker_frfs
-    first = identify(make(sc, 0), IdentifyOptions(bootstrap=0))
+
+    def make(s: int) -> FRFSet:
+        return (hammer_frfs if kind == "hammer" else shaker_frfs)(sc, s, clean=clean)
+
+    first = identify(make(0), IdentifyOptions(bootstrap=0))
     opt = IdentifyOptions(mass_band=first.mass_band, stiffness_band=first.stiffness_band)
     est, boot, cov = [], [], []
     for s in range(tests):
-        frfs = make(sc, s)
+        frfs = make(s)
         fitted, b = bootstrap_identify(frfs, opt, resamples, seed=s)
         assert isinstance(b, Bootstrap), b
         est.append(derived_of_draws(fitted.theta[None], fitted.K[None], fitted.C[None]))
@@ -165,13 +175,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tests", type=int, default=40)
     ap.add_argument("--kind", choices=("hammer", "shaker", "both"), default="both")
+    ap.add_argument("--clean", action="store_true",
+                    help="white noise only (no force offset, response drift, IEPE settling)")
+    ap.add_argument("--no-cost", action="store_true", help="calibration only")
     args = ap.parse_args()
     for kind in ("hammer", "shaker") if args.kind == "both" else (args.kind,):
-        c = cost(kind)
-        print(f"{kind}: cost " + ", ".join(f"{k} {v:.3f}" + ("" if "/" in k else " s")
-                                          for k, v in c.items()))
-        r = calibrate(kind, args.tests)
-        print(f"{kind}: {r['tests']} tests, bands {r['bands']}")
+        if not args.no_cost:
+            c = cost(kind)
+            print(f"{kind}: cost " + ", ".join(f"{k} {v:.3f}" + ("" if "/" in k else " s")
+                                              for k, v in c.items()))
+        r = calibrate(kind, args.tests, clean=args.clean)
+        print(f"{kind}{' (clean)' if args.clean else ''}: {r['tests']} tests, bands "
+              f"{r['bands']}")
         print(f"  {'quantity':12s} {'scatter':>10s}  bootstrap/scatter (q25 med q75)"
               "   covariance/scatter (q25 med q75)")
         for label, _, _ in QUANTITIES:

@@ -146,34 +146,43 @@ class Bootstrap:
         return out
 
 
-def weighted_accelerances(problem: Problem, H: NDArray[np.complex128],
-                          coherence: NDArray[np.float64] | None,
+def _inverse_variances(problem: Problem, H: NDArray[np.complex128],
+                       coherence: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Inverse variances (.., n_resp) of H1 values ``|H|^2 (1 - g) / g`` plus the noise floor
+    of :func:`processing.problem.prepare` (its ``_weighted_accelerances``)."""
+    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(problem.H) ** 2,
+                                                              axis=(0, 1))))
+    g = np.clip(coherence, 1e-12, 1.0)
+    return np.asarray(1.0 / (np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300)))
+
+
+def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[np.complex128],
+                          coherence: NDArray[np.float64],
                           ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
     """Rigid-body accelerances X (n, 6, n_e, n_l) and column weights (n, n_e, n_l) of
-    resamples' FRFs ``H`` and coherence (n_e, n_l, n_resp, n), as
-    :func:`processing.problem.prepare` forms them (``_weighted_accelerances``: each FRF value
-    weighted by the inverse of its H1 variance ``|H|^2 (1 - g) / g`` plus the main fit's
-    noise floor; the column weights on the main fit's scale), or ``E^+ H`` and equal weights
-    without coherence."""
-    E = problem.E
-    if coherence is None or problem.coherence is None:
-        X = np.einsum("ir,elrn->niel", problem.Epinv, H)
-        return X, np.ones((H.shape[-1], *H.shape[:2]))
-    H0 = problem.H
-    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(H0) ** 2, axis=(0, 1))))
-    g = np.clip(coherence, 1e-12, 1.0)
-    var = np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300)
-    W = 1.0 / var  # (n_e, n_l, n_r, n)
-    top = np.max(W, axis=2, keepdims=True)
-    W = W / top
-    A = np.einsum("ri,elrn,rj->elnij", E, W, E)
-    b = np.einsum("ri,elrn->elni", E, W * H)
-    Ainv = np.linalg.inv(A)
-    X = np.einsum("elnij,elnj->niel", Ainv, b)
-    dvar = np.diagonal(Ainv, axis1=-2, axis2=-1) / np.moveaxis(top, 2, -1)  # (e, l, n, 6)
-    L = problem.geometry.length
-    v = dvar[..., :3].sum(-1) + L**2 * dvar[..., 3:].sum(-1)  # (n_e, n_l, n)
-    return X, np.moveaxis(1.0 / v, -1, 0)
+    resamples' FRFs ``H`` and coherence (n_e, n_l, n_resp, n) on the lines ``used``.
+
+    X is the main fit's map from each column's responses to its accelerances at O (the
+    coherence-weighted least squares of :func:`processing.problem.prepare`, or ``E^+``),
+    applied to the resample's FRFs; each column's weight on each line follows the
+    resample's own coherence: the main fit's weight times the ratio of the summed inverse
+    H1 variances ``1 / (|H|^2 (1 - g) / g + floor^2)`` of its responses (resample over main
+    fit). Without coherence: ``E^+ H`` and the main fit's weights."""
+    n_r, n = problem.E.shape[0], H.shape[-1]
+    colw0 = problem.col_weights[:, used]  # (n_e, n_l)
+    if problem.coherence is None:
+        op = np.broadcast_to(problem.Epinv, (*colw0.shape, 6, n_r))
+        scale = np.ones((n, *colw0.shape))
+    else:
+        H0 = np.moveaxis(problem.H[..., used], 0, -1)  # (n_e, n_l, n_r)
+        W0 = _inverse_variances(problem, H0, np.moveaxis(problem.coherence[..., used], 0, -1))
+        Wn = W0 / np.max(W0, axis=-1, keepdims=True)
+        A = np.einsum("ri,elr,rj->elij", problem.E, Wn, problem.E)
+        op = np.linalg.solve(A, np.einsum("ri,elr->elir", problem.E, Wn))  # (e, l, 6, r)
+        Wb = _inverse_variances(problem, H, coherence).sum(axis=2)  # (e, l, n)
+        scale = np.moveaxis(Wb / W0.sum(-1)[..., None], -1, 0)
+    X = np.ascontiguousarray(np.transpose(op @ H, (3, 2, 0, 1)))  # (n, 6, e, l)
+    return X, colw0 * scale
 
 
 def _line_index(units_freq: NDArray[np.float64], freq: NDArray[np.float64]) -> (
@@ -187,13 +196,24 @@ def _line_index(units_freq: NDArray[np.float64], freq: NDArray[np.float64]) -> (
     return idx if np.all(np.abs(units_freq[idx] - freq) <= tol) else None
 
 
+def _mix(S: NDArray[Any], lines: NDArray[np.int64], cw: NDArray[np.float64]) -> NDArray[Any]:
+    """(n_l, n_r, n) spectra of n resamples: per-unit spectra S (n_u, n_r, n_f) on ``lines``
+    mixed with the resamples' unit weights ``cw`` (n_u, n)."""
+    part = np.swapaxes(S[..., lines], 1, 2).reshape(S.shape[0], -1)
+    return np.asarray((part.T @ cw).reshape(lines.size, S.shape[1], cw.shape[1]))
+
+
 def _resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
         NDArray[np.float64]]) -> tuple[NDArray[np.complex128], NDArray[np.float64]] | None:
-    """FRFs and coherence (n_exc, n_lines, n_resp, n) of the resamples on ``lines`` (Hz):
+    """FRFs and coherence (n_exc, n_lines, n_resp, n) of the n resamples on ``lines`` (Hz):
     each column's units weighted by how often each was drawn; None when a column lacks a
     line."""
-    cols, cohs = [], []
-    for col, c in zip(units.columns, counts, strict=True):
+    n = counts[0].shape[0]
+    n_l, n_r = lines.size, units.columns[0].Sfx.shape[1]
+    H = np.empty((len(units.columns), n_l, n_r, n), complex)
+    G = np.empty((len(units.columns), n_l, n_r, n))
+    est = units.estimator.upper()
+    for k, (col, c) in enumerate(zip(units.columns, counts, strict=True)):
         li = _line_index(col.freq, lines)
         if li is None:
             return None
@@ -202,26 +222,22 @@ def _resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
         cw = cw / cw.sum(axis=1, keepdims=True)
         # a resample's deviation from the mean, scaled by sqrt(n / (n - 1)): the bootstrap's
         # variance of a mean of n units is (n - 1) / n of the unbiased estimate
-        cw = (mean + np.sqrt(col.n_units / (col.n_units - 1)) * (cw - mean)).T
-        n, n_l, n_r = cw.shape[1], li.size, col.Sfx.shape[1]
-        Sfx = np.moveaxis(col.Sfx[..., li], 0, -1) @ cw  # (n_r, n_l, n)
-        Sxx = np.moveaxis(col.Sxx[..., li], 0, -1) @ cw
-        Sff = (col.Sff[:, li].T @ cw)[None]
-        est = units.estimator.upper()
+        cw = (mean + np.sqrt(col.n_units / (col.n_units - 1)) * (cw - mean)).T  # (n_u, n)
+        Sfx, Sxx = _mix(col.Sfx, li, cw), _mix(col.Sxx, li, cw)
+        Sff = (col.Sff[:, li].T @ cw)[:, None, :]  # (n_l, 1, n)
         with np.errstate(divide="ignore", invalid="ignore"):
-            g = np.clip(np.abs(Sfx) ** 2 / (Sff * Sxx), 0.0, 1.0)
+            G[k] = np.clip(np.abs(Sfx) ** 2 / (Sff * Sxx), 0.0, 1.0)
             if est == "H1":
-                H = Sfx / Sff
+                H[k] = Sfx / Sff
             elif est == "H2":
-                H = Sxx / np.conj(Sfx)
+                H[k] = Sxx / np.conj(Sfx)
             else:  # Hv (and any other): the estimator itself on the resampled spectra
-                sp = CrossSpectra(np.zeros(n * n_l), Sff.reshape(1, 1, -1) + 0j,
-                                  Sfx.reshape(1, n_r, -1), Sxx.reshape(n_r, -1), 1, (0,),
+                flat = np.moveaxis(Sfx, 1, 0).reshape(n_r, -1)  # (n_r, n_l n)
+                sp = CrossSpectra(np.zeros(n_l * n), Sff.reshape(1, 1, -1) + 0j, flat[None],
+                                  np.moveaxis(Sxx, 1, 0).reshape(n_r, -1), 1, (0,),
                                   tuple(range(1, n_r + 1)))
-                H = frf(sp, units.estimator)[0][:, 0].reshape(n_r, n_l, n)
-        cols.append(np.moveaxis(H, 0, 1))  # (n_l, n_r, n)
-        cohs.append(np.moveaxis(g, 0, 1))
-    return np.stack(cols), np.stack(cohs)
+                H[k] = np.moveaxis(frf(sp, units.estimator)[0][:, 0].reshape(n_r, n_l, n), 0, 1)
+    return H, G
 
 
 Triple = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
@@ -271,13 +287,13 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
         C0 = -np.mean(w[:, None, None] * B.imag, axis=1)
         return (K0, C0, zero), (np.broadcast_to(np.mean(w**2) * MB, zl.shape), zl, zl)
     # improved: the direct fit from 6x6 moments (processing.stiffness.fit_stiffness)
-    wt = ws_.reshape(n, 1, -1)
-    Xf = Xs.reshape(n, 6, -1)
-    wl = np.broadcast_to(w, weights.stiffness.shape).ravel()
-    Tf = np.broadcast_to(T[:, :, None], Xs.shape[1:]).reshape(6, -1)
-    Xw = np.conj(Xf) * wt
-    G = [(Xw * wl**p) @ np.swapaxes(Xf, 1, 2) for p in range(4)]
-    Q2, Q3 = (np.asarray((Xw * wl**p) @ Tf.T, dtype=np.complex128) for p in (2, 3))
+    # moments sum wt w^p conj(x) x^T (and t^T) as sums over lines of per-line 6x6 sums
+    Xl = np.moveaxis(Xs, 3, 1)  # (n, n_l, 6, n_e)
+    Cw = np.conj(Xl) * ws_.transpose(0, 2, 1)[:, :, None, :]
+    Z = Cw @ np.swapaxes(Xl, -1, -2)  # (n, n_l, 6, 6)
+    R = Cw @ T.T  # (n, n_l, 6, 6)
+    G = [np.einsum("nlij,l->nij", Z, w**p + 0j) for p in range(4)]
+    Q2, Q3 = (np.einsum("nlij,l->nij", R, w**p + 0j) for p in (2, 3))
     s2 = (np.ones(6) if problem.row_scale is None
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
     G0r, G0i, G1r, G1i = G[0].real, G[0].imag, G[1].real, G[1].imag
@@ -326,31 +342,31 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
     wm = problem.w[weights.mass_lines]
     a, T = problem.window_decay, problem.T
     sw = np.sqrt(wm_)[:, None]  # (n, 1, n_e, n_lm)
-    Xw = (Xm * sw).reshape(n, 6, -1)
-    XwH = np.conj(np.swapaxes(Xw, 1, 2))
+    Xw = Xm * sw
+    # the real-stacked mass-line moments sum Re(z) Re(x) + Im(z) Im(x) over the weighted
+    # equations (MassLineProblem) are Re sum_l f_l Y_l for z = f_l x: per-line 6x6 sums
+    Xl = np.moveaxis(Xw, 3, 1)  # (n, n_lm, 6, n_e)
+    Y = Xl @ np.conj(np.swapaxes(Xl, -1, -2))  # (n, n_lm, 6, 6)
 
-    def moment(Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
-        """``sum Re(z) Re(x) + Im(z) Im(x)`` over the weighted equations (the real-stacked
-        moments of :class:`~processing.massline.MassLineProblem`), (n, 6, 6)."""
-        Z = np.broadcast_to(Z, Xm.shape)
-        return np.asarray(((Z * sw).reshape(n, 6, -1) @ XwH).real)
+    def moment(f: NDArray[Any] | complex) -> NDArray[np.float64]:
+        return np.asarray(np.einsum("nlij,l->nij", Y, np.broadcast_to(f, wm.shape)).real)
 
     s2 = (np.ones(6) if problem.row_scale is None
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
     MBs = (MASS_BASIS * s2[None, :, None]).reshape(10, 36)
     op = np.einsum("pia,qib->pqab", MASS_BASIS * s2[None, :, None], MASS_BASIS).reshape(100, 36)
-    N = (moment(Xm).reshape(n, 36) @ op.T).reshape(n, 10, 10)
+    N = (moment(1.0 + 0j).reshape(n, 36) @ op.T).reshape(n, 10, 10)
     solver = np.linalg.solve(N, np.broadcast_to(MBs, (n, 10, 36)))
-    WT = moment(T[:, :, None] + 0j)
+    WT = T[None] @ np.swapaxes(np.sum(Xw * sw, axis=-1).real, 1, 2)
     if a:  # B = T - ((K + a C) X + j w C X) / s^2
         s_2 = (1j * wm + a) ** 2
-        AK = -moment(Xm / s_2)
-        AC = a * AK - moment(1j * wm * Xm / s_2)
+        AK = -moment(1.0 / s_2)
+        AC = a * AK - moment(1j * wm / s_2)
         AD = np.zeros_like(AK)
     else:  # B = T + (K + j w C + j D) X / w^2
-        AK = moment(Xm / wm**2)
-        AC = moment(1j * Xm / wm)
-        AD = moment(1j * Xm / wm**2)
+        AK = moment(1.0 / wm**2 + 0j)
+        AC = moment(1j / wm)
+        AD = moment(1j / wm**2)
     (K0, C0, D0), (Kl, Cl, Dl) = _stiffness_affine(problem, weights, fitted.damping_model, Xs,
                                                    ws_)
     W0 = WT + K0 @ AK + C0 @ AC + D0 @ AD
@@ -417,7 +433,7 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     if few:
         return (f"no bootstrap over {units.kind}s: {few[0][0]} has {few[0][1]} "
                 f"(at least 2 needed)")
-    used = weights.mass_lines | bands.in_stiffness
+    used = weights.mass_lines | weights.stiffness_lines
     rng = np.random.default_rng([seed, 15])
     counts = [rng.multinomial(c.n_units, np.full(c.n_units, 1.0 / c.n_units), size=n)
               .astype(float) for c in units.columns]
@@ -427,13 +443,12 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     if nominal is None:
         return f"no bootstrap over {units.kind}s: their lines differ from the FRFs'"
     ref = problem.H[..., used]
-    if not np.allclose(np.moveaxis(nominal[0][..., 0], (0, 1, 2), (1, 2, 0)), ref, rtol=1e-6,
+    if not np.allclose(np.transpose(nominal[0][..., 0], (2, 0, 1)), ref, rtol=1e-6,
                        atol=1e-9 * float(np.max(np.abs(ref)))):
         return f"no bootstrap over {units.kind}s: their spectra do not give the FRFs identified"
     drawn = _resampled_frfs(units, lines, counts)
     assert drawn is not None
-    coh = None if problem.coherence is None else drawn[1]
-    X, colw = weighted_accelerances(problem, drawn[0], coh)  # (n, 6, e, l), (n, e, l)
+    X, colw = weighted_accelerances(problem, used, *drawn)  # (n, 6, e, l), (n, e, l)
     idx = np.flatnonzero(used)
     mass = np.isin(idx, np.flatnonzero(weights.mass_lines))
     stiff = np.isin(idx, np.flatnonzero(weights.stiffness_lines))
