@@ -26,7 +26,7 @@ from processing.data import FRFSet, Geometry
 from processing.impact import ImpactSettings, merge_results, process_impacts
 from processing.problem import IdentifyOptions
 from processing.results import UNCERTAIN_KEYS
-from processing.spectral import SpectralAccumulator, record_spectra
+from processing.spectral import SpectralAccumulator, frf, record_spectra
 from processing.uncertainty import combine
 from processing.units import TimeUnits, UnitSpectra, record_units, welch_units
 
@@ -196,3 +196,20 @@ def test_bootstrap_std_matches_the_scatter_of_independent_hammer_tests(
             assert 0.1 <= med <= 1.2, (label, q)
         else:
             assert 0.5 <= med <= 2.0, (label, q)
+
+
+@pytest.mark.parametrize("estimator", ["H1", "H2", "Hv"])
+def test_resampled_frfs_follow_the_estimator(estimator: str) -> None:
+    """Each unit drawn once: the FRFs and coherence of the mean spectra by the estimator."""
+    rng = np.random.default_rng(8)
+    n_u, n_r, n_f = 4, 3, 16
+    F = rng.normal(size=(n_u, n_f)) + 1j * rng.normal(size=(n_u, n_f))
+    X = (rng.normal(size=(n_u, n_r, n_f)) + 1j * rng.normal(size=(n_u, n_r, n_f))
+         + 2.0 * F[:, None])
+    col = UnitSpectra(np.arange(n_f, dtype=float), np.abs(F) ** 2, np.conj(F)[:, None] * X,
+                      np.abs(X) ** 2, np.ones(n_u))
+    units = TimeUnits("hit", (col,), np.array([1]), np.array([[0.0, 0.0, 1.0]]), estimator)
+    H, G = bsm._resampled_frfs(units, col.freq[2:], [np.ones((2, n_u))])
+    want, coh = frf(col.mean(), estimator)
+    assert_allclose(np.moveaxis(H[0, ..., 0], 0, 1), want[:, 0, 2:], rtol=1e-10)
+    assert_allclose(np.moveaxis(G[0, ..., 1], 0, 1), coh[:, 0, 2:], rtol=1e-10)
