@@ -50,6 +50,8 @@ __all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "bootstrap_identify", "resample",
 
 #: resamples when none are asked for
 DEFAULT_RESAMPLES = 200
+#: most FRF values (resamples x columns x lines x responses) formed at once (memory bound)
+CHUNK_VALUES = 4_000_000
 
 # --- resampling ------------------------------------------------------------------------------
 
@@ -446,21 +448,28 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     if not np.allclose(np.transpose(nominal[0][..., 0], (2, 0, 1)), ref, rtol=1e-6,
                        atol=1e-9 * float(np.max(np.abs(ref)))):
         return f"no bootstrap over {units.kind}s: their spectra do not give the FRFs identified"
-    drawn = _resampled_frfs(units, lines, counts)
-    assert drawn is not None
-    X, colw = weighted_accelerances(problem, used, *drawn)  # (n, 6, e, l), (n, e, l)
     idx = np.flatnonzero(used)
     mass = np.isin(idx, np.flatnonzero(weights.mass_lines))
     stiff = np.isin(idx, np.flatnonzero(weights.stiffness_lines))
-    wm_ = colw[..., mass] * (weights.mass > 0)  # a column the main fit dropped stays out
-    ws_ = colw[..., stiff] * (weights.stiffness > 0)
-    if fitted.mass_line is not None and fitted.mass_line.shapes is not None:
-        Xall = np.broadcast_to(problem.X, (n, *problem.X.shape)).copy()
-        Xall[..., used] = X
-        theta, K, C = _solve_iterated(problem, weights, fitted, bands, Xall, wm_, ws_)
-    else:
-        theta, K, C = _solve_batch(problem, weights, fitted, X[..., mass], X[..., stiff],
-                                   wm_, ws_)
+    shapes = fitted.mass_line is not None and fitted.mass_line.shapes is not None
+    # resamples in chunks: the FRFs of a chunk hold at most CHUNK_VALUES values
+    size = len(units.columns) * lines.size * problem.H.shape[0]
+    step = max(1, min(n, CHUNK_VALUES // max(size, 1)))
+    out = []
+    for lo in range(0, n, step):
+        drawn = _resampled_frfs(units, lines, [c[lo:lo + step] for c in counts])
+        assert drawn is not None
+        X, colw = weighted_accelerances(problem, used, *drawn)  # (m, 6, e, l), (m, e, l)
+        wm_ = colw[..., mass] * (weights.mass > 0)  # a column the main fit dropped stays out
+        ws_ = colw[..., stiff] * (weights.stiffness > 0)
+        if shapes:
+            Xall = np.broadcast_to(problem.X, (X.shape[0], *problem.X.shape)).copy()
+            Xall[..., used] = X
+            out.append(_solve_iterated(problem, weights, fitted, bands, Xall, wm_, ws_))
+        else:
+            out.append(_solve_batch(problem, weights, fitted, X[..., mass], X[..., stiff],
+                                    wm_, ws_))
+    theta, K, C = (np.concatenate([o[k] for o in out]) for k in range(3))
     labels = units.labels()
     groups = tuple(lab for lab, c in zip(labels, units.columns, strict=True)
                    for _ in range(c.n_units))

@@ -226,3 +226,14 @@ def test_bootstrap_std_matches_the_scatter_of_independent_shaker_tests() -> None
         q = r[label]
         assert isinstance(q, dict)
         assert 0.5 <= q["bootstrap"][1] <= 2.0, (label, q)
+
+
+def test_resamples_in_chunks_are_the_same(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Memory is bounded by forming the resamples in chunks; the chunks change nothing."""
+    frf = hammer_frfs(scenario(), seed=1, hits=3)
+    _, whole = bsm.bootstrap_identify(frf, IdentifyOptions(), 40, seed=3)
+    monkeypatch.setattr(bsm, "CHUNK_VALUES", 60_000)
+    _, parts = bsm.bootstrap_identify(frf, IdentifyOptions(), 40, seed=3)
+    assert isinstance(whole, bsm.Bootstrap) and isinstance(parts, bsm.Bootstrap)
+    assert_allclose(parts.theta, whole.theta, rtol=1e-12, atol=1e-12 * np.abs(whole.theta).max())
+    assert_allclose(parts.K, whole.K, rtol=1e-12, atol=1e-12 * np.abs(whole.K).max())
