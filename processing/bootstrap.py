@@ -161,7 +161,7 @@ def _inverse_variances(problem: Problem, H: NDArray[np.complex128],
 def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[np.complex128],
                           coherence: NDArray[np.float64],
                           ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
-    """Rigid-body accelerances X (n, 6, n_e, n_l) and column weights (n, n_e, n_l) of
+    """Rigid-body accelerances X (n, n_l, 6, n_e) and column weights (n, n_e, n_l) of
     resamples' FRFs ``H`` and coherence (n_e, n_l, n_resp, n) on the lines ``used``.
 
     X is the main fit's map from each column's responses to its accelerances at O (the
@@ -183,7 +183,7 @@ def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[
         op = np.linalg.solve(A, np.einsum("ri,elr->elir", problem.E, Wn))  # (e, l, 6, r)
         Wb = _inverse_variances(problem, H, coherence).sum(axis=2)  # (e, l, n)
         scale = np.moveaxis(Wb / W0.sum(-1)[..., None], -1, 0)
-    X = np.ascontiguousarray(np.transpose(op @ H, (3, 2, 0, 1)))  # (n, 6, e, l)
+    X = np.ascontiguousarray(np.transpose(op @ H, (3, 1, 2, 0)))  # (n, l, 6, e)
     return X, colw0 * scale
 
 
@@ -248,9 +248,9 @@ Triple = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 def _line_inverses(Xs: NDArray[np.complex128], T: NDArray[np.float64]) -> (
     NDArray[np.complex128]
 ):
-    """Apparent masses ``B_j = T X_j^+`` (n, n_l, 6, 6) of resamples' lines Xs (n, 6, n_e, n_l)
+    """Apparent masses ``B_j = T X_j^+`` (n, n_l, 6, 6) of resamples' lines Xs (n, n_l, 6, n_e)
     (:func:`processing.stiffness.line_operators`, vectorised over resamples)."""
-    Xl = np.moveaxis(Xs, -1, 1)  # (n, n_l, 6, n_e)
+    Xl = Xs
     Xh = np.conj(np.swapaxes(Xl, -1, -2))
     try:
         Xp = Xh @ np.linalg.inv(Xl @ Xh)
@@ -263,7 +263,7 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
                       Xs: NDArray[np.complex128], ws_: NDArray[np.float64],
                       ) -> tuple[Triple, Triple]:
     """The stiffness step of the main fit, M -> (K, C, D), for resamples' stiffness lines Xs
-    (n, 6, n_e, n_l) with column weights ``ws_`` (n, n_e, n_l): it is affine in M, returned
+    (n, n_l, 6, n_e) with column weights ``ws_`` (n, n_e, n_l): it is affine in M, returned
     as its value at M = 0, (K, C, D) each (n, 6, 6), and its change per unit of each
     parameter, each (n, 10, 6, 6)
     (``_StiffnessStep``, vectorised over resamples)."""
@@ -290,12 +290,14 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
         return (K0, C0, zero), (np.broadcast_to(np.mean(w**2) * MB, zl.shape), zl, zl)
     # improved: the direct fit from 6x6 moments (processing.stiffness.fit_stiffness)
     # moments sum wt w^p conj(x) x^T (and t^T) as sums over lines of per-line 6x6 sums
-    Xl = np.moveaxis(Xs, 3, 1)  # (n, n_l, 6, n_e)
-    Cw = np.conj(Xl) * ws_.transpose(0, 2, 1)[:, :, None, :]
-    Z = Cw @ np.swapaxes(Xl, -1, -2)  # (n, n_l, 6, 6)
+    Cw = np.conj(Xs) * ws_.transpose(0, 2, 1)[:, :, None, :]
+    Z = Cw @ np.swapaxes(Xs, -1, -2)  # (n, n_l, 6, 6)
     R = Cw @ T.T  # (n, n_l, 6, 6)
-    G = [np.einsum("nlij,l->nij", Z, w**p + 0j) for p in range(4)]
-    Q2, Q3 = (np.einsum("nlij,l->nij", R, w**p + 0j) for p in (2, 3))
+    powers = np.stack([w**p for p in range(4)], axis=1) + 0j  # (n_l, 4)
+    Gs = (Z.reshape(n, -1, 36).transpose(0, 2, 1) @ powers).reshape(n, 6, 6, 4)
+    Qs = (R.reshape(n, -1, 36).transpose(0, 2, 1) @ powers[:, 2:]).reshape(n, 6, 6, 2)
+    G = [Gs[..., p] for p in range(4)]
+    Q2, Q3 = Qs[..., 0], Qs[..., 1]
     s2 = (np.ones(6) if problem.row_scale is None
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
     G0r, G0i, G1r, G1i = G[0].real, G[0].imag, G[1].real, G[1].imag
@@ -304,22 +306,27 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
     k = len(blocks)
     Nb = np.concatenate([np.concatenate([full[r][c] for c in blocks], axis=2)
                          for r in blocks], axis=1)  # (n, 6k, 6k)
-    Nfull = np.einsum("i,ij,ntaub->ntiaujb", s2, np.eye(6),
-                      Nb.reshape(n, k, 6, k, 6)).reshape(n, 36 * k, 36 * k)
-    if opt.symmetric:
-        dup = np.kron(np.eye(k), _DUP)
-        S = np.asarray(dup @ np.linalg.solve(dup.T @ Nfull @ dup,
-                                             np.broadcast_to(dup.T, (n, *dup.T.shape))))
-    else:
-        S = np.asarray(np.linalg.inv(Nfull))
+    Nb = Nb.reshape(n, k, 6, k, 6)
+    blocks7 = np.zeros((n, k, 6, 6, k, 6, 6))
+    for i in range(6):  # row blocks s2_i Nb on the diagonal of the equation rows
+        blocks7[:, :, i, :, :, i, :] = s2[i] * Nb
+    Nfull = blocks7.reshape(n, 36 * k, 36 * k)
 
     def rhs(R0: NDArray[Any], R1: NDArray[Any]) -> NDArray[np.float64]:
         parts = (R0.real, R1.imag, R0.imag)
         return np.concatenate([np.swapaxes(parts[b] * s2, -1, -2).reshape(*R0.shape[:-2], 36)
                                for b in blocks], axis=-1)
 
-    v0 = np.einsum("nij,nj->ni", S, rhs(-Q2, -Q3))
-    vl = np.einsum("nij,npj->npi", S, rhs(G[2][:, None] @ (MB + 0j), G[3][:, None] @ (MB + 0j)))
+    # the value at M = 0 and the change per parameter: eleven right-hand sides at once
+    r = np.concatenate([rhs(-Q2, -Q3)[:, None],
+                        rhs(G[2][:, None] @ (MB + 0j), G[3][:, None] @ (MB + 0j))], axis=1)
+    if opt.symmetric:
+        dup = np.kron(np.eye(k), _DUP)
+        v = np.linalg.solve(dup.T @ Nfull @ dup, dup.T @ np.swapaxes(r, 1, 2))
+        v = np.swapaxes(dup @ v, 1, 2)  # (n, 11, 36 k)
+    else:
+        v = np.swapaxes(np.linalg.solve(Nfull, np.swapaxes(r, 1, 2)), 1, 2)
+    v0, vl = v[:, 0], v[:, 1:]
     const, lin = [zero] * 3, [zl] * 3
     for j, b in enumerate(blocks):
         const[b] = v0[:, 36 * j:36 * (j + 1)].reshape(n, 6, 6)
@@ -331,7 +338,7 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
                  Xm: NDArray[np.complex128], Xs: NDArray[np.complex128],
                  wm_: NDArray[np.float64], ws_: NDArray[np.float64]) -> Triple:
     """theta (n, 10), K, C (n, 6, 6) of resamples' accelerances on the mass lines Xm
-    (n, 6, n_e, n_lm) and on the stiffness lines Xs (n, 6, n_e, n_ls), with their column
+    (n, n_lm, 6, n_e) and on the stiffness lines Xs (n, n_ls, 6, n_e), with their column
     weights ``wm_`` (n, n_e, n_lm) and ``ws_`` (n, n_e, n_ls): the main fit's model (no
     leakage shapes) with its lines and damping model, solved for the fixed point of the
     inertia-stiffness iteration directly.
@@ -343,15 +350,16 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
     n = Xm.shape[0]
     wm = problem.w[weights.mass_lines]
     a, T = problem.window_decay, problem.T
-    sw = np.sqrt(wm_)[:, None]  # (n, 1, n_e, n_lm)
+    sw = np.sqrt(wm_).transpose(0, 2, 1)[:, :, None, :]  # (n, n_lm, 1, n_e)
     Xw = Xm * sw
     # the real-stacked mass-line moments sum Re(z) Re(x) + Im(z) Im(x) over the weighted
     # equations (MassLineProblem) are Re sum_l f_l Y_l for z = f_l x: per-line 6x6 sums
-    Xl = np.moveaxis(Xw, 3, 1)  # (n, n_lm, 6, n_e)
-    Y = Xl @ np.conj(np.swapaxes(Xl, -1, -2))  # (n, n_lm, 6, 6)
+    Y = Xw @ np.conj(np.swapaxes(Xw, -1, -2))  # (n, n_lm, 6, 6)
+
+    Yf = Y.reshape(n, -1, 36).transpose(0, 2, 1)  # (n, 36, n_lm)
 
     def moment(f: NDArray[Any] | complex) -> NDArray[np.float64]:
-        return np.asarray(np.einsum("nlij,l->nij", Y, np.broadcast_to(f, wm.shape)).real)
+        return np.asarray((Yf @ np.broadcast_to(f, wm.shape)).real.reshape(n, 6, 6))
 
     s2 = (np.ones(6) if problem.row_scale is None
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
@@ -359,7 +367,7 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
     op = np.einsum("pia,qib->pqab", MASS_BASIS * s2[None, :, None], MASS_BASIS).reshape(100, 36)
     N = (moment(1.0 + 0j).reshape(n, 36) @ op.T).reshape(n, 10, 10)
     solver = np.linalg.solve(N, np.broadcast_to(MBs, (n, 10, 36)))
-    WT = T[None] @ np.swapaxes(np.sum(Xw * sw, axis=-1).real, 1, 2)
+    WT = T[None] @ np.swapaxes(np.sum(Xw * sw, axis=1).real, 1, 2)
     if a:  # B = T - ((K + a C) X + j w C X) / s^2
         s_2 = (1j * wm + a) ** 2
         AK = -moment(1.0 / s_2)
@@ -459,16 +467,16 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     for lo in range(0, n, step):
         drawn = _resampled_frfs(units, lines, [c[lo:lo + step] for c in counts])
         assert drawn is not None
-        X, colw = weighted_accelerances(problem, used, *drawn)  # (m, 6, e, l), (m, e, l)
+        X, colw = weighted_accelerances(problem, used, *drawn)  # (m, l, 6, e), (m, e, l)
         wm_ = colw[..., mass] * (weights.mass > 0)  # a column the main fit dropped stays out
         ws_ = colw[..., stiff] * (weights.stiffness > 0)
         if shapes:
             Xall = np.broadcast_to(problem.X, (X.shape[0], *problem.X.shape)).copy()
-            Xall[..., used] = X
+            Xall[..., used] = np.transpose(X, (0, 2, 3, 1))
             out.append(_solve_iterated(problem, weights, fitted, bands, Xall, wm_, ws_))
         else:
-            out.append(_solve_batch(problem, weights, fitted, X[..., mass], X[..., stiff],
-                                    wm_, ws_))
+            out.append(_solve_batch(problem, weights, fitted, X[:, mass], X[:, stiff], wm_,
+                                    ws_))
     theta, K, C = (np.concatenate([o[k] for o in out]) for k in range(3))
     labels = units.labels()
     groups = tuple(lab for lab, c in zip(labels, units.columns, strict=True)
