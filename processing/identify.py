@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg
@@ -75,7 +76,11 @@ from processing.uncertainty import (
     draw_variances,
     fit_covariance,
 )
+from processing.units import MIN_UNITS, TimeUnits
 from processing.windows import correct_dynamic_stiffness
+
+if TYPE_CHECKING:
+    from processing.bootstrap import Bootstrap
 
 __all__ = [
     "Bands",
@@ -685,14 +690,38 @@ def monte_carlo_model(problem: Problem, weights: LineWeights, fitted: Fit,
                        *(node_ids if node_ids is not None else (None, None)))
 
 
+def _bootstrap(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
+               units: TimeUnits) -> Bootstrap | str | None:
+    """The bootstrap over the time data's hits or blocks (a
+    :class:`processing.bootstrap.Bootstrap`), or why it did not run (a line), or None when
+    turned off (``options.bootstrap == 0``). By default it runs with 200 resamples when
+    every point has at least :data:`processing.units.MIN_UNITS` units."""
+    from processing.bootstrap import DEFAULT_RESAMPLES, resample  # it imports this module
+
+    n = problem.options.bootstrap
+    if n == 0:
+        return None
+    least = min(c.n_units for c in units.columns)
+    if n is None:
+        if least < MIN_UNITS:
+            return (f"no bootstrap over {units.kind}s: a point has {least} (at least "
+                    f"{MIN_UNITS} for the default; --bootstrap N runs it with 2)")
+        n = DEFAULT_RESAMPLES
+    return resample(problem, bands, weights, fitted, units, n)
+
+
 def uncertainty(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
                 checks: Checks,
                 node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+                units: TimeUnits | None = None,
                 ) -> Uncertainty | None:
     """Standard deviations of every result: the fit's covariance
     (:mod:`processing.uncertainty`), plus the Monte Carlo of the stated test uncertainties
-    (:mod:`processing.montecarlo`) when the options state any; None when the fit kept no
-    state for it."""
+    (:mod:`processing.montecarlo`) when the options state any, and, for time data whose
+    ``units`` are given, the bootstrap over hits or blocks (:mod:`processing.bootstrap`;
+    it measures the FRF noise the covariance reads off the residual, so per number the
+    larger of the two is kept, and it gives the asymmetric ``ci95``); None when the fit
+    kept no state for it."""
     if fitted.mass_line is None or fitted.mass_rhs is None or fitted.stiffness_map is None:
         return None
     used = weights.stiffness_lines[bands.in_stiffness]
@@ -708,7 +737,16 @@ def uncertainty(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fi
         extra = draw_variances(draws.theta, draws.K, draws.C, draws.z, draws.groups)
         extra_cov = draw_covariance(draws.theta, draws.K, draws.C)
         sources = (*sources, stated.describe())
-    return combine(fitted.theta, fitted.K, cov.parts, sources, extra, extra_cov)
+    boot = None if units is None else _bootstrap(problem, bands, weights, fitted, units)
+    if isinstance(boot, str):
+        sources = (*sources, boot)
+        boot = None
+    if boot is None:
+        return combine(fitted.theta, fitted.K, cov.parts, sources, extra, extra_cov)
+    unc = combine(fitted.theta, fitted.K, cov.parts, (*sources, boot.describe()), extra,
+                  extra_cov, boot.variances(), boot.covariance())
+    return dataclasses.replace(unc, ci95=boot.intervals(fitted.theta, fitted.K, fitted.C,
+                                                        unc.std))
 
 
 # --- stage 6: results ------------------------------------------------------------------------
@@ -797,12 +835,15 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
     if opt.use_rigidity and (opt.mass_band is None or opt.stiffness_band is None):
         rigid_top, rigid_raised, notes = _rigid_band_tops(frf)
     tau = frf.meta.get("exponential_tau") if frf.meta else None
+    units = frf.meta.get("time_units") if frf.meta else None
     result = identify_arrays(
         frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
         coherence=frf.coherence, options=opt, rigid_band_top=rigid_top,
         rigid_band_fallback=rigid_raised,
         exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0 else None,
         node_ids=(frf.resp_nodes, frf.exc_nodes),
+        time_units=(units.aligned(frf.exc_nodes, frf.exc_dirs)
+                    if isinstance(units, TimeUnits) else None),
     )
     if notes:
         result = dataclasses.replace(result, warnings=(*result.warnings, *notes))
@@ -823,11 +864,13 @@ def identify_arrays(
     exponential_tau: float | None = None,
     rigid_band_fallback: float | None = None,
     node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+    time_units: TimeUnits | None = None,
 ) -> IdentificationResult:
     """:func:`identify` on plain arrays (shapes as in :class:`FRFSet`).
 
     ``node_ids`` (response, excitation node ids) name the points in the uncertainty's
-    contributions.
+    contributions. ``time_units`` (the hits or blocks of each excitation column, in its
+    order) add the bootstrap over them to the uncertainty (not with ``refine_points``).
 
     ``rigid_band_top`` (Hz) bounds the automatic mass-line band, ``rigid_band_fallback``
     (Hz) when the first leaves no mass line; ``exponential_tau`` (s) is the time
@@ -844,7 +887,7 @@ def identify_arrays(
     bands, weights = settle_mass_band(problem, bands, weights)
     fitted = fit(problem, bands, weights)
     checks = check(problem, bands, weights, fitted)
-    uncertain = (uncertainty(problem, bands, weights, fitted, checks, node_ids)
+    uncertain = (uncertainty(problem, bands, weights, fitted, checks, node_ids, time_units)
                  if opt.uncertainty else None)
     return assemble(problem, bands, weights, fitted, checks, uncertain)
 

@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing.data import FRFSet, Geometry, InputError
 from processing.spectral import CrossSpectra, combine, frf, record_spectra
+from processing.units import UnitSpectra, record_units
 from processing.windows import exponential_window, force_window
 
 __all__ = [
@@ -141,6 +142,8 @@ class ImpactResult:
     estimator: str
     exp_tau: float | None
     meta: dict[str, object] = field(default_factory=dict, compare=False)
+    #: the accepted hits' spectra, hit by hit (``keep_units``; for the bootstrap over hits)
+    units: UnitSpectra | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if (self.H is None) != (self.coherence is None) or (self.H is None) != (
@@ -223,6 +226,7 @@ def process_impacts(
     estimator: str = "H1",
     force_accept: bool = False,
     max_averages: int | None = None,
+    keep_units: bool = False,
 ) -> ImpactResult:
     """Find, check, window and average the hits of one impact recording.
 
@@ -252,6 +256,9 @@ def process_impacts(
         Average only the first ``max_averages`` accepted hits (at least 1); the later
         ones are not used: their verdict is not accepted, with the reason
         ``"not used: the first N accepted hits are averaged"``.
+    keep_units : bool
+        Keep each accepted hit's spectra (``ImpactResult.units``, for the bootstrap over
+        hits, :mod:`processing.bootstrap`).
 
     Returns
     -------
@@ -288,7 +295,10 @@ def process_impacts(
     sp = record_spectra(hits.rec[accepted], fs, windows, references=(force_channel,))
     H, coh = frf(sp, estimator)
     meta["n_averages"] = int(accepted.sum())
-    return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta)
+    units = (record_units(hits.rec[accepted], fs, windows, force_channel) if keep_units
+             else None)
+    return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta,
+                        units)
 
 
 def _checked_input(data: ArrayLike, fs: float, force_channel: int,
@@ -449,8 +459,11 @@ def merge_results(results: Sequence[ImpactResult]) -> ImpactResult:
     for other in spectra[1:]:
         sp = combine(sp, other)
     H, coh = frf(sp, first.estimator)
+    parts = [r.units for r in results if r.spectra is not None]
+    units = (UnitSpectra.concat([u for u in parts if u is not None])
+             if parts and all(u is not None for u in parts) else None)
     return ImpactResult(sp.freq, H, coh, verdicts, sp, first.estimator, first.exp_tau,
-                        {**first.meta, "n_averages": sp.n_averages})
+                        {**first.meta, "n_averages": sp.n_averages}, units)
 
 
 def impact_frfset(

@@ -63,6 +63,9 @@ class IdentifyOptions:
     damping: Literal["auto", "viscous"] = "auto"
     #: stated test uncertainties propagated by Monte Carlo (:mod:`processing.montecarlo`)
     stated: StatedUncertainty | None = None
+    #: resamples of the bootstrap over the hits or blocks of time data
+    #: (:mod:`processing.bootstrap`); None: 200 when every point has at least 3; 0: none
+    bootstrap: int | None = None
 
 
 @dataclass(frozen=True)

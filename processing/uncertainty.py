@@ -358,11 +358,29 @@ def contributions(var_parts: dict[str, dict[str, NDArray[np.float64]]], top: int
 def combine(theta: NDArray[np.float64], K: NDArray[np.float64],
             parts: dict[str, NDArray[np.float64]], sources: tuple[str, ...],
             extra_parts: dict[str, dict[str, NDArray[np.float64]]] | None = None,
-            extra_cov: NDArray[np.float64] | None = None) -> Uncertainty:
+            extra_cov: NDArray[np.float64] | None = None,
+            resampled: dict[str, dict[str, NDArray[np.float64]]] | None = None,
+            resampled_cov: NDArray[np.float64] | None = None) -> Uncertainty:
     """:class:`Uncertainty` of independent covariance parts of ``[theta, vec K, vec C]`` plus,
     optionally, per-key variances from elsewhere (a Monte Carlo), keyed like
-    :func:`variance_parts`, and that source's (82, 82) covariance ``extra_cov``."""
+    :func:`variance_parts`, and that source's (82, 82) covariance ``extra_cov``.
+
+    ``resampled`` (keyed the same) is a second estimate of the errors the fit's covariance
+    already measures (the bootstrap over hits or blocks: the FRFs' noise, which the fit
+    reads off its residual): per entry, the larger of the two totals is kept with its
+    parts, not their sum; ``resampled_cov`` its (82, 82) covariance (the joint covariance
+    then takes, per parameter, the larger variance).
+    """
     vp = variance_parts(theta, K, parts)
+    if resampled:
+        for key, fit_parts in vp.items():
+            alt = resampled.get(key)
+            if not alt:
+                continue
+            fit_total = np.sum(list(fit_parts.values()), axis=0)
+            wins = np.sum(list(alt.values()), axis=0) > fit_total
+            vp[key] = {**{n: np.where(wins, 0.0, v) for n, v in fit_parts.items()},
+                       **{n: np.where(wins, v, 0.0) for n, v in alt.items()}}
     for key, more in (extra_parts or {}).items():
         vp.setdefault(key, {}).update(more)
     std = {key: np.sqrt(np.clip(np.sum(list(v.values()), axis=0), 0.0, None))
@@ -370,6 +388,8 @@ def combine(theta: NDArray[np.float64], K: NDArray[np.float64],
     std = {k: np.where(np.isfinite(v), v, np.nan) for k, v in std.items()}
     std = {k: v for k, v in std.items() if np.all(np.isfinite(v))}
     cov = np.sum(list(parts.values()), axis=0)
+    if resampled_cov is not None:
+        cov = _largest([cov, resampled_cov])
     if extra_cov is not None:
         cov = cov + extra_cov
     return Uncertainty(std=std, sources=sources, contributions=contributions(vp), covariance=cov)

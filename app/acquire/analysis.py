@@ -26,10 +26,12 @@ from processing.impact import (
     merge_results,
     process_impacts,
 )
+from processing.units import TimeUnits, UnitSpectra
 
 __all__ = ["PointColumn", "RecordAnalysis", "RecordLoader", "RunAnalysis", "analyse_blocks",
            "analyse_records", "analyse_run", "check_identifiable", "frfset", "hit_result",
-           "host_timed", "impact_settings", "margin_samples", "point_result", "run_frfs"]
+           "host_timed", "impact_settings", "margin_samples", "point_result", "run_frfs",
+           "run_units"]
 
 
 def margin_samples(fs: float) -> int:
@@ -113,6 +115,8 @@ class RecordAnalysis(Protocol):
     def set_used(self, hit_id: int, used: bool) -> None: ...
     def n_used(self, point: int) -> int: ...
     def point(self, point: int, max_averages: int | None = None) -> PointColumn | None: ...
+    def unit_spectra(self, point: int, max_averages: int | None = None,
+                     ) -> UnitSpectra | None: ...
 
 
 class RunAnalysis:
@@ -233,6 +237,25 @@ class RunAnalysis:
     def n_used(self, point: int) -> int:
         return self._n_used.get(point, 0)
 
+    def used_ids(self, point: int, max_averages: int | None = None) -> list[int]:
+        """The point's used hits in acquisition order (the first ``max_averages``)."""
+        ids = sorted(h for h, p in self._point_of.items() if p == point and self._accepted[h])
+        return ids if max_averages is None else ids[:max_averages]
+
+    def unit_spectra(self, point: int, max_averages: int | None = None) -> UnitSpectra | None:
+        """The spectra of each of the point's used hits (the units :meth:`point` averages),
+        read back with ``loader``; None without a used hit."""
+        ids = self.used_ids(point, max_averages)
+        if not ids or self.loader is None:
+            return None
+        spectra = []
+        for i, data in self.loader(ids):
+            res = hit_result(data, self.plan.record, self.names, self.ranges,
+                             self._override.get(i, ""))
+            if res.spectra is not None:
+                spectra.append(res.spectra)
+        return UnitSpectra.of(spectra) if spectra else None
+
 
 def _run_setup(run: RunData) -> tuple[TestPlan, list[str], NDArray[np.float64]]:
     """A run file's plan, record row names and their full-scale ranges."""
@@ -288,6 +311,22 @@ def analyse_run(run: RunData, options: IdentifyOptions | None = None) -> (
     check_identifiable(run)
     frf, ana = run_frfs(run)
     return frf, identify_frfs(frf, options), ana
+
+
+def run_units(ana: RecordAnalysis, max_averages: int | None = None) -> TimeUnits | None:
+    """The per-hit (hammer) or per-block (shaker) spectra of every point with a used record,
+    for the bootstrap (:mod:`processing.bootstrap`); None when no point has one."""
+    plan = ana.plan
+    cols, keep = [], []
+    for j in range(len(plan.excitations)):
+        u = ana.unit_spectra(j, max_averages)
+        if u is not None:
+            cols.append(u)
+            keep.append(j)
+    if not cols:
+        return None
+    return TimeUnits("hit" if isinstance(ana, RunAnalysis) else "block", tuple(cols),
+                     plan.exc_nodes[keep], plan.exc_dirs[keep], plan.record.estimator)
 
 
 def check_identifiable(run: RunData) -> None:

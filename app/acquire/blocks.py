@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from app.acquire.plan import ShakerSettings, TestPlan
 from processing.data import FRFSet, Geometry, InputError
 from processing.spectral import CrossSpectra, SpectralAccumulator, frf
+from processing.units import UnitSpectra
 
 __all__ = ["WINDOWS", "BlockAnalysis", "BlockResult", "RecordLoader", "block_verdict",
            "shaker_frfset"]
@@ -184,6 +185,24 @@ class BlockAnalysis:
         sp = st.acc.spectra()
         H, coh = frf(sp, self.plan.record.estimator)
         return BlockResult(sp.freq, H, coh, sp, len(st.ids))
+
+    def used_ids(self, point: int, max_averages: int | None = None) -> list[int]:
+        """The point's used blocks in acquisition order (the first ``max_averages``)."""
+        ids = sorted(h for h, p in self._point_of.items() if p == point and self._accepted.get(h))
+        return ids if max_averages is None else ids[:max_averages]
+
+    def unit_spectra(self, point: int, max_averages: int | None = None) -> UnitSpectra | None:
+        """The spectra of each of the point's used blocks (the units :meth:`point` averages),
+        read back with ``loader``; None without a used block."""
+        ids = self.used_ids(point, max_averages)
+        if not ids or self.loader is None:
+            return None
+        spectra = []
+        for _, data in self.loader(ids):
+            acc = self._accumulator()
+            acc.update(data)
+            spectra.append(acc.spectra())
+        return UnitSpectra.of(spectra)
 
     def _rebuild(self, ids: Sequence[int]) -> _Point | None:
         """An accumulator of blocks ``ids`` read back from the stored records, in order."""

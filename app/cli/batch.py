@@ -33,7 +33,7 @@ from app.cli.frf import add_processing_arguments, settings_from
 #: is listed here once :func:`run` passes it on to :func:`app.batch.campaign.identify_file`
 _IDENTIFY = {"mass_band", "stiffness_band", "physical", "method", "refine_points",
              "no_uncertainty", "location_uncertainty", "angle_uncertainty", "gain_uncertainty",
-             "draws"}
+             "draws", "bootstrap"}
 
 
 class _Capture:

@@ -74,6 +74,9 @@ def add_uncertainty_arguments(p: Any) -> None:
                    help="standard deviation of each channel's gain (e.g. 2%%)")
     g.add_argument("--draws", type=int, metavar="N",
                    help="Monte Carlo draws of the stated uncertainties (default 1000)")
+    g.add_argument("--bootstrap", type=int, metavar="N",
+                   help="time data: resamples of the bootstrap over hits (hammer) or blocks "
+                        "(shaker) (default 200 when every point has at least 3; 0: none)")
     g.add_argument("--no-uncertainty", action="store_true",
                    help="skip the uncertainty (no std in the result)")
 
@@ -122,6 +125,21 @@ def mounts_from(args: argparse.Namespace) -> MountsFile | None:
     return mounts
 
 
+def bootstrap_from(args: argparse.Namespace) -> int | None:
+    """``--bootstrap N`` checked (one line): None (the default rule), 0 (none) or N >= 2."""
+    n = getattr(args, "bootstrap", None)
+    if n is None:
+        return None
+    if n < 0 or n == 1:
+        raise UserError(f"--bootstrap must be 0 (none) or at least 2 resamples, got {n}")
+    if n > 100_000:
+        raise UserError(f"--bootstrap {n} is more resamples than any test needs: give at most "
+                        "100000 (200 is the default)")
+    if n and args.no_uncertainty:
+        raise UserError("--no-uncertainty contradicts --bootstrap: drop one")
+    return int(n)
+
+
 def options_from(args: argparse.Namespace) -> IdentifyOptions:
     return IdentifyOptions(
         method=args.method,
@@ -132,6 +150,7 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
         coherence_threshold=args.coherence,
         uncertainty=not args.no_uncertainty,
         stated=args.stated,
+        bootstrap=bootstrap_from(args),
     )
 
 

@@ -97,7 +97,9 @@ def write_frf_h5(path: str | Path, frf: FRFSet, *, source: str = "") -> None:
                 "resp_dirs": frf.resp_dirs, "exc_nodes": frf.exc_nodes,
                 "exc_dirs": frf.exc_dirs, "geometry/node_ids": frf.geometry.node_ids,
                 "geometry/xyz": frf.geometry.xyz,
-                "meta": json.dumps(frf.meta, default=_jsonable),
+                # the per-hit spectra of time data (the bootstrap's) are not kept
+                "meta": json.dumps({k: v for k, v in frf.meta.items() if k != "time_units"},
+                                   default=_jsonable),
             }
             if frf.coherence is not None:
                 values["coherence"] = frf.coherence

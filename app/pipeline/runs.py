@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.acquire.analysis import analyse_records, check_identifiable, run_frfs
+from app.acquire.analysis import analyse_records, check_identifiable, run_frfs, run_units
 from app.io.runfile import RunData, read_run
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings
@@ -41,7 +41,8 @@ def open_run_file(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
         raise OpenError(f"{path}: the run holds no hit yet")
     else:
         check_identifiable(run)
-        whole = run_frfs(run)[0]
+        whole, ana = run_frfs(run)
+        whole.meta["time_units"] = run_units(ana)  # per hit or block: the bootstrap
     out = whole.select_lines(whole.anti_alias_fmax())
     out.meta.update({"file": Path(path).name, "run_state": run.state})
     if run.mounts is not None:
@@ -56,8 +57,9 @@ def _usable_points(run: RunData, path: Path, s: Settings) -> tuple[FRFSet, list[
     fmax = s.fmax if s.fmax is not None else run.records.fs / 2.56
     reports: list[RunReport] = []
     if run.method != "hammer":  # shaker runs: the run's own FRFs (every point needed)
-        frfs = run_frfs(run, s.averages)[0]
+        frfs, blocks = run_frfs(run, s.averages)
         assert frfs.coherence is not None
+        frfs.meta["time_units"] = run_units(blocks, s.averages)
         out = assemble(frfs.freq, [frfs.H], [frfs.coherence], frfs.resp_nodes, frfs.resp_dirs,
                        frfs.exc_nodes, frfs.exc_dirs, frfs.geometry, dict(frfs.meta), fmax,
                        reports)
@@ -86,6 +88,7 @@ def _usable_points(run: RunData, path: Path, s: Settings) -> tuple[FRFSet, list[
     col = impact_frfset(results, run.geometry, np.array([c.node for c in rows]),
                         np.array([c.direction for c in rows]), plan.exc_nodes[good],
                         plan.exc_dirs[good])
+    col.meta["time_units"] = run_units(ana, s.averages)  # per hit: the bootstrap
     assert col.coherence is not None
     out = assemble(col.freq, [col.H], [col.coherence], col.resp_nodes, col.resp_dirs,
                    col.exc_nodes, col.exc_dirs, col.geometry, col.meta, fmax, reports)

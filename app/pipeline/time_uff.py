@@ -33,15 +33,18 @@ from processing.impact import (
     process_impacts,
 )
 from processing.spectral import CrossSpectra, SpectralAccumulator, combine, frf
+from processing.units import TimeUnits, UnitSpectra, welch_units
 
 __all__ = ["open_time_uff"]
 
-#: one FRF column: H (n_resp, 1, n_f), coherence, frequency lines (Hz)
-Column = tuple[NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64]]
+#: one FRF column: H (n_resp, 1, n_f), coherence, frequency lines (Hz), and the spectra of
+#: its hits or blocks (for the bootstrap, :mod:`processing.bootstrap`; None when too few)
+Column = tuple[NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64],
+               UnitSpectra | None]
 DofKey = tuple[int, tuple[float, ...]]
 
 
-def _random_spectra(r: TimeRun, s: Settings) -> CrossSpectra:
+def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra | None]:
     nperseg = s.nperseg
     if r.n_samples < nperseg:
         raise InputError(f"load case {r.load_case}: {r.n_samples} samples, fewer than "
@@ -53,8 +56,7 @@ def _random_spectra(r: TimeRun, s: Settings) -> CrossSpectra:
     n = r.n_samples
     if s.averages is not None:  # the samples of the first N segments
         n = min(n, (s.averages - 1) * (nperseg - noverlap) + nperseg)
-    acc.update(np.vstack([r.force[None, :n], r.responses[:, :n]]))
-    return acc.spectra()
+    return welch_units(acc, np.vstack([r.force[None, :n], r.responses[:, :n]]))
 
 
 #: pre-trigger when none is given, s
@@ -82,7 +84,7 @@ def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
     names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
     res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
                           channel_names=names, estimator=s.estimator,
-                          max_averages=max_averages)
+                          max_averages=max_averages, keep_units=True)
     if not res.verdicts:
         raise InputError(f"{lc}: no hit found (the force never crosses {level:g} N): lower "
                          "--level or check the force channel")
@@ -139,19 +141,21 @@ def _impact_column(key: DofKey, members: list[TimeRun], s: Settings,
         return None
     res = merge_results(results)
     assert res.H is not None and res.coherence is not None
-    return res.H, res.coherence, res.freq
+    return res.H, res.coherence, res.freq, res.units
 
 
 def _random_column(key: DofKey, members: list[TimeRun], s: Settings,
                    reports: list[RunReport], levels: dict[int, float]) -> Column | None:
     """The Welch average over one excitation DOF's runs (None when none is usable)."""
-    spectra = []
+    spectra, units = [], []
     for r in members:
         try:
             if not np.any(r.force):
                 raise InputError(f"load case {r.load_case}: the force channel is zero "
                                  "throughout: check the shaker's force channel")
-            spectra.append(_random_spectra(r, s))
+            sp_r, units_r = _random_spectra(r, s)
+            spectra.append(sp_r)
+            units.append(units_r)
         except InputError as err:
             reports.append(RunReport(str(err), skipped=True))
     if not spectra:
@@ -161,7 +165,9 @@ def _random_column(key: DofKey, members: list[TimeRun], s: Settings,
         sp = combine(sp, other)
     H, coh = frf(sp, s.estimator)
     reports.append(RunReport(f"excitation node {key[0]}: {sp.n_averages} averages"))
-    return H, coh, sp.freq
+    joined = (UnitSpectra.concat([u for u in units if u is not None])
+              if all(u is not None for u in units) else None)
+    return H, coh, sp.freq, joined
 
 
 def _excitation(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]]:
@@ -268,4 +274,9 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
                    first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),
                    np.array([k[1] for k in keys]), geometry, meta,
                    s.fmax if s.fmax is not None else first.fs / 2.56, reports)
+    if all(cols[k][3] is not None for k in keys):  # per-unit spectra: the bootstrap
+        out.meta["time_units"] = TimeUnits(
+            "hit" if s.excitation == "impact" else "block",
+            tuple(u for k in keys if (u := cols[k][3]) is not None),
+            np.array([k[0] for k in keys]), np.array([k[1] for k in keys]), s.estimator)
     return out, reports + check_reports(out, s.coherence)

@@ -1,0 +1,515 @@
+"""Bootstrap over hits (hammer) or blocks (shaker): how far the FRFs' own noise moves a result.
+
+A point's FRF column from time data is a ratio of averaged spectra: H1 is
+``sum_u S_fx,u / sum_u S_ff,u`` over the point's averaging units ``u`` (the accepted hits
+of a hammer test, the blocks of a shaker test), H2 ``sum S_xx / sum conj(S_fx)``. The
+units are independent measurements of the same column, so resampling them with
+replacement (each point on its own: the points were measured apart) and forming the
+FRFs again gives draws of what another test of the same engine, as noisy, could have
+given (Efron's bootstrap). Each resample is identified again with everything the main
+fit chose held fixed: bands, lines, coherence weights, leakage shapes, damping model
+(band selection is not re-run), and the spread of each result over the resamples is its
+bootstrap uncertainty.
+
+Units
+    :class:`processing.units.TimeUnits` (per column, the spectra of each unit), attached by
+    the pipeline to ``FRFSet.meta["time_units"]``.
+
+Re-identification
+    Without modelled leakage the coupled inertia-stiffness iteration (section 2.2) is an
+    affine map of theta for fixed data (the mass-line solve is linear in K, C, D and the
+    stiffness step affine in M), so each resample's fixed point is found exactly from
+    eleven evaluations of one iteration step and one 10x10 solve; with leakage shapes the
+    iteration itself runs, from the main fit's solution. The FRFs of all resamples and
+    their rigid-body accelerances are formed at once (vectorised over resamples).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.data import FRFSet, InputError
+from processing.identify import Bands, Fit, LineWeights, _iterate, _StiffnessStep
+from processing.inertia import MASS_BASIS, mass_matrix
+from processing.massline import MassLineProblem, stack_real
+from processing.physical import constrain_physical
+from processing.problem import COHERENCE_NOISE_FLOOR, IdentifyOptions, Problem, prepare
+from processing.results import UNCERTAIN_KEYS
+from processing.spectral import CrossSpectra, frf
+from processing.stiffness import _BLOCKS, _DUP, line_operators
+from processing.uncertainty import derived_of_draws, draw_covariance
+from processing.units import TimeUnits, UnitKind
+
+__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "bootstrap_identify", "resample",
+           "weighted_accelerances"]
+
+#: resamples when none are asked for
+DEFAULT_RESAMPLES = 200
+#: most FRF values (resamples x columns x lines x responses) formed at once (memory bound)
+CHUNK_VALUES = 4_000_000
+
+# --- resampling ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Bootstrap:
+    """Resampled identifications: theta (n, 10), K, C (n, 6, 6); ``counts`` (n, n_units)
+    how often each unit was drawn; ``groups`` the column label of each unit."""
+
+    theta: NDArray[np.float64]
+    K: NDArray[np.float64]
+    C: NDArray[np.float64]
+    counts: NDArray[np.float64]
+    groups: tuple[str, ...]
+    kind: UnitKind
+    units: tuple[int, ...]
+
+    @property
+    def n(self) -> int:
+        return int(self.theta.shape[0])
+
+    def describe(self) -> str:
+        """One line: what was resampled."""
+        return (f"bootstrap over {self.kind}s ({self.n} resamples; {min(self.units)}-"
+                f"{max(self.units)} {self.kind}s a point; bands, weights and models held fixed)")
+
+    def values(self) -> dict[str, NDArray[np.float64]]:
+        """Every key of :data:`UNCERTAIN_KEYS` for each resample, (n, *shape)."""
+        return derived_of_draws(self.theta, self.K, self.C)
+
+    def covariance(self) -> NDArray[np.float64]:
+        """(82, 82) covariance of ``[theta, vec K, vec C]`` over the resamples."""
+        return draw_covariance(self.theta, self.K, self.C)
+
+    def variances(self) -> dict[str, dict[str, NDArray[np.float64]]]:
+        """Per key, the variance of each entry over the resamples split by column.
+
+        First order: a linear regression of the resamples on the counts; column g gets
+        the variance of its fitted linear part ``z_g beta_g``; what the linear part leaves
+        is ``"bootstrap (non-linear part)"``. Parts are scaled down when the regression's
+        noise makes them exceed the total. Entries with a non-finite resample (rigid modes
+        of a resample whose M is not positive definite) are left out.
+        """
+        values = self.values()
+        keys = list(values)
+        flat = np.concatenate([values[k].reshape(self.n, -1) for k in keys], axis=1)
+        ok = np.all(np.isfinite(flat), axis=0)
+        y = np.where(ok, flat, 0.0)
+        y = y - y.mean(axis=0)
+        z = self.counts - self.counts.mean(axis=0)
+        total = np.var(y, axis=0, ddof=1)
+        beta = np.linalg.lstsq(z, y, rcond=None)[0]
+        names = list(dict.fromkeys(self.groups))
+        gidx = np.array([names.index(g) for g in self.groups])
+        per = np.stack([np.var(z[:, gidx == i] @ beta[gidx == i], axis=0, ddof=1)
+                        for i in range(len(names))])
+        lin = per.sum(axis=0)
+        per *= np.where(lin > total, total / np.maximum(lin, 1e-300), 1.0)
+        rest = np.clip(total - per.sum(axis=0), 0.0, None)
+        out: dict[str, dict[str, NDArray[np.float64]]] = {}
+        col = 0
+        for k in keys:
+            shape = UNCERTAIN_KEYS[k]
+            sl = slice(col, col + int(np.prod(shape, dtype=int)))
+            col = sl.stop
+            if not np.all(ok[sl]):
+                continue
+            parts = {g: per[i, sl].reshape(shape) for i, g in enumerate(names)}
+            parts["bootstrap (non-linear part)"] = rest[sl].reshape(shape)
+            out[k] = parts
+        return out
+
+    def intervals(self, theta: NDArray[np.float64], K: NDArray[np.float64],
+                  C: NDArray[np.float64], std: dict[str, NDArray[np.float64]],
+                  ) -> dict[str, NDArray[np.float64]]:
+        """Asymmetric 95 % intervals (shape + (2,)) of the keys in ``std`` about the result
+        ``theta``, ``K``, ``C``: the percentile interval of the resamples, ``[q2.5, q97.5]``,
+        widened about the result's value ``x`` to ``x + r (q - x)`` by the ratio ``r`` of
+        ``std`` (every source) to the resamples' own std when that is above 1; the value
+        always lies inside.
+        """
+        nominal = {k: v[0] for k, v in derived_of_draws(theta[None], K[None], C[None]).items()}
+        out: dict[str, NDArray[np.float64]] = {}
+        for k, v in self.values().items():
+            x = nominal[k]
+            if k not in std or not (np.all(np.isfinite(v)) and np.all(np.isfinite(x))):
+                continue
+            q = np.percentile(v, [2.5, 97.5], axis=0)
+            sb = np.std(v, axis=0, ddof=1)
+            r = np.maximum(np.where(sb > 0, std[k] / np.where(sb > 0, sb, 1.0), 1.0), 1.0)
+            lo = np.minimum(x + r * (q[0] - x), x)
+            hi = np.maximum(x + r * (q[1] - x), x)
+            out[k] = np.stack([lo, hi], axis=-1)
+        return out
+
+
+def _inverse_variances(problem: Problem, H: NDArray[np.complex128],
+                       coherence: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Inverse variances (.., n_resp) of H1 values ``|H|^2 (1 - g) / g`` plus the noise floor
+    of :func:`processing.problem.prepare` (its ``_weighted_accelerances``)."""
+    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(problem.H) ** 2,
+                                                              axis=(0, 1))))
+    g = np.clip(coherence, 1e-12, 1.0)
+    return np.asarray(1.0 / (np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300)))
+
+
+def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[np.complex128],
+                          coherence: NDArray[np.float64],
+                          ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
+    """Rigid-body accelerances X (n, n_l, 6, n_e) and column weights (n, n_e, n_l) of
+    resamples' FRFs ``H`` and coherence (n_e, n_l, n_resp, n) on the lines ``used``.
+
+    X is the main fit's map from each column's responses to its accelerances at O (the
+    coherence-weighted least squares of :func:`processing.problem.prepare`, or ``E^+``),
+    applied to the resample's FRFs; each column's weight on each line follows the
+    resample's own coherence: the main fit's weight times the ratio of the summed inverse
+    H1 variances ``1 / (|H|^2 (1 - g) / g + floor^2)`` of its responses (resample over main
+    fit). Without coherence: ``E^+ H`` and the main fit's weights."""
+    n_r, n = problem.E.shape[0], H.shape[-1]
+    colw0 = problem.col_weights[:, used]  # (n_e, n_l)
+    if problem.coherence is None:
+        op = np.broadcast_to(problem.Epinv, (*colw0.shape, 6, n_r))
+        scale = np.ones((n, *colw0.shape))
+    else:
+        H0 = np.moveaxis(problem.H[..., used], 0, -1)  # (n_e, n_l, n_r)
+        W0 = _inverse_variances(problem, H0, np.moveaxis(problem.coherence[..., used], 0, -1))
+        Wn = W0 / np.max(W0, axis=-1, keepdims=True)
+        A = np.einsum("ri,elr,rj->elij", problem.E, Wn, problem.E)
+        op = np.linalg.solve(A, np.einsum("ri,elr->elir", problem.E, Wn))  # (e, l, 6, r)
+        Wb = _inverse_variances(problem, H, coherence).sum(axis=2)  # (e, l, n)
+        scale = np.moveaxis(Wb / W0.sum(-1)[..., None], -1, 0)
+    X = np.ascontiguousarray(np.transpose(op @ H, (3, 1, 2, 0)))  # (n, l, 6, e)
+    return X, colw0 * scale
+
+
+def _line_index(units_freq: NDArray[np.float64], freq: NDArray[np.float64]) -> (
+    NDArray[np.int64] | None
+):
+    """Index into ``units_freq`` of each line of ``freq`` (None when one is missing)."""
+    idx = np.clip(np.searchsorted(units_freq, freq), 0, units_freq.size - 1)
+    lo = np.clip(idx - 1, 0, None)
+    idx = np.where(np.abs(units_freq[lo] - freq) < np.abs(units_freq[idx] - freq), lo, idx)
+    tol = 1e-6 * max(float(np.max(np.abs(freq))), 1.0)
+    return idx if np.all(np.abs(units_freq[idx] - freq) <= tol) else None
+
+
+def _mix(S: NDArray[Any], lines: NDArray[np.int64], cw: NDArray[np.float64]) -> NDArray[Any]:
+    """(n_l, n_r, n) spectra of n resamples: per-unit spectra S (n_u, n_r, n_f) on ``lines``
+    mixed with the resamples' unit weights ``cw`` (n_u, n)."""
+    part = np.swapaxes(S[..., lines], 1, 2).reshape(S.shape[0], -1)
+    return np.asarray((part.T @ cw).reshape(lines.size, S.shape[1], cw.shape[1]))
+
+
+def _resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
+        NDArray[np.float64]]) -> tuple[NDArray[np.complex128], NDArray[np.float64]] | None:
+    """FRFs and coherence (n_exc, n_lines, n_resp, n) of the n resamples on ``lines`` (Hz):
+    each column's units weighted by how often each was drawn; None when a column lacks a
+    line."""
+    n = counts[0].shape[0]
+    n_l, n_r = lines.size, units.columns[0].Sfx.shape[1]
+    H = np.empty((len(units.columns), n_l, n_r, n), complex)
+    G = np.empty((len(units.columns), n_l, n_r, n))
+    est = units.estimator.upper()
+    for k, (col, c) in enumerate(zip(units.columns, counts, strict=True)):
+        li = _line_index(col.freq, lines)
+        if li is None:
+            return None
+        mean = col.weight / col.weight.sum()
+        cw = c * col.weight  # (n, n_u)
+        cw = cw / cw.sum(axis=1, keepdims=True)
+        # a resample's deviation from the mean, scaled by sqrt(n / (n - 1)): the bootstrap's
+        # variance of a mean of n units is (n - 1) / n of the unbiased estimate
+        cw = (mean + np.sqrt(col.n_units / (col.n_units - 1)) * (cw - mean)).T  # (n_u, n)
+        Sfx, Sxx = _mix(col.Sfx, li, cw), _mix(col.Sxx, li, cw)
+        Sff = (col.Sff[:, li].T @ cw)[:, None, :]  # (n_l, 1, n)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            G[k] = np.clip(np.abs(Sfx) ** 2 / (Sff * Sxx), 0.0, 1.0)
+            if est == "H1":
+                H[k] = Sfx / Sff
+            elif est == "H2":
+                H[k] = Sxx / np.conj(Sfx)
+            else:  # Hv (and any other): the estimator itself on the resampled spectra
+                flat = np.moveaxis(Sfx, 1, 0).reshape(n_r, -1)  # (n_r, n_l n)
+                sp = CrossSpectra(np.zeros(n_l * n), Sff.reshape(1, 1, -1) + 0j, flat[None],
+                                  np.moveaxis(Sxx, 1, 0).reshape(n_r, -1), 1, (0,),
+                                  tuple(range(1, n_r + 1)))
+                H[k] = np.moveaxis(frf(sp, units.estimator)[0][:, 0].reshape(n_r, n_l, n), 0, 1)
+    return H, G
+
+
+Triple = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+
+def _line_inverses(Xs: NDArray[np.complex128], T: NDArray[np.float64]) -> (
+    NDArray[np.complex128]
+):
+    """Apparent masses ``B_j = T X_j^+`` (n, n_l, 6, 6) of resamples' lines Xs (n, n_l, 6, n_e)
+    (:func:`processing.stiffness.line_operators`, vectorised over resamples)."""
+    Xl = Xs
+    Xh = np.conj(np.swapaxes(Xl, -1, -2))
+    try:
+        Xp = Xh @ np.linalg.inv(Xl @ Xh)
+    except np.linalg.LinAlgError:
+        Xp = np.linalg.pinv(Xl)
+    return np.asarray(T @ Xp)
+
+
+def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
+                      Xs: NDArray[np.complex128], ws_: NDArray[np.float64],
+                      ) -> tuple[Triple, Triple]:
+    """The stiffness step of the main fit, M -> (K, C, D), for resamples' stiffness lines Xs
+    (n, n_l, 6, n_e) with column weights ``ws_`` (n, n_e, n_l): it is affine in M, returned
+    as its value at M = 0, (K, C, D) each (n, 6, 6), and its change per unit of each
+    parameter, each (n, 10, 6, 6)
+    (``_StiffnessStep``, vectorised over resamples)."""
+    n = Xs.shape[0]
+    w = problem.w[weights.stiffness_lines]
+    a, T, opt = problem.window_decay, problem.T, problem.options
+    MB = MASS_BASIS[None]  # (1, 10, 6, 6), symmetric
+    zero, zl = np.zeros((n, 6, 6)), np.zeros((n, 10, 6, 6))
+    if a or not problem.improved:
+        B = _line_inverses(Xs, T)
+        if a:  # P_j = -s_j^2 (M - B_j); C: least squares of Im P = w C; K = mean Re P - a C
+            sq = (1j * w + a) ** 2
+            C0 = np.einsum("l,nlij->nij", w, (sq[:, None, None] * B).imag) / np.sum(w**2)
+            K0 = np.mean((sq[:, None, None] * B).real, axis=1) - a * C0
+            cc = float(np.sum(w * (-sq).imag) / np.sum(w**2))
+            kk = float(np.mean((-sq).real)) - a * cc
+            Kl, Cl = np.broadcast_to(kk * MB, zl.shape), np.broadcast_to(cc * MB, zl.shape)
+            if opt.symmetric:
+                K0, C0 = 0.5 * (K0 + np.swapaxes(K0, 1, 2)), 0.5 * (C0 + np.swapaxes(C0, 1, 2))
+            return (K0, C0, zero), (Kl, Cl, zl)
+        # the article's line average of eq. 14: K = mean(w^2) M - mean(w^2 Re B), C
+        K0 = -np.mean((w**2)[:, None, None] * B.real, axis=1)
+        C0 = -np.mean(w[:, None, None] * B.imag, axis=1)
+        return (K0, C0, zero), (np.broadcast_to(np.mean(w**2) * MB, zl.shape), zl, zl)
+    # improved: the direct fit from 6x6 moments (processing.stiffness.fit_stiffness)
+    # moments sum wt w^p conj(x) x^T (and t^T) as sums over lines of per-line 6x6 sums
+    Cw = np.conj(Xs) * ws_.transpose(0, 2, 1)[:, :, None, :]
+    Z = Cw @ np.swapaxes(Xs, -1, -2)  # (n, n_l, 6, 6)
+    R = Cw @ T.T  # (n, n_l, 6, 6)
+    powers = np.stack([w**p for p in range(4)], axis=1) + 0j  # (n_l, 4)
+    Gs = (Z.reshape(n, -1, 36).transpose(0, 2, 1) @ powers).reshape(n, 6, 6, 4)
+    Qs = (R.reshape(n, -1, 36).transpose(0, 2, 1) @ powers[:, 2:]).reshape(n, 6, 6, 2)
+    G = [Gs[..., p] for p in range(4)]
+    Q2, Q3 = Qs[..., 0], Qs[..., 1]
+    s2 = (np.ones(6) if problem.row_scale is None
+          else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
+    G0r, G0i, G1r, G1i = G[0].real, G[0].imag, G[1].real, G[1].imag
+    full = [[G0r, -G1i, -G0i], [G1i, G[2].real, G1r], [G0i, G1r, G0r]]
+    blocks = _BLOCKS[model]
+    k = len(blocks)
+    Nb = np.concatenate([np.concatenate([full[r][c] for c in blocks], axis=2)
+                         for r in blocks], axis=1)  # (n, 6k, 6k)
+    Nb = Nb.reshape(n, k, 6, k, 6)
+    blocks7 = np.zeros((n, k, 6, 6, k, 6, 6))
+    for i in range(6):  # row blocks s2_i Nb on the diagonal of the equation rows
+        blocks7[:, :, i, :, :, i, :] = s2[i] * Nb
+    Nfull = blocks7.reshape(n, 36 * k, 36 * k)
+
+    def rhs(R0: NDArray[Any], R1: NDArray[Any]) -> NDArray[np.float64]:
+        parts = (R0.real, R1.imag, R0.imag)
+        return np.concatenate([np.swapaxes(parts[b] * s2, -1, -2).reshape(*R0.shape[:-2], 36)
+                               for b in blocks], axis=-1)
+
+    # the value at M = 0 and the change per parameter: eleven right-hand sides at once
+    r = np.concatenate([rhs(-Q2, -Q3)[:, None],
+                        rhs(G[2][:, None] @ (MB + 0j), G[3][:, None] @ (MB + 0j))], axis=1)
+    if opt.symmetric:
+        dup = np.kron(np.eye(k), _DUP)
+        v = np.linalg.solve(dup.T @ Nfull @ dup, dup.T @ np.swapaxes(r, 1, 2))
+        v = np.swapaxes(dup @ v, 1, 2)  # (n, 11, 36 k)
+    else:
+        v = np.swapaxes(np.linalg.solve(Nfull, np.swapaxes(r, 1, 2)), 1, 2)
+    v0, vl = v[:, 0], v[:, 1:]
+    const, lin = [zero] * 3, [zl] * 3
+    for j, b in enumerate(blocks):
+        const[b] = v0[:, 36 * j:36 * (j + 1)].reshape(n, 6, 6)
+        lin[b] = vl[..., 36 * j:36 * (j + 1)].reshape(n, 10, 6, 6)
+    return (const[0], const[1], const[2]), (lin[0], lin[1], lin[2])
+
+
+def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
+                 Xm: NDArray[np.complex128], Xs: NDArray[np.complex128],
+                 wm_: NDArray[np.float64], ws_: NDArray[np.float64]) -> Triple:
+    """theta (n, 10), K, C (n, 6, 6) of resamples' accelerances on the mass lines Xm
+    (n, n_lm, 6, n_e) and on the stiffness lines Xs (n, n_ls, 6, n_e), with their column
+    weights ``wm_`` (n, n_e, n_lm) and ``ws_`` (n, n_e, n_ls): the main fit's model (no
+    leakage shapes) with its lines and damping model, solved for the fixed point of the
+    inertia-stiffness iteration directly.
+
+    For fixed data the iteration (:func:`processing.identify._iterate`) is affine in theta:
+    the stiffness step is affine in M, the mass-line solve linear in K, C, D. So
+    ``theta = t0 + L theta`` is one 10x10 solve a resample.
+    """
+    n = Xm.shape[0]
+    wm = problem.w[weights.mass_lines]
+    a, T = problem.window_decay, problem.T
+    sw = np.sqrt(wm_).transpose(0, 2, 1)[:, :, None, :]  # (n, n_lm, 1, n_e)
+    Xw = Xm * sw
+    # the real-stacked mass-line moments sum Re(z) Re(x) + Im(z) Im(x) over the weighted
+    # equations (MassLineProblem) are Re sum_l f_l Y_l for z = f_l x: per-line 6x6 sums
+    Y = Xw @ np.conj(np.swapaxes(Xw, -1, -2))  # (n, n_lm, 6, 6)
+
+    Yf = Y.reshape(n, -1, 36).transpose(0, 2, 1)  # (n, 36, n_lm)
+
+    def moment(f: NDArray[Any] | complex) -> NDArray[np.float64]:
+        return np.asarray((Yf @ np.broadcast_to(f, wm.shape)).real.reshape(n, 6, 6))
+
+    s2 = (np.ones(6) if problem.row_scale is None
+          else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
+    MBs = (MASS_BASIS * s2[None, :, None]).reshape(10, 36)
+    op = np.einsum("pia,qib->pqab", MASS_BASIS * s2[None, :, None], MASS_BASIS).reshape(100, 36)
+    N = (moment(1.0 + 0j).reshape(n, 36) @ op.T).reshape(n, 10, 10)
+    solver = np.linalg.solve(N, np.broadcast_to(MBs, (n, 10, 36)))
+    WT = T[None] @ np.swapaxes(np.sum(Xw * sw, axis=1).real, 1, 2)
+    if a:  # B = T - ((K + a C) X + j w C X) / s^2
+        s_2 = (1j * wm + a) ** 2
+        AK = -moment(1.0 / s_2)
+        AC = a * AK - moment(1j * wm / s_2)
+        AD = np.zeros_like(AK)
+    else:  # B = T + (K + j w C + j D) X / w^2
+        AK = moment(1.0 / wm**2 + 0j)
+        AC = moment(1j / wm)
+        AD = moment(1j / wm**2)
+    (K0, C0, D0), (Kl, Cl, Dl) = _stiffness_affine(problem, weights, fitted.damping_model, Xs,
+                                                   ws_)
+    W0 = WT + K0 @ AK + C0 @ AC + D0 @ AD
+    Wl = Kl @ AK[:, None] + Cl @ AC[:, None] + Dl @ AD[:, None]  # (n, 10, 6, 6)
+    t0 = np.einsum("npq,nq->np", solver, W0.reshape(n, 36))
+    L = np.einsum("npq,nkq->npk", solver, Wl.reshape(n, 10, 36))
+    theta = np.linalg.solve(np.eye(10)[None] - L, t0[..., None])[..., 0]
+    if problem.options.physical:  # few resamples leave the consistent set: one at a time
+        theta = np.array([constrain_physical(t, Nk) for t, Nk in zip(theta, N, strict=True)])
+    K = K0 + np.einsum("np,npij->nij", theta, Kl)
+    C = C0 + np.einsum("np,npij->nij", theta, Cl)
+    return theta, K, C
+
+
+def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: Bands,
+                    X: NDArray[np.complex128], wm_: NDArray[np.float64],
+                    ws_: NDArray[np.float64]) -> Triple:
+    """:func:`_solve_batch` for a fit with leakage shapes (the cleaning of the accelerances
+    makes the iteration non-linear): the iteration itself, from the main fit's solution,
+    resample by resample."""
+    from processing.identify import _leakage_shapes
+
+    msel, ins = weights.mass_lines, bands.in_stiffness
+    shapes = _leakage_shapes(problem, bands)
+    if not shapes:  # the upper residual the fit chose
+        shapes = [(problem.w / problem.w[-1]) ** 2 + 0j]
+    stacked = np.array([stack_real(sh[msel]) for sh in shapes])
+    opt = dataclasses.replace(problem.options, tol=max(problem.options.tol, 1e-9))
+    out = []
+    for Xb, wmb, wsb in zip(X, wm_, ws_, strict=True):  # not affine: one at a time
+        weights = dataclasses.replace(weights, mass=wmb, stiffness=wsb)
+        pb = dataclasses.replace(problem, X=Xb, options=opt)
+        ops = (fitted.operators if problem.improved
+               else line_operators(Xb[..., ins], problem.T, problem.w[ins]))
+        step = _StiffnessStep(pb, weights, ops, weights.stiffness_lines[ins])
+        step.model = fitted.damping_model
+        ml = MassLineProblem(Xb[..., msel], weights=weights.mass, row_scale=problem.row_scale,
+                             shapes=stacked)
+        Xs = Xb[..., weights.stiffness_lines]
+        _, theta, K, C, _D, Xc, _, _ = _iterate(pb, weights, ml, step, shapes, (fitted.theta, Xs))
+        if problem.options.physical:  # K, C on the cleaned lines, as the main fit
+            theta = constrain_physical(theta, ml.normal)
+            K, C, _D = step(mass_matrix(theta), Xc)
+        out.append((theta, K, C))
+    return np.array([o[0] for o in out]), np.array([o[1] for o in out]), np.array(
+        [o[2] for o in out])
+
+
+def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
+             units: TimeUnits, n: int = DEFAULT_RESAMPLES, seed: int = 0) -> Bootstrap | str:
+    """Bootstrap the main fit over the time data's units; or, when it cannot run, why not.
+
+    Parameters
+    ----------
+    problem, bands, weights, fitted : the main identification's stages
+    units : the units of the problem's columns, in its column order
+    n : resamples (at least 2)
+    seed : of the resampling (the same seed gives the same resamples)
+    """
+    if n < 2:
+        raise InputError(f"the bootstrap needs at least 2 resamples, got {n}")
+    few = [(lab, c.n_units) for lab, c in zip(units.labels(), units.columns, strict=True)
+           if c.n_units < 2]
+    if few:
+        return (f"no bootstrap over {units.kind}s: {few[0][0]} has {few[0][1]} "
+                f"(at least 2 needed)")
+    used = weights.mass_lines | weights.stiffness_lines
+    rng = np.random.default_rng([seed, 15])
+    counts = [rng.multinomial(c.n_units, np.full(c.n_units, 1.0 / c.n_units), size=n)
+              .astype(float) for c in units.columns]
+    # the units must give the FRFs the fit used (the nominal: every unit once)
+    lines = problem.freq[used]
+    nominal = _resampled_frfs(units, lines, [np.ones((1, c.n_units)) for c in units.columns])
+    if nominal is None:
+        return f"no bootstrap over {units.kind}s: their lines differ from the FRFs'"
+    ref = problem.H[..., used]
+    if not np.allclose(np.transpose(nominal[0][..., 0], (2, 0, 1)), ref, rtol=1e-6,
+                       atol=1e-9 * float(np.max(np.abs(ref)))):
+        return f"no bootstrap over {units.kind}s: their spectra do not give the FRFs identified"
+    idx = np.flatnonzero(used)
+    mass = np.isin(idx, np.flatnonzero(weights.mass_lines))
+    stiff = np.isin(idx, np.flatnonzero(weights.stiffness_lines))
+    shapes = fitted.mass_line is not None and fitted.mass_line.shapes is not None
+    # resamples in chunks: the FRFs of a chunk hold at most CHUNK_VALUES values
+    size = len(units.columns) * lines.size * problem.H.shape[0]
+    step = max(1, min(n, CHUNK_VALUES // max(size, 1)))
+    out = []
+    for lo in range(0, n, step):
+        drawn = _resampled_frfs(units, lines, [c[lo:lo + step] for c in counts])
+        assert drawn is not None
+        X, colw = weighted_accelerances(problem, used, *drawn)  # (m, l, 6, e), (m, e, l)
+        wm_ = colw[..., mass] * (weights.mass > 0)  # a column the main fit dropped stays out
+        ws_ = colw[..., stiff] * (weights.stiffness > 0)
+        if shapes:
+            Xall = np.broadcast_to(problem.X, (X.shape[0], *problem.X.shape)).copy()
+            Xall[..., used] = np.transpose(X, (0, 2, 3, 1))
+            out.append(_solve_iterated(problem, weights, fitted, bands, Xall, wm_, ws_))
+        else:
+            out.append(_solve_batch(problem, weights, fitted, X[:, mass], X[:, stiff], wm_,
+                                    ws_))
+    theta, K, C = (np.concatenate([o[k] for o in out]) for k in range(3))
+    labels = units.labels()
+    groups = tuple(lab for lab, c in zip(labels, units.columns, strict=True)
+                   for _ in range(c.n_units))
+    return Bootstrap(theta, K, C, np.concatenate(counts, axis=1),
+                     groups, units.kind, tuple(c.n_units for c in units.columns))
+
+
+def bootstrap_identify(frf: FRFSet, options: IdentifyOptions | None = None,
+                       n: int = DEFAULT_RESAMPLES, seed: int = 0,
+                       ) -> tuple[Fit, Bootstrap | str]:
+    """The main fit of ``identify(frf, options)`` and its bootstrap over the units in
+    ``frf.meta["time_units"]`` alone (without the other sources): for studies of the
+    bootstrap itself. Bands as :func:`processing.identify.identify` takes or chooses them;
+    no point refinement."""
+    from processing.identify import _rigid_band_tops, choose_bands, fit, weigh_lines
+
+    opt = options or IdentifyOptions()
+    units = frf.meta.get("time_units")
+    if not isinstance(units, TimeUnits):
+        raise InputError("the FRFs carry no per-hit or per-block spectra (time data only)")
+    aligned = units.aligned(frf.exc_nodes, frf.exc_dirs)
+    if aligned is None:
+        raise InputError("the time data's units do not cover every excitation column")
+    tops: tuple[float | None, float | None] = (None, None)
+    if opt.use_rigidity and (opt.mass_band is None or opt.stiffness_band is None):
+        tops = _rigid_band_tops(frf)[:2]
+    tau = frf.meta.get("exponential_tau")
+    problem = prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
+                      coherence=frf.coherence, options=opt,
+                      exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0
+                      else None)
+    bands = choose_bands(problem, *tops)
+    weights = weigh_lines(problem, bands)
+    fitted = fit(problem, bands, weights)
+    return fitted, resample(problem, bands, weights, fitted, aligned, n, seed)

@@ -1,0 +1,207 @@
+"""Time data's averaging units: the spectra of each hit (hammer) or block (shaker) of a column.
+
+A point's FRF column from time data is a ratio of averaged spectra: H1 is
+``sum_u S_fx,u / sum_u S_ff,u`` over the point's units ``u`` (the accepted hits of a hammer
+test, the blocks of a shaker test). Keeping them unit by unit lets the FRFs be formed again
+from any resample of the units (:mod:`processing.bootstrap`). The pipeline attaches a test's
+:class:`TimeUnits` to ``FRFSet.meta["time_units"]``. Continuous random records (Welch,
+overlapping segments) are cut into contiguous blocks of segments (:func:`welch_units`), so
+that neighbouring units share at most one overlapping segment (a block bootstrap).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import scipy.fft
+from numpy.typing import ArrayLike, NDArray
+
+from processing.data import InputError
+from processing.spectral import CrossSpectra, SpectralAccumulator
+
+__all__ = ["MIN_UNITS", "TimeUnits", "UnitKind", "UnitSpectra", "record_units", "welch_units"]
+
+#: the bootstrap runs by default when every excitation column has at least this many units
+MIN_UNITS = 3
+#: continuous random records: at most this many blocks a run, of at least WELCH_MIN_SEGMENTS
+WELCH_BLOCKS = 20
+WELCH_MIN_SEGMENTS = 2
+
+UnitKind = Literal["hit", "block"]
+
+
+@dataclass(frozen=True)
+class UnitSpectra:
+    """One excitation column's spectra, unit by unit (one reference: the column's force).
+
+    Attributes
+    ----------
+    freq : (n_f,) Hz
+    Sff : (n_u, n_f) force auto-spectrum of each unit
+    Sfx : (n_u, n_resp, n_f) cross-spectra force -> responses (``conj(F) X``)
+    Sxx : (n_u, n_resp, n_f) response auto-spectra
+    weight : (n_u,) segments each unit averages (the weight of its spectra in the mean)
+
+    All spectra of one column share one scaling; only their ratios matter.
+    """
+
+    freq: NDArray[np.float64]
+    Sff: NDArray[np.float64]
+    Sfx: NDArray[np.complex128]
+    Sxx: NDArray[np.float64]
+    weight: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        n_u, n_r, n_f = np.shape(self.Sfx)
+        if np.shape(self.Sff) != (n_u, n_f) or np.shape(self.Sxx) != (n_u, n_r, n_f):
+            raise InputError(f"unit spectra shapes differ: Sff {np.shape(self.Sff)}, Sfx "
+                             f"{np.shape(self.Sfx)}, Sxx {np.shape(self.Sxx)}")
+        if np.shape(self.weight) != (n_u,) or np.size(self.freq) != n_f:
+            raise InputError("unit spectra: one weight per unit and one frequency per line")
+
+    def __repr__(self) -> str:  # short: the FRF file writes meta values as text
+        return f"UnitSpectra({self.n_units} units, {self.Sfx.shape[1]} responses)"
+
+    @property
+    def n_units(self) -> int:
+        return int(self.Sff.shape[0])
+
+    @classmethod
+    def of(cls, spectra: Sequence[CrossSpectra]) -> UnitSpectra:
+        """Units from averaged spectra of one reference (each weighted by its averages)."""
+        if not spectra:
+            raise InputError("no unit spectra")
+        for sp in spectra:
+            if sp.n_ref != 1:
+                raise InputError(f"unit spectra need one reference per column, got {sp.n_ref}")
+        return cls(spectra[0].freq, np.stack([sp.Sff[0, 0].real for sp in spectra]),
+                   np.stack([sp.Sfx[0] for sp in spectra]), np.stack([sp.Sxx for sp in spectra]),
+                   np.array([float(sp.n_averages) for sp in spectra]))
+
+    @classmethod
+    def concat(cls, parts: Sequence[UnitSpectra]) -> UnitSpectra:
+        """The units of several recordings of one column, in order."""
+        if not parts:
+            raise InputError("no unit spectra to join")
+        for p in parts[1:]:
+            if not np.array_equal(p.freq, parts[0].freq):
+                raise InputError("unit spectra with different frequency lines")
+        return cls(parts[0].freq, np.concatenate([p.Sff for p in parts]),
+                   np.concatenate([p.Sfx for p in parts]),
+                   np.concatenate([p.Sxx for p in parts]),
+                   np.concatenate([p.weight for p in parts]))
+
+    def mean(self) -> CrossSpectra:
+        """The weighted mean of the units (the spectra the column's FRF is formed from)."""
+        w = self.weight / self.weight.sum()
+        return CrossSpectra(self.freq, (w @ self.Sff)[None, None] + 0j,
+                            np.einsum("u,urf->rf", w, self.Sfx)[None],
+                            np.einsum("u,urf->rf", w, self.Sxx), int(self.weight.sum()),
+                            (0,), tuple(range(1, self.Sfx.shape[1] + 1)))
+
+
+@dataclass(frozen=True)
+class TimeUnits:
+    """The averaging units of every excitation column of a time-data test.
+
+    ``columns`` in the order of ``exc_nodes`` / ``exc_dirs`` (n_exc, 3); ``kind`` "hit"
+    (hammer) or "block" (shaker blocks, or blocks of segments of continuous records);
+    ``estimator`` the FRF estimator ("H1", "H2", "Hv").
+    """
+
+    kind: UnitKind
+    columns: tuple[UnitSpectra, ...]
+    exc_nodes: NDArray[np.int64]
+    exc_dirs: NDArray[np.float64]
+    estimator: str = "H1"
+
+    def __repr__(self) -> str:  # short: the FRF file writes meta values as text
+        n = [c.n_units for c in self.columns]
+        return f"TimeUnits({len(n)} columns, {min(n, default=0)}-{max(n, default=0)} {self.kind}s)"
+
+    def aligned(self, exc_nodes: NDArray[np.int64], exc_dirs: NDArray[np.float64],
+                ) -> TimeUnits | None:
+        """The units of the columns ``exc_nodes`` / ``exc_dirs`` in that order; None when a
+        column has none."""
+        idx = []
+        for n, d in zip(np.asarray(exc_nodes), np.asarray(exc_dirs, float), strict=True):
+            hit = np.flatnonzero((self.exc_nodes == n)
+                                 & np.all(np.abs(self.exc_dirs - d) < 1e-6, axis=1))
+            if hit.size == 0:
+                return None
+            idx.append(int(hit[0]))
+        return TimeUnits(self.kind, tuple(self.columns[i] for i in idx),
+                         self.exc_nodes[idx], self.exc_dirs[idx], self.estimator)
+
+    def labels(self) -> tuple[str, ...]:
+        """Contribution names of the columns: ``"hits of node 3:+z"``."""
+        return tuple(f"{self.kind}s of node {n}{_axis(d)}"
+                     for n, d in zip(self.exc_nodes, self.exc_dirs, strict=True))
+
+
+def _axis(d: NDArray[np.float64]) -> str:
+    k = int(np.argmax(np.abs(d)))
+    return f":{'+' if d[k] >= 0 else '-'}{'xyz'[k]}"
+
+
+def record_units(records: ArrayLike, fs: float, windows: ArrayLike | None = None,
+                 force_channel: int = 0) -> UnitSpectra:
+    """Per-record spectra of windowed records (n_rec, n_ch, n): one unit per record, scaled
+    as :func:`processing.spectral.record_spectra` (whose average they are)."""
+    rec = np.asarray(records, dtype=float)
+    x = rec * (1.0 if windows is None else np.asarray(windows, dtype=float))
+    n = x.shape[-1]
+    Z = scipy.fft.rfft(x, axis=-1)
+    scale = np.full(Z.shape[-1], 2.0 / (fs * n))
+    scale[0] /= 2
+    if n % 2 == 0:
+        scale[-1] /= 2
+    F = Z[:, force_channel]
+    resp = [c for c in range(x.shape[1]) if c != force_channel]
+    Xr = Z[:, resp]
+    return UnitSpectra(np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64),
+                       np.abs(F) ** 2 * scale,
+                       np.conj(F)[:, None] * Xr * scale, np.abs(Xr) ** 2 * scale,
+                       np.ones(rec.shape[0]))
+
+
+def welch_units(acc: SpectralAccumulator, data: NDArray[np.floating],
+                n_blocks: int = WELCH_BLOCKS) -> tuple[CrossSpectra, UnitSpectra | None]:
+    """Feed ``data`` (n_ch, n) to ``acc`` in pieces and return its spectra and the blocks of
+    contiguous segments as units (None under ``MIN_UNITS`` blocks of
+    ``WELCH_MIN_SEGMENTS``).
+
+    The accumulator's result is the same, bit for bit, as one update with all of ``data``
+    (:class:`~processing.spectral.SpectralAccumulator`); a block's spectra are the
+    difference of the running sums before and after its segments. ``acc`` must be new.
+    """
+    N, step = acc.nperseg, acc.step
+    n = data.shape[-1]
+    n_seg = 0 if n < N else (n - N) // step + 1
+    g = min(n_blocks, n_seg // WELCH_MIN_SEGMENTS)
+    if g < MIN_UNITS:
+        acc.update(data)
+        return acc.spectra(), None
+    ends = [round(n_seg * (j + 1) / g) for j in range(g)]  # segments done after block j
+    blocks: list[CrossSpectra] = []
+    fed, prev = 0, None
+    for e in ends:
+        stop = n if e == n_seg else (e - 1) * step + N
+        acc.update(data[:, fed:stop])
+        fed = stop
+        now = acc.spectra()
+        if prev is None:
+            blocks.append(now)
+        else:
+            k0, k1 = prev.n_averages, now.n_averages
+            blocks.append(CrossSpectra(
+                now.freq, (now.Sff * k1 - prev.Sff * k0) / (k1 - k0),
+                (now.Sfx * k1 - prev.Sfx * k0) / (k1 - k0),
+                (now.Sxx * k1 - prev.Sxx * k0) / (k1 - k0), k1 - k0,
+                now.ref_channels, now.resp_channels))
+        prev = now
+    assert prev is not None
+    return prev, UnitSpectra.of(blocks)
