@@ -281,6 +281,21 @@ def groups(rows: list[dict[str, Any]]) -> list[tuple[str, list[dict[str, Any]]]]
     for tag in sorted({t for r in rows for t in r["tags"]}):
         out.append((f"[{tag}]", [r for r in rows if tag in r["tags"]]))
     out.append(("all", rows))
+    out.append(("all, article answered", [r for r in rows if "errors" in r["article"]]))
+    return out
+
+
+def ratios(rows: list[dict[str, Any]]) -> list[tuple[str, float, float]]:
+    """(metric, default / article median, default / article p95) on the scenarios both
+    answered."""
+    both = [r for r in rows if "errors" in r["article"] and "errors" in r["default"]]
+    out = []
+    for key, _ in METRICS:
+        d = np.array([r["default"]["errors"][key] for r in both])
+        a = np.array([r["article"]["errors"][key] for r in both])
+        if d.size:
+            out.append((key, float(np.median(d) / np.median(a)),
+                        float(np.percentile(d, 95) / np.percentile(a, 95))))
     return out
 
 
@@ -354,6 +369,9 @@ def main(argv: list[str] | None = None) -> int:
     both = sum(1 for r in rows if "errors" in r["article"])
     console.print(f"default worse than the article's method in some metric (or refused where "
                   f"it answered): {len(worse)} of {both} scenarios the article answered")
+    for key, med, p95 in ratios(rows):
+        console.print(f"  {key}: default / article on the scenarios both answered: median "
+                      f"{med:.2f}, p95 {p95:.2f}")
     for method in METHODS:
         for count, kind, _ in refusal_kinds(rows, method):
             console.print(f"  {method} refused {count}x: {kind}")
@@ -408,6 +426,13 @@ def write_docs(body: list[list[str]], rows: list[dict[str, Any]], worse: list[st
         f"Scenarios where `default` is worse than the article's method in at least one "
         f"metric, or refuses where it answers: **{len(worse)}** of the {both} it answered.",
         "",
+        "Ratios default / article on the scenarios both answered (group `all, article "
+        "answered`):",
+        "",
+        "| metric | median ratio | p95 ratio |",
+        "| --- | ---: | ---: |",
+        *(f"| {k} | {m:.2f} | {q:.2f} |" for k, m, q in ratios(rows)),
+        "",
     ]
     for method in METHODS:
         kinds = refusal_kinds(rows, method)
@@ -416,7 +441,7 @@ def write_docs(body: list[list[str]], rows: list[dict[str, Any]], worse: list[st
                       "example):", "",
                       *(f"- {n}: `{k}` (e.g. `{ex}`)" for n, k, ex in kinds), ""]
     old = DOCS.read_text() if DOCS.exists() else ""
-    kept = COVERAGE_TITLE + old.split(COVERAGE_TITLE, 1)[1] if COVERAGE_TITLE in old else ""
+    kept = old[old.index("\n## ") + 1:] if "\n## " in old else ""  # the other sections
     DOCS.write_text("\n".join(lines) + ("\n\n" + kept if kept else ""))
 
 
