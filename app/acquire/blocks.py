@@ -125,6 +125,18 @@ class BlockAnalysis:
         return SpectralAccumulator(self.plan.record.fs, s.nperseg, 0, detrend=False,
                                    window=WINDOWS[s.waveform], references=(0,))
 
+    def warm_up(self) -> None:
+        """Load the spectral kernels (numba's cache on disk, or compile them) and run one
+        block of this run's layout through them, results thrown away.
+
+        The first spectrum of a process takes about 0.4 s more than the next ones (more on
+        a loaded machine): longer than a shaker's watchdog. The procedure calls this before
+        any output goes on, so the first block is analysed as fast as the others.
+        """
+        acc = self._accumulator()
+        acc.update(np.zeros((len(self.names), self.plan.shaker.nperseg)))
+        frf(acc.spectra(), self.plan.record.estimator)
+
     def add(self, hit_id: int, point: int, data: NDArray[np.float64],
             override: str = "") -> tuple[bool, str, float] | None:
         """Judge a stored block; returns its verdict (None if it has lost samples)."""

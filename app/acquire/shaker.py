@@ -15,7 +15,10 @@ The output goes off at the end of each point, on pause and stop, on any error
 procedure dies: with an SG-1 (``shaker-scpi``) the device's watchdog is fed by
 the procedure's own worker, after every read, not by a free-running thread, so a
 worker that hangs (a listener blocking it, a deadlock) turns the output off
-within ``heartbeat`` s as surely as a killed process does.
+within ``heartbeat`` s as surely as a killed process does. So that the first
+block's analysis is no slower than the others', the spectral kernels are loaded
+and run once (:meth:`~app.acquire.blocks.BlockAnalysis.warm_up`) before any
+device is opened.
 
 Example
 -------
@@ -129,6 +132,11 @@ class ShakerProcedure(RecordingProcedure):
         self._t_offset = 0.0
 
     # -- set-up ---------------------------------------------------------------------------------
+    def startup(self) -> None:
+        # the first spectrum loads the kernels: before the output is on and its watchdog armed
+        self.analysis.warm_up()
+        super().startup()
+
     def _resolve(self, force_choice: str | None, shaker_choice: str | None) -> None:
         st, plan = self.station, self.plan
         resp = plan.response_channels(st)

@@ -17,7 +17,9 @@ another process (``insitu mock-bench --station BENCH.toml``), through the same
 drivers and transports as real hardware; a simulated operator hits each point
 the run names (or attaches the shaker there) through the bench's control
 channel, whose address is in the station's ``[extra.mock_bench]`` table. A run
-that pauses then (a device stopped answering) is stopped, its records kept.
+on a mock bench (``--mock`` or ``--mock-operator``) that pauses (a device stopped
+answering, the shaker's amplifier tripped) is stopped, its records kept: nobody is
+there to fix the bench and resume.
 """
 
 from __future__ import annotations
@@ -295,10 +297,13 @@ def run(args: argparse.Namespace) -> int:
             proc.start()
             try:
                 while proc.wait(0.2) is not RunState.FINISHED and proc.running:
-                    if operator is not None and (operator.error
-                                                 or proc.state is RunState.PAUSED):
-                        # nobody at the bench to fix and resume: stop, the records are kept
-                        gave_up = operator.error or f"run paused: {proc.message}"
+                    if ((operator is not None and operator.error) or (
+                            proc.state is RunState.PAUSED
+                            and (operator is not None or bench is not None))):
+                        # a simulated bench: nobody there to fix and resume: stop, the
+                        # records are kept
+                        gave_up = (operator.error if operator is not None else "") or \
+                            f"run paused: {proc.message}"
                         _stop(proc, args.out)
                     elif proc.state is RunState.PAUSED and bars.paused.startswith(ATTACH):
                         bars.paused = ""
