@@ -10,10 +10,18 @@ overlap between blocks: a rejected block or a pause never joins two pieces of
 signal), windowed for its waveform (:data:`WINDOWS`): Hann for random, none for
 burst random (each block starts at a burst) and periodic chirp (one period per
 block), which are leakage-free.
+
+The spectra are the offline path's: the parallel numba kernel of
+:class:`~processing.spectral.SpectralAccumulator`, its channels shared by
+:data:`WORKERS` threads (as :mod:`app.pipeline.time_uff` does for a time recording).
+Live, each block is one call; a point rebuilt from its stored blocks (a verdict
+changed, ``insitu replay``) is fed :data:`REBUILD_BLOCKS` blocks per call, the same
+segments in the same order, so the sums are the same bits.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -24,11 +32,15 @@ from app.acquire.plan import ShakerSettings, TestPlan
 from processing.data import FRFSet, Geometry, InputError
 from processing.spectral import CrossSpectra, SpectralAccumulator, frf
 
-__all__ = ["WINDOWS", "BlockAnalysis", "BlockResult", "RecordLoader", "block_verdict",
-           "shaker_frfset"]
+__all__ = ["REBUILD_BLOCKS", "WINDOWS", "WORKERS", "BlockAnalysis", "BlockResult",
+           "RecordLoader", "block_verdict", "shaker_frfset"]
 
 #: window of each waveform's blocks (scipy window names)
 WINDOWS = {"random": "hann", "burst-random": "boxcar", "chirp": "boxcar"}
+#: threads of the spectral kernel: both cores of a bench PC, as the offline path
+WORKERS = min(2, os.cpu_count() or 1)
+#: stored blocks fed to the kernel per call when a point is rebuilt
+REBUILD_BLOCKS = 16
 
 
 def block_verdict(data: NDArray[np.float64], names: Sequence[str],
@@ -90,7 +102,8 @@ class BlockAnalysis:
     Memory does not grow with the blocks: each point keeps its spectral accumulator, fed
     a used block as it comes; per block, only its point and verdict. A change that cannot
     be fed in order (a verdict changed on an older block) rebuilds the point's accumulator
-    from the stored blocks, read one at a time with ``loader``, in acquisition order.
+    from the stored blocks, read one at a time with ``loader`` and fed
+    :data:`REBUILD_BLOCKS` at a time, in acquisition order.
 
     Parameters
     ----------
@@ -101,12 +114,16 @@ class BlockAnalysis:
     loader : callable, optional
         ``loader(ids)`` yields ``(id, data)`` for the stored blocks ``ids``. Without it, a
         rebuild raises RuntimeError.
+    workers : int, optional
+        Threads of the spectral kernel (default :data:`WORKERS`); the sums are the same
+        bits whatever their number.
     """
 
     def __init__(self, plan: TestPlan, names: Sequence[str],
-                 ranges: NDArray[np.float64] | None, loader: RecordLoader | None = None
-                 ) -> None:
+                 ranges: NDArray[np.float64] | None, loader: RecordLoader | None = None,
+                 workers: int | None = None) -> None:
         self.plan = plan
+        self.workers = WORKERS if workers is None else workers
         self.names = tuple(names)
         self.ranges = ranges
         self.loader = loader
@@ -123,7 +140,8 @@ class BlockAnalysis:
         # no detrend: the sensors are AC-coupled, and a mean removed from the force of a
         # periodic block would leave 0/0 (NaN) on the 0 Hz line
         return SpectralAccumulator(self.plan.record.fs, s.nperseg, 0, detrend=False,
-                                   window=WINDOWS[s.waveform], references=(0,))
+                                   window=WINDOWS[s.waveform], references=(0,),
+                                   workers=self.workers)
 
     def warm_up(self) -> None:
         """Load the spectral kernels (numba's cache on disk, or compile them) and run one
@@ -205,9 +223,15 @@ class BlockAnalysis:
             raise RuntimeError("rebuilding a point's average needs the stored blocks: give "
                                "BlockAnalysis a loader")
         st = _Point(self._accumulator())
+        batch: list[NDArray[np.float64]] = []
         for i, data in self.loader(ids):
-            st.acc.update(data)
+            batch.append(data)
             st.ids.append(i)
+            if len(batch) == REBUILD_BLOCKS:
+                st.acc.update(np.concatenate(batch, axis=1))  # no overlap: the same segments
+                batch.clear()
+        if batch:
+            st.acc.update(np.concatenate(batch, axis=1))
         return st
 
 
