@@ -11,6 +11,12 @@ signal), windowed for its waveform (:data:`WINDOWS`): Hann for random, none for
 burst random (each block starts at a burst) and periodic chirp (one period per
 block), which are leakage-free.
 
+With several shakers driven at once (``[shaker] shakers``), a block holds every force
+(rows ``0 .. shakers - 1``) then the responses, and is stored under its drive (the
+stop where those shakers were attached, :attr:`~app.acquire.plan.TestPlan.drives`);
+the drive's spectra have every force as a reference and its multiple-reference H1
+gives one FRF column per excitation driven.
+
 The spectra are the offline path's: the parallel numba kernel of
 :class:`~processing.spectral.SpectralAccumulator`, its channels shared by
 :data:`WORKERS` threads (as :mod:`app.pipeline.time_uff` does for a time recording).
@@ -44,18 +50,20 @@ REBUILD_BLOCKS = 16
 
 
 def block_verdict(data: NDArray[np.float64], names: Sequence[str],
-                  ranges: NDArray[np.float64] | None) -> tuple[bool, str, float]:
-    """Automatic verdict of one block (force row 0, N; responses m/s^2).
+                  ranges: NDArray[np.float64] | None, n_forces: int = 1
+                  ) -> tuple[bool, str, float]:
+    """Automatic verdict of one block (force rows ``0 .. n_forces - 1``, N; responses m/s^2).
 
-    Returns ``(accepted, reason, peak force N)``: a block with lost samples or with a
-    channel at or above 99 % of its range (``ranges`` in each row's unit) is rejected.
+    Returns ``(accepted, reason, peak force N)`` (the largest of the forces): a block
+    with lost samples or with a channel at or above 99 % of its range (``ranges`` in each
+    row's unit) is rejected.
 
     Examples
     --------
     >>> block_verdict(np.array([[1.0, -3.0], [0.5, 9.95]]), ["F", "a1"], np.array([10, 10.]))
     (False, 'overload on a1 (peak at or above 99 % of its range)', 3.0)
     """
-    force = data[0]
+    force = data[:n_forces]
     finite = force[np.isfinite(force)]
     peak = float(np.abs(finite).max()) if finite.size else float("nan")
     lost = int(np.count_nonzero(np.isnan(data).any(axis=0)))
@@ -96,6 +104,10 @@ RecordLoader = Callable[[Sequence[int]], Iterable[tuple[int, NDArray[np.float64]
 
 class BlockAnalysis:
     """FRFs of a shaker run, point by point, kept up to date as blocks and verdicts change.
+
+    A "point" here is a drive of the plan (:attr:`~app.acquire.plan.TestPlan.drives`):
+    the excitation point itself with one shaker, the excitations driven together with
+    several; :meth:`point` then gives their columns, one per force.
 
     Same interface as :class:`app.acquire.analysis.RunAnalysis`: :meth:`add` a stored
     block, :meth:`set_used` its verdict in force, :meth:`point` the averaged column.
@@ -140,7 +152,8 @@ class BlockAnalysis:
         # no detrend: the sensors are AC-coupled, and a mean removed from the force of a
         # periodic block would leave 0/0 (NaN) on the 0 Hz line
         return SpectralAccumulator(self.plan.record.fs, s.nperseg, 0, detrend=False,
-                                   window=WINDOWS[s.waveform], references=(0,),
+                                   window=WINDOWS[s.waveform],
+                                   references=tuple(range(self.plan.n_references)),
                                    workers=self.workers)
 
     def warm_up(self) -> None:
@@ -161,7 +174,7 @@ class BlockAnalysis:
         if hit_id in self._point_of and self._point_of[hit_id] != point:
             self._stale.add(self._point_of[hit_id])
         self._point_of[hit_id] = point
-        verdict = block_verdict(data, self.names, self.ranges)
+        verdict = block_verdict(data, self.names, self.ranges, self.plan.n_references)
         finite = bool(np.all(np.isfinite(data)))
         self._finite[hit_id] = finite
         self._pending = (hit_id, data) if finite else None
@@ -237,18 +250,22 @@ class BlockAnalysis:
 
 def shaker_frfset(plan: TestPlan, points: Sequence[BlockResult | None], geometry: Geometry,
                   resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64]) -> FRFSet:
-    """All points' FRF columns as one FRF set (raises InputError naming a point without blocks)."""
-    cols, cohs = [], []
-    for j, r in enumerate(points):
+    """All drives' FRF columns as one FRF set, one column per excitation in plan order
+    (``points[d]``: drive ``d``'s result; raises InputError naming a drive without blocks)."""
+    cols, cohs, n_avg = [], [], []
+    for d, r in enumerate(points):
         if r is None:
-            raise InputError(f"excitation {plan.excitations[j].label} has no accepted block: "
+            labels = " and ".join(plan.excitations[j].label for j in plan.drives[d])
+            raise InputError(f"excitation {labels} has no accepted block: "
                              "resume the run (insitu acquire --resume)")
         cols.append(r.H)
         cohs.append(r.coherence)
+        n_avg += [r.n_accepted] * r.H.shape[1]
     first = next(r for r in points if r is not None)
+    meta: dict[str, object] = {"estimator": plan.record.estimator,
+                               "excitation": f"shaker {plan.shaker.waveform}",
+                               "window": WINDOWS[plan.shaker.waveform], "n_averages": n_avg}
+    if plan.n_references > 1:
+        meta["shakers"] = plan.n_references
     return FRFSet(first.freq, np.concatenate(cols, axis=1), resp_nodes, resp_dirs,
-                  plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1),
-                  {"estimator": plan.record.estimator,
-                   "excitation": f"shaker {plan.shaker.waveform}",
-                   "window": WINDOWS[plan.shaker.waveform],
-                   "n_averages": [0 if r is None else r.n_accepted for r in points]})
+                  plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1), meta)

@@ -109,6 +109,10 @@ class ShakerProcedure(RecordingProcedure):
         if plan.method != "shaker":
             raise PlanError(f"{plan.source}: plan.method is {plan.method!r}; "
                             "this is the shaker procedure")
+        if plan.n_references > 1:
+            raise PlanError(f"{plan.source}: shaker.shakers is {plan.n_references}: this "
+                            "procedure drives one shaker at a time; give each point its own "
+                            "stop (shakers = 1)")
         self.plan, self.station = plan, station
         self.device_options = {k: dict(v) for k, v in (device_options or {}).items()}
         self.do_identify = identify
@@ -330,7 +334,7 @@ class ShakerProcedure(RecordingProcedure):
 
     def _complete(self) -> None:
         assert self.writer is not None
-        points = [self.analysis.point(j) for j in range(len(self.plan.excitations))]
+        points = [self.analysis.point(d) for d in range(len(self.plan.drives))]
         frf = shaker_frfset(self.plan, points, self.plan.geometry(),
                             *self.plan.response_dofs(self.station))
         self._finish_run(frf)
