@@ -38,13 +38,15 @@ A plan is a TOML file::
 
 Response directions come from the station channels (their ``direction``).
 
-With ``shakers = 2`` (or more) the ``[[excitation]]`` tables are taken two at a time,
-in order: the first two are driven together (one shaker each, different random
-signals, correlated or not), then the next two, and so on. Each such *drive* is one
-stop of the test: its blocks hold both forces (the front end's force channels, in
+With ``shakers = 2`` (or more) the ``[[excitation]]`` tables are taken ``shakers`` at a
+time, in order: with two, the first two are driven together (one shaker each, different
+random signals, correlated or not), then the next two, and so on. Each such *drive* is
+one stop of the test: its blocks hold every force (the front end's force channels, in
 plan order) then the responses, and one multiple-reference H1 (``H = G_xf G_ff^-1``)
-gives its excitations' two FRF columns; ``averages`` counts blocks per drive. Plans
-with one shaker have one excitation per drive.
+gives one FRF column per excitation driven; ``averages`` counts blocks per drive. With
+one shaker each drive is one excitation. Random or burst-random only (each shaker its
+own signal; burst random needs generators that start their bursts together).
+
 Every error is one line naming the key, as ``plan.toml: record.fs: must be > 0, got -1``.
 
 Example
@@ -461,6 +463,10 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
     if k > 1:
         if method != "shaker":
             raise c.fail("shaker.shakers", f"{k} shakers need plan.method = 'shaker'")
+        if shaker.waveform == "chirp":
+            raise c.fail("shaker.shakers", f"{k} shakers need random or burst-random signals "
+                         "(every shaker would play the same chirp: the forces could not be "
+                         "told apart)")
         if len(excs) % k:
             raise c.fail("excitation", f"{len(excs)} excitations for shaker.shakers = {k}: "
                          f"give them {k} at a time (the points driven together)")

@@ -121,16 +121,16 @@ def _mock_plan(args: argparse.Namespace) -> TestPlan:
     return plan_for_bench(args.bench, points=pts, hits=args.hits, length=args.length)
 
 
-def _in_process_bench(name: str, fs: float) -> InProcessBench:
-    """The built-in mock bench ``name`` in this process (front end at ``fs`` Hz); one line
-    where it cannot run."""
+def _in_process_bench(name: str, fs: float, shakers: int = 1) -> InProcessBench:
+    """The built-in mock bench ``name`` in this process (front end at ``fs`` Hz, ``shakers``
+    shakers); one line where it cannot run."""
     from app.mockbench import unavailable
 
     if why := unavailable():
         raise UserError(f"--mock: {why}")
     from app.mockbench.bench import InProcessBench
 
-    return InProcessBench(name, fs_frontend=fs)
+    return InProcessBench(name, fs_frontend=fs, shakers=shakers)
 
 
 def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Namespace,
@@ -274,7 +274,8 @@ def run(args: argparse.Namespace) -> int:
             known = plan if plan is not None or not args.resume else parse_plan(
                 read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan")
             fs = known.record.fs if known is not None else 1024.0
-            bench = stack.enter_context(_in_process_bench(args.bench, fs))
+            shakers = known.n_references if known is not None else 1
+            bench = stack.enter_context(_in_process_bench(args.bench, fs, shakers))
             station = bench.station
             if plan is None and not args.resume:
                 plan = _mock_plan(args)

@@ -250,8 +250,8 @@ def test_a_mock_run_that_pauses_stops_with_its_blocks_kept(
             if not self.shaker.errors and self.shaker.output:
                 self.shaker.amplifier_fault()
 
-    def bench(name: str, fs: float) -> InProcessBench:
-        b = made(name, fs)
+    def bench(name: str, fs: float, shakers: int = 1) -> InProcessBench:
+        b = made(name, fs, shakers)
         b.shaker_operator = Tripping(b.shaker)
         return b
 

@@ -1,10 +1,8 @@
 """Two shakers at once: a plan with ``shakers = 2``, a run file whose blocks hold both forces,
-and the pipeline's multiple-reference H1 (``G_xf G_ff^-1``) identifying the engine.
-
-The run is synthetic (the acquisition procedure drives one shaker at a time): burst-random
-blocks of the built-in engine bench, each drive's second force correlated with its first
-(correlation 0.6, as two shakers on one structure), the responses the bench's linear
-convolution of both forces.
+and the pipeline's multiple-reference H1 (``G_xf G_ff^-1``) identifying the engine: from a
+synthetic run (each drive's second force correlated with its first, correlation 0.6, as two
+shakers on one structure; the responses the bench's linear convolution of both forces), and
+acquired end to end on the mock bench with two shakers (``insitu acquire --mock``).
 """
 
 from __future__ import annotations
@@ -17,13 +15,12 @@ import pytest
 from numpy.testing import assert_allclose
 
 from app.acquire.analysis import run_frfs
-from app.acquire.plan import PlanError, TestPlan, parse_plan
+from app.acquire.plan import PlanError, TestPlan, load_plan, parse_plan
 from app.acquire.shaker import ShakerProcedure
 from app.cli.main import main
 from app.io.runfile import RunWriter, read_run
-from app.mockbench.bench import plan_for_bench
+from app.mockbench.bench import InProcessBench, plan_for_bench
 from drivers.base import ChannelConfig
-from drivers.station import parse_station
 from hardware_mocks.benches import get_bench
 from hardware_mocks.physics import BenchPhysics
 from processing.inertia import inertia_properties
@@ -33,6 +30,7 @@ from processing.spectral import SpectralAccumulator, frf
 POINTS = [0, 1, 3, 4, 6, 8, 9, 12, 15, 2]
 FS, NPS, BLOCKS = 512.0, 1024, 6
 RHO = 0.6  # correlation of the two forces of a drive
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _plan() -> TestPlan:
@@ -90,12 +88,14 @@ def test_the_plan_takes_the_excitations_two_at_a_time() -> None:
     data["plan"]["method"] = "hammer"
     with pytest.raises(PlanError, match=r"shaker\.shakers: 2 shakers need plan\.method"):
         parse_plan(data, "p.toml")
-    station = parse_station({"devices": {"fe": {"backend": "frontend-can", "fs": FS,
-                                                "transport": {"interface": "virtual",
-                                                              "channel": "x"},
-                                                "channels": []}}}, "s.toml")
-    with pytest.raises(PlanError, match="drives one shaker at a time"):
-        ShakerProcedure(plan, station, "never.h5")
+    data = plan.to_dict()
+    data["shaker"]["waveform"] = "chirp"
+    with pytest.raises(PlanError, match="need random or burst-random signals"):
+        parse_plan(data, "p.toml")
+    with InProcessBench("engine-rigid", fs_frontend=FS) as bench:  # one shaker, one force
+        with pytest.raises(PlanError, match="the plan drives 2 shakers at once; the station "
+                           "has 1 excitation devices and 1 force channels"):
+            ShakerProcedure(plan, bench.station, "never.h5")
 
 
 def test_two_correlated_shakers_identify_the_engine(tmp_path: Path) -> None:
@@ -147,3 +147,32 @@ def test_two_correlated_shakers_identify_the_engine(tmp_path: Path) -> None:
     replayed = tmp_path / "replay.json"
     assert main(["replay", str(path), "--out", str(replayed)]) == 0
     assert json.loads(replayed.read_text())["theta"] == res["theta"]
+
+
+def test_two_shakers_acquired_on_the_mock_bench_and_identified(tmp_path: Path) -> None:
+    """``insitu acquire --mock`` of docs/shaker_pair_plan.toml: two mock SG-1s on the
+    bench, each force on its own front-end input, five drives, then ``insitu identify``."""
+    plan_file = ROOT / "docs" / "shaker_pair_plan.toml"
+    plan = load_plan(plan_file)
+    assert plan.n_references == 2 and plan.shaker.waveform == "burst-random"
+    assert_allclose(plan.exc_nodes, _plan().exc_nodes)
+    path, out = tmp_path / "two.h5", tmp_path / "two.json"
+    assert main(["acquire", "--mock", "--bench", "engine-rigid", "--plan", str(plan_file),
+                 "--out", str(path)]) == 0
+    assert main(["identify", str(path), "--out", str(out)]) == 0
+    run = read_run(path)
+    assert run.state == "finished" and [c.name for c in run.channels[:2]] == ["F1_fe", "F2_fe"]
+    assert run.records.data.shape == (10, 14, NPS) and run.records.accepted.all()
+    assert run.records.point.tolist() == [d for d in range(5) for _ in range(2)]
+    f1, f2 = run.records.data[:, 0], run.records.data[:, 1]
+    assert (np.abs(f1).max(axis=1) > 20).all() and (np.abs(f2).max(axis=1) > 20).all()
+    assert abs(np.corrcoef(f1.ravel(), f2.ravel())[0, 1]) < 0.2  # two signals
+    assert run.frf is not None and run.frf.H.shape[1] == len(POINTS)
+    model = get_bench("engine-rigid").model
+    truth = inertia_properties(model.theta)
+    res = json.loads(out.read_text())
+    assert res["mass"] == pytest.approx(truth.mass, rel=0.005)
+    assert_allclose(res["cog"], truth.cog, atol=0.002)
+    assert_allclose(res["inertia_cog"], truth.inertia_cog,
+                    atol=0.01 * np.abs(truth.inertia_cog).max())
+    assert_allclose(res["stiffness"], model.K, atol=0.02 * np.abs(model.K).max())
