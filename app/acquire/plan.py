@@ -45,7 +45,8 @@ one stop of the test: its blocks hold every force (the front end's force channel
 plan order) then the responses, and one multiple-reference H1 (``H = G_xf G_ff^-1``)
 gives one FRF column per excitation driven; ``averages`` counts blocks per drive. With
 one shaker each drive is one excitation. Random or burst-random only (each shaker its
-own signal; burst random needs generators that start their bursts together).
+own signal; burst random needs generators that start their bursts together), and more
+blocks per drive than shakers.
 
 Every error is one line naming the key, as ``plan.toml: record.fs: must be > 0, got -1``.
 
@@ -467,6 +468,10 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
             raise c.fail("shaker.shakers", f"{k} shakers need random or burst-random signals "
                          "(every shaker would play the same chirp: the forces could not be "
                          "told apart)")
+        if shaker.averages <= k:
+            raise c.fail("shaker.averages", f"must be more than shaker.shakers ({k}): with "
+                         f"{shaker.averages} blocks for {k} forces the coherence is 1 whatever "
+                         "the data, and nothing is averaged")
         if len(excs) % k:
             raise c.fail("excitation", f"{len(excs)} excitations for shaker.shakers = {k}: "
                          f"give them {k} at a time (the points driven together)")
