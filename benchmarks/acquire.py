@@ -13,6 +13,15 @@
    CAN FD) read in 50 ms blocks; after each hit, as soon as its 1 s record is in,
    ``processing.impact.process_impacts`` and ``merge_results`` give the averaged H1.
    Latency = time the H1 is updated - host time of the record's last sample.
+4. Shaker block analysis, live and rebuilt (``app.acquire.blocks.BlockAnalysis``, the
+   spectral kernel the offline path uses): ``--blocks`` blocks of 1 force + 12 and of
+   1 force + 48 accelerations (``nperseg`` 2048), each judged, added and its point's
+   H1 read, one block every ``--block-gap`` s as a shaker run delivers them (the
+   kernel's threads go idle in between); one thread and two take turns on each block.
+   Then each point rebuilt from its stored blocks (a verdict changed, a replay), one
+   thread and two in turn. The sums of one and two threads are compared bit for bit.
+
+``--only blocks`` runs part 4 alone (no mock devices).
 
 Run: ``.venv/bin/python benchmarks/acquire.py`` (``--duration 5`` for a quick look).
 The mocks run in the same process (the virtual bus works within one process only),
@@ -183,16 +192,85 @@ def hit_to_frf(n_hits: int) -> list[float]:
     return latencies
 
 
+def block_analysis(n_ch: int, n_blocks: int, gap: float, repeat: int
+                   ) -> tuple[dict[int, list[float]], dict[int, list[float]], bool]:
+    """Per-block live times and per-block rebuild times (s) by number of threads, and
+    whether the sums of one and two threads are identical."""
+    from app.acquire.blocks import BlockAnalysis
+    from app.mockbench.bench import plan_for_bench
+
+    nps = 2048
+    plan = plan_for_bench("engine-rigid", points=[0], fs=1024.0, method="shaker", shaker={
+        "waveform": "random", "nperseg": nps, "averages": n_blocks})
+    rng = np.random.default_rng(0)
+    blocks = [rng.standard_normal((n_ch, nps)) for _ in range(n_blocks)]
+    names = [f"c{i}" for i in range(n_ch)]
+    anas = {w: BlockAnalysis(plan, names, None, workers=w,
+                             loader=lambda ids: ((i, blocks[i]) for i in ids)) for w in (1, 2)}
+    for a in anas.values():  # kernels loaded, threads started
+        a.warm_up()
+    live: dict[int, list[float]] = {1: [], 2: []}
+    for i, b in enumerate(blocks):
+        for w in ((1, 2) if i % 2 else (2, 1)):
+            time.sleep(gap)
+            t0 = time.perf_counter()
+            v = anas[w].add(i, 0, b)
+            anas[w].set_used(i, v is not None and v[0])
+            res = anas[w].point(0)
+            live[w].append(time.perf_counter() - t0)
+            assert res is not None and res.n_accepted == i + 1
+    rebuild: dict[int, list[float]] = {1: [], 2: []}
+    sums = {}
+    for k in range(repeat):
+        for w in ((1, 2) if k % 2 else (2, 1)):
+            time.sleep(gap)
+            t0 = time.perf_counter()
+            res = anas[w].point(0, max_averages=n_blocks)
+            rebuild[w].append((time.perf_counter() - t0) / n_blocks)
+            assert res is not None
+            sums[w] = res.spectra
+    same = all(np.array_equal(getattr(sums[1], f), getattr(sums[2], f))
+               for f in ("Sff", "Sfx", "Sxx"))
+    return live, rebuild, same
+
+
+def print_block_analysis(console: Console, n_blocks: int, gap: float, repeat: int) -> None:
+    t = Table(title=f"Shaker block analysis: {n_blocks} blocks of 2048 samples, one every "
+                    f"{gap:g} s; ms per block, median (95th percentile)")
+    for col in ("channels", "live, 1 thread", "live, 2 threads", "2/1",
+                "rebuild, 1 thread", "rebuild, 2 threads", "2/1 ", "identical sums"):
+        t.add_column(col, justify="right")
+    for n_ch in (13, 49):
+        live, rebuild, same = block_analysis(n_ch, n_blocks, gap, repeat)
+        lv = {w: np.array(v) * 1e3 for w, v in live.items()}
+        rb = {w: np.array(v) * 1e3 for w, v in rebuild.items()}
+        t.add_row(str(n_ch),
+                  *(f"{np.median(lv[w]):.2f} ({np.percentile(lv[w], 95):.2f})" for w in (1, 2)),
+                  f"{np.median(lv[2]) / np.median(lv[1]):.2f}",
+                  *(f"{np.median(rb[w]):.2f} ({np.percentile(rb[w], 95):.2f})" for w in (1, 2)),
+                  f"{np.median(rb[2]) / np.median(rb[1]):.2f}", "yes" if same else "NO")
+    console.print(t)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=10.0, help="seconds per rate test")
     parser.add_argument("--hits", type=int, default=8, help="hits for the latency test")
+    parser.add_argument("--blocks", type=int, default=40,
+                        help="shaker blocks for the block-analysis test")
+    parser.add_argument("--block-gap", type=float, default=0.05,
+                        help="s between blocks in the block-analysis test")
+    parser.add_argument("--repeat", type=int, default=5, help="rebuilds per thread count")
+    parser.add_argument("--only", choices=("blocks",), help="run one part alone")
     args = parser.parse_args()
     console = Console(width=170)
     load = os.getloadavg()
     console.print(f"{os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} "
                   f"{load[2]:.2f} at start (shared machine: other processes compete)")
+    if args.only == "blocks":
+        print_block_analysis(console, args.blocks, args.block_gap, args.repeat)
+        return
     table = Table(title=f"Sustained acquisition, {args.duration:g} s")
     for col in ("transport", "device", "channels", "fs Hz", "samples/s per ch",
                 "frames sent", "frames received", "lost samples", "bad frames",
@@ -208,6 +286,7 @@ def main() -> None:
         t2.add_column(col, justify="right")
     t2.add_row(f"{np.median(lat):.1f}", f"{lat.max():.1f}", f"{lat.min():.1f}", "100")
     console.print(t2)
+    print_block_analysis(console, args.blocks, args.block_gap, args.repeat)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,9 @@ front end's own sample grid, plus sensor noise. Continuous forces are sampled
 in blocks of ``source_block`` s, :data:`LOOKAHEAD` samples ahead of the
 samples being sent: the response starting more than that many samples before
 its force (below 1e-5 of the peak) is left out, and a change of the shaker's
-output shows up within ``source_block`` s.
+output shows up within ``source_block`` s. An input wired to
+``shaker_force(k)`` carries the force sensor of the shakers whose ``sensor`` is
+``k`` only (two shakers driven at once, each with its own force sensor).
 
 The frames are packed here with ``struct``/numpy, independently of the DBC and
 of cantools, so a layout bug cannot pass on both sides.
@@ -42,11 +44,19 @@ from hardware_mocks.benches import get_bench
 from hardware_mocks.physics import BenchPhysics, DeviceClock, sampled_pulse
 from hardware_mocks.signals import simulate
 
-__all__ = ["FORCE", "LOOKAHEAD", "FrontEndDevice", "FrontEndFaults"]
+__all__ = ["FORCE", "LOOKAHEAD", "FrontEndDevice", "FrontEndFaults", "shaker_force"]
 
 logger = logging.getLogger(__name__)
 
 FORCE = -1  #: wiring code: the input carries the hammer force
+
+
+def shaker_force(sensor: int) -> int:
+    """Wiring code of an input that carries the force sensor ``sensor`` of a shaker only
+    (:attr:`hardware_mocks.shaker_device.ShakerDevice.sensor`)."""
+    return -2 - sensor
+
+
 FULL = 8388607
 RATES = (256, 512, 1024, 2048, 4096)
 RANGES_MV = (1000, 5000, 10000)
@@ -90,7 +100,8 @@ class FrontEndDevice:
     interface, channel : str
         python-can bus the device sits on.
     wiring : sequence of int
-        Per input: index of the bench response DOF it measures, or :data:`FORCE`;
+        Per input: index of the bench response DOF it measures, :data:`FORCE` (every
+        force: hammer and shakers) or :func:`shaker_force` (one shaker's force sensor);
         inputs beyond the list are open. Default: DOFs 0..11 then the force.
     sensitivity : sequence of float
         Transducer sensitivities per input, mV/(m/s^2) or mV/N (default 10.2 and 2.25).
@@ -116,7 +127,7 @@ class FrontEndDevice:
         self.physics = physics if physics is not None else BenchPhysics(get_bench("engine"))
         self.wiring = [*range(12), FORCE] if wiring is None else list(wiring)
         if sensitivity is None:
-            sensitivity = [2.25 if w == FORCE else 10.2 for w in self.wiring]
+            sensitivity = [2.25 if w < 0 else 10.2 for w in self.wiring]
         self.sensitivity = np.zeros(self.N_INPUTS)
         self.sensitivity[: len(sensitivity)] = sensitivity
         self.accel_noise = accel_noise
@@ -138,9 +149,10 @@ class FrontEndDevice:
         self._rng = np.random.default_rng(seed)
         self._bus = can.Bus(interface=interface, channel=channel, fd=True)
         self._clock = DeviceClock(self.rate)
-        self._resp_rows = [i for i, w in enumerate(self.wiring) if w != FORCE]
-        self._resp_dofs = [w for w in self.wiring if w != FORCE]
+        self._resp_rows = [i for i, w in enumerate(self.wiring) if w >= 0]
+        self._resp_dofs = [w for w in self.wiring if w >= 0]
         self._force_rows = [i for i, w in enumerate(self.wiring) if w == FORCE]
+        self._sensor_rows = [i for i, w in enumerate(self.wiring) if w < FORCE]
         self._reset_stream()
         self._stop = threading.Event()
         self._unplugged = threading.Event()
@@ -265,12 +277,16 @@ class FrontEndDevice:
             self._pending = np.concatenate([self._pending, grow], axis=1)
         self._pending[:, start:end] += signal
 
-    def _signal(self, force: NDArray[np.float64], acc: NDArray[np.float64]
-                ) -> NDArray[np.float64]:
-        """Inputs (N_INPUTS, n) from the force on the bench and all response DOFs' accelerations."""
+    def _signal(self, force: NDArray[np.float64], acc: NDArray[np.float64],
+                sensor: int | None = None) -> NDArray[np.float64]:
+        """Inputs (N_INPUTS, n) from the force on the bench and all response DOFs'
+        accelerations; ``sensor``: the force sensor that measures it (a shaker's), if any."""
         signal = np.zeros((self.N_INPUTS, acc.shape[1]))
         signal[self._resp_rows] = acc[self._resp_dofs]
         signal[self._force_rows] = force
+        if sensor is not None:
+            rows = [i for i, w in enumerate(self.wiring) if w == shaker_force(sensor)]
+            signal[rows] = force
         return signal
 
     def _absorb_hits(self) -> None:
@@ -295,12 +311,11 @@ class FrontEndDevice:
             a = self._forced_until
             n = max(block, until - a)
             self._forced_until = a + n
-            forces = self.physics.continuous_force(self._clock.instants(a, n))
-            for exc, f in forces.items():
+            for exc, sensor, f in self.physics.source_forces(self._clock.instants(a, n)):
                 ir = self.physics.impulse_response(rate, exc)
                 padded = np.zeros(LOOKAHEAD + n + ir.h.shape[-1] - ir.lead)
                 padded[LOOKAHEAD : LOOKAHEAD + n] = f
-                self._add_pending(self._signal(padded, simulate(ir, padded[None, :])),
+                self._add_pending(self._signal(padded, simulate(ir, padded[None, :]), sensor),
                                   a - LOOKAHEAD)
 
     def _physical(self, n: int) -> NDArray[np.float64]:
@@ -312,8 +327,8 @@ class FrontEndDevice:
             out[self._resp_rows] += self.accel_noise * self._rng.standard_normal(
                 (len(self._resp_rows), n))
         if self.force_noise:
-            out[self._force_rows] += self.force_noise * self._rng.standard_normal(
-                (len(self._force_rows), n))
+            rows = self._force_rows + self._sensor_rows
+            out[rows] += self.force_noise * self._rng.standard_normal((len(rows), n))
         return out
 
     def _emit_due(self) -> None:

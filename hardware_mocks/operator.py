@@ -216,25 +216,30 @@ class MockShakerOperator:
 
     Parameters
     ----------
-    shaker : ShakerDevice
-        The mock shaker, on the bench's physics.
+    *shakers : ShakerDevice
+        The mock shakers, on the bench's physics. With ``n`` of them, the plan's points
+        are driven ``n`` at a time (:attr:`app.acquire.plan.TestPlan.drives`): point
+        ``index`` gets shaker ``index % n``.
     """
 
-    def __init__(self, shaker: ShakerDevice) -> None:
-        if shaker.physics is None:
+    def __init__(self, *shakers: ShakerDevice) -> None:
+        if not shakers or any(s.physics is None for s in shakers):
             raise ValueError("the mock shaker has no bench (physics=None)")
-        self.shaker = shaker
+        self.shakers = shakers
+        self.shaker = shakers[0]
         self.points: list[int] = []
 
     def on_next_point(self, point: Any) -> None:
-        assert self.shaker.physics is not None
-        exc = excitation_index(self.shaker.physics.bench, point)
+        shaker = self.shakers[int(point.index) % len(self.shakers)]
+        assert shaker.physics is not None
+        exc = excitation_index(shaker.physics.bench, point)
         logger.debug("operator: shaker attached at excitation %d", exc)
         self.points.append(int(point.index))
-        self.shaker.attach(exc)
+        shaker.attach(exc)
 
     def on_finished(self, state: Any) -> None:
-        self.shaker.attach(None)
+        for shaker in self.shakers:
+            shaker.attach(None)
 
 
 class RemoteOperator(MockOperator):

@@ -168,6 +168,25 @@ class BenchPhysics:
             if source in self._sources:
                 self._sources.remove(source)
 
+    def source_forces(self, t: NDArray[np.float64]
+                      ) -> list[tuple[int, int | None, NDArray[np.float64]]]:
+        """``(excitation DOF, force sensor, force N)`` of each attached source at host instants
+        ``t``; the sensor is the source's ``sensor`` attribute (None without one)."""
+        with self._lock:
+            sources = list(self._sources)
+        out = []
+        n = len(self.bench.exc_nodes)
+        for src in sources:
+            exc = src.exc
+            if exc is None:
+                continue
+            if not 0 <= exc < n:
+                raise ValueError(f"force source drives excitation {exc}, "
+                                 f"out of range 0..{n - 1}")
+            out.append((exc, getattr(src, "sensor", None),
+                        np.asarray(src.force(t), dtype=float)))
+        return out
+
     def continuous_force(self, t: NDArray[np.float64]) -> dict[int, NDArray[np.float64]]:
         """Force (N) of the attached sources at host instants ``t``, by excitation DOF."""
         with self._lock:

@@ -90,13 +90,18 @@ class ShakerDevice(SerialMockDevice):
     force_per_volt : float
         Force on the structure per volt of output, N/V (amplifier and shaker).
     seed : int
-        Seed of the random waveform's phases.
+        Seed of the random waveform's phases (two shakers driven at once: two seeds).
+    sensor : int
+        Its force sensor: the front-end input wired to
+        :func:`~hardware_mocks.frontend_device.shaker_force` of it shows this shaker's
+        force alone.
     """
 
     def __init__(self, physics: BenchPhysics | None = None, *, max_level: float = 2.0,
                  serial_number: str = "0007", exc: int | None = None,
-                 force_per_volt: float = 50.0, seed: int = 0) -> None:
+                 force_per_volt: float = 50.0, seed: int = 0, sensor: int = 0) -> None:
         self.max_level = max_level
+        self.sensor = sensor
         self.serial_number = serial_number
         self.physics = physics
         self.force_per_volt = force_per_volt

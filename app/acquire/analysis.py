@@ -342,12 +342,14 @@ def run_frfs(run: RunData, max_averages: int | None = None
     """The FRFs of a run's stored records (every point needs an accepted record) and the
     analysis they come from; :func:`analyse_run` without the identification. With
     ``max_averages``, each point averages only its first used records."""
-    resp = run.channels[1:]
-    resp_nodes, resp_dirs = np.array([c.node for c in resp]), np.array([c.direction for c in resp])
     if run.method == "shaker":
         splan, blocks = analyse_blocks(run)
-        cols = [blocks.point(j, max_averages) for j in range(len(splan.excitations))]
-        return shaker_frfset(splan, cols, run.geometry, resp_nodes, resp_dirs), blocks
+        resp = run.channels[splan.n_references:]
+        cols = [blocks.point(d, max_averages) for d in range(len(splan.drives))]
+        return shaker_frfset(splan, cols, run.geometry, np.array([c.node for c in resp]),
+                             np.array([c.direction for c in resp])), blocks
+    resp = run.channels[1:]
+    resp_nodes, resp_dirs = np.array([c.node for c in resp]), np.array([c.direction for c in resp])
     plan, ana = analyse_records(run)
     points = [ana.point(j, max_averages) for j in range(len(plan.excitations))]
     for j, r in enumerate(points):

@@ -10,10 +10,24 @@ overlap between blocks: a rejected block or a pause never joins two pieces of
 signal), windowed for its waveform (:data:`WINDOWS`): Hann for random, none for
 burst random (each block starts at a burst) and periodic chirp (one period per
 block), which are leakage-free.
+
+With several shakers driven at once (``[shaker] shakers``), a block holds every force
+(rows ``0 .. shakers - 1``) then the responses, and is stored under its drive (the
+stop where those shakers were attached, :attr:`~app.acquire.plan.TestPlan.drives`);
+the drive's spectra have every force as a reference and its multiple-reference H1
+gives one FRF column per excitation driven.
+
+The spectra are the offline path's: the parallel numba kernel of
+:class:`~processing.spectral.SpectralAccumulator`, its channels shared by
+:data:`WORKERS` threads (as :mod:`app.pipeline.time_uff` does for a time recording).
+Live, each block is one call; a point rebuilt from its stored blocks (a verdict
+changed, ``insitu replay``) is fed :data:`REBUILD_BLOCKS` blocks per call, the same
+segments in the same order, so the sums are the same bits.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -25,26 +39,32 @@ from processing.data import FRFSet, Geometry, InputError
 from processing.spectral import CrossSpectra, SpectralAccumulator, frf
 from processing.units import UnitSpectra
 
-__all__ = ["WINDOWS", "BlockAnalysis", "BlockResult", "RecordLoader", "block_verdict",
-           "shaker_frfset"]
+__all__ = ["REBUILD_BLOCKS", "WINDOWS", "WORKERS", "BlockAnalysis", "BlockResult",
+           "RecordLoader", "block_verdict", "shaker_frfset"]
 
 #: window of each waveform's blocks (scipy window names)
 WINDOWS = {"random": "hann", "burst-random": "boxcar", "chirp": "boxcar"}
+#: threads of the spectral kernel: both cores of a bench PC, as the offline path
+WORKERS = min(2, os.cpu_count() or 1)
+#: stored blocks fed to the kernel per call when a point is rebuilt
+REBUILD_BLOCKS = 16
 
 
 def block_verdict(data: NDArray[np.float64], names: Sequence[str],
-                  ranges: NDArray[np.float64] | None) -> tuple[bool, str, float]:
-    """Automatic verdict of one block (force row 0, N; responses m/s^2).
+                  ranges: NDArray[np.float64] | None, n_forces: int = 1
+                  ) -> tuple[bool, str, float]:
+    """Automatic verdict of one block (force rows ``0 .. n_forces - 1``, N; responses m/s^2).
 
-    Returns ``(accepted, reason, peak force N)``: a block with lost samples or with a
-    channel at or above 99 % of its range (``ranges`` in each row's unit) is rejected.
+    Returns ``(accepted, reason, peak force N)`` (the largest of the forces): a block
+    with lost samples or with a channel at or above 99 % of its range (``ranges`` in each
+    row's unit) is rejected.
 
     Examples
     --------
     >>> block_verdict(np.array([[1.0, -3.0], [0.5, 9.95]]), ["F", "a1"], np.array([10, 10.]))
     (False, 'overload on a1 (peak at or above 99 % of its range)', 3.0)
     """
-    force = data[0]
+    force = data[:n_forces]
     finite = force[np.isfinite(force)]
     peak = float(np.abs(finite).max()) if finite.size else float("nan")
     lost = int(np.count_nonzero(np.isnan(data).any(axis=0)))
@@ -86,12 +106,17 @@ RecordLoader = Callable[[Sequence[int]], Iterable[tuple[int, NDArray[np.float64]
 class BlockAnalysis:
     """FRFs of a shaker run, point by point, kept up to date as blocks and verdicts change.
 
+    A "point" here is a drive of the plan (:attr:`~app.acquire.plan.TestPlan.drives`):
+    the excitation point itself with one shaker, the excitations driven together with
+    several; :meth:`point` then gives their columns, one per force.
+
     Same interface as :class:`app.acquire.analysis.RunAnalysis`: :meth:`add` a stored
     block, :meth:`set_used` its verdict in force, :meth:`point` the averaged column.
     Memory does not grow with the blocks: each point keeps its spectral accumulator, fed
     a used block as it comes; per block, only its point and verdict. A change that cannot
     be fed in order (a verdict changed on an older block) rebuilds the point's accumulator
-    from the stored blocks, read one at a time with ``loader``, in acquisition order.
+    from the stored blocks, read one at a time with ``loader`` and fed
+    :data:`REBUILD_BLOCKS` at a time, in acquisition order.
 
     Parameters
     ----------
@@ -102,12 +127,16 @@ class BlockAnalysis:
     loader : callable, optional
         ``loader(ids)`` yields ``(id, data)`` for the stored blocks ``ids``. Without it, a
         rebuild raises RuntimeError.
+    workers : int, optional
+        Threads of the spectral kernel (default :data:`WORKERS`); the sums are the same
+        bits whatever their number.
     """
 
     def __init__(self, plan: TestPlan, names: Sequence[str],
-                 ranges: NDArray[np.float64] | None, loader: RecordLoader | None = None
-                 ) -> None:
+                 ranges: NDArray[np.float64] | None, loader: RecordLoader | None = None,
+                 workers: int | None = None) -> None:
         self.plan = plan
+        self.workers = WORKERS if workers is None else workers
         self.names = tuple(names)
         self.ranges = ranges
         self.loader = loader
@@ -124,7 +153,21 @@ class BlockAnalysis:
         # no detrend: the sensors are AC-coupled, and a mean removed from the force of a
         # periodic block would leave 0/0 (NaN) on the 0 Hz line
         return SpectralAccumulator(self.plan.record.fs, s.nperseg, 0, detrend=False,
-                                   window=WINDOWS[s.waveform], references=(0,))
+                                   window=WINDOWS[s.waveform],
+                                   references=tuple(range(self.plan.n_references)),
+                                   workers=self.workers)
+
+    def warm_up(self) -> None:
+        """Load the spectral kernels (numba's cache on disk, or compile them) and run one
+        block of this run's layout through them, results thrown away.
+
+        The first spectrum of a process takes about 0.4 s more than the next ones (more on
+        a loaded machine): longer than a shaker's watchdog. The procedure calls this before
+        any output goes on, so the first block is analysed as fast as the others.
+        """
+        acc = self._accumulator()
+        acc.update(np.zeros((len(self.names), self.plan.shaker.nperseg)))
+        frf(acc.spectra(), self.plan.record.estimator)
 
     def add(self, hit_id: int, point: int, data: NDArray[np.float64],
             override: str = "") -> tuple[bool, str, float] | None:
@@ -132,7 +175,7 @@ class BlockAnalysis:
         if hit_id in self._point_of and self._point_of[hit_id] != point:
             self._stale.add(self._point_of[hit_id])
         self._point_of[hit_id] = point
-        verdict = block_verdict(data, self.names, self.ranges)
+        verdict = block_verdict(data, self.names, self.ranges, self.plan.n_references)
         finite = bool(np.all(np.isfinite(data)))
         self._finite[hit_id] = finite
         self._pending = (hit_id, data) if finite else None
@@ -212,26 +255,36 @@ class BlockAnalysis:
             raise RuntimeError("rebuilding a point's average needs the stored blocks: give "
                                "BlockAnalysis a loader")
         st = _Point(self._accumulator())
+        batch: list[NDArray[np.float64]] = []
         for i, data in self.loader(ids):
-            st.acc.update(data)
+            batch.append(data)
             st.ids.append(i)
+            if len(batch) == REBUILD_BLOCKS:
+                st.acc.update(np.concatenate(batch, axis=1))  # no overlap: the same segments
+                batch.clear()
+        if batch:
+            st.acc.update(np.concatenate(batch, axis=1))
         return st
 
 
 def shaker_frfset(plan: TestPlan, points: Sequence[BlockResult | None], geometry: Geometry,
                   resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64]) -> FRFSet:
-    """All points' FRF columns as one FRF set (raises InputError naming a point without blocks)."""
-    cols, cohs = [], []
-    for j, r in enumerate(points):
+    """All drives' FRF columns as one FRF set, one column per excitation in plan order
+    (``points[d]``: drive ``d``'s result; raises InputError naming a drive without blocks)."""
+    cols, cohs, n_avg = [], [], []
+    for d, r in enumerate(points):
         if r is None:
-            raise InputError(f"excitation {plan.excitations[j].label} has no accepted block: "
+            labels = " and ".join(plan.excitations[j].label for j in plan.drives[d])
+            raise InputError(f"excitation {labels} has no accepted block: "
                              "resume the run (insitu acquire --resume)")
         cols.append(r.H)
         cohs.append(r.coherence)
+        n_avg += [r.n_accepted] * r.H.shape[1]
     first = next(r for r in points if r is not None)
+    meta: dict[str, object] = {"estimator": plan.record.estimator,
+                               "excitation": f"shaker {plan.shaker.waveform}",
+                               "window": WINDOWS[plan.shaker.waveform], "n_averages": n_avg}
+    if plan.n_references > 1:
+        meta["shakers"] = plan.n_references
     return FRFSet(first.freq, np.concatenate(cols, axis=1), resp_nodes, resp_dirs,
-                  plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1),
-                  {"estimator": plan.record.estimator,
-                   "excitation": f"shaker {plan.shaker.waveform}",
-                   "window": WINDOWS[plan.shaker.waveform],
-                   "n_averages": [0 if r is None else r.n_accepted for r in points]})
+                  plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1), meta)

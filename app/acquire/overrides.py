@@ -84,7 +84,7 @@ def _needed(run: RunData) -> tuple[list[int], int]:
     plan = parse_plan(run.plan_data, f"{run.path}:/plan")
     if run.method == "shaker":
         _, blocks = analyse_blocks(run)
-        return [blocks.n_used(j) for j in range(len(plan.excitations))], plan.shaker.averages
+        return [blocks.n_used(d) for d in range(len(plan.drives))], plan.shaker.averages
     _, ana = analyse_records(run)
     return [ana.n_used(j) for j in range(len(plan.excitations))], plan.hits
 
@@ -92,7 +92,7 @@ def _needed(run: RunData) -> tuple[list[int], int]:
 def _spans_six_dofs(run: RunData) -> bool:
     plan = parse_plan(run.plan_data, f"{run.path}:/plan")
     g = run.geometry
-    resp = run.channels[1:]
+    resp = run.channels[plan.n_references:]
     try:
         rep = check_geometry(g.coordinates(np.array([c.node for c in resp])),
                              np.array([c.direction for c in resp]),

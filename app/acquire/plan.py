@@ -24,6 +24,7 @@ A plan is a TOML file::
     ramp = 1.0                   # s, output ramp up and down
     settle = 1.0                 # s streamed after the ramp before the first block
     duty = 0.5                   # burst random: fraction of each block the burst is on
+    shakers = 1                  # shakers driven at once (multiple-reference H1)
 
     [[excitation]]
     node = 101
@@ -36,6 +37,17 @@ A plan is a TOML file::
     channels = ["a1x", "a1y", "a1z"]   # station channels that measure this point
 
 Response directions come from the station channels (their ``direction``).
+
+With ``shakers = 2`` (or more) the ``[[excitation]]`` tables are taken ``shakers`` at a
+time, in order: with two, the first two are driven together (one shaker each, different
+random signals, correlated or not), then the next two, and so on. Each such *drive* is
+one stop of the test: its blocks hold every force (the front end's force channels, in
+plan order) then the responses, and one multiple-reference H1 (``H = G_xf G_ff^-1``)
+gives one FRF column per excitation driven; ``averages`` counts blocks per drive. With
+one shaker each drive is one excitation. Random or burst-random only (each shaker its
+own signal; burst random needs generators that start their bursts together), and more
+blocks per drive than shakers.
+
 Every error is one line naming the key, as ``plan.toml: record.fs: must be > 0, got -1``.
 
 Example
@@ -178,6 +190,8 @@ class ShakerSettings:
     duty : float
         Burst random: fraction of each block the burst is on (the rest lets the
         response decay).
+    shakers : int
+        Shakers driven at once, each at its own excitation point (see the module doc).
     """
 
     waveform: str = "random"
@@ -189,6 +203,7 @@ class ShakerSettings:
     ramp: float = 1.0
     settle: float = 1.0
     duty: float = 0.5
+    shakers: int = 1
 
 
 @dataclass(frozen=True)
@@ -216,6 +231,17 @@ class TestPlan:
             nodes[p.node] = p.xyz
         ids = sorted(nodes)
         return Geometry(np.array(ids, dtype=np.int64), np.array([nodes[i] for i in ids]))
+
+    @property
+    def n_references(self) -> int:
+        """Force channels per record: the shakers driven at once (1 for a hammer)."""
+        return self.shaker.shakers if self.method == "shaker" else 1
+
+    @property
+    def drives(self) -> tuple[tuple[int, ...], ...]:
+        """The excitation indices driven together, stop by stop (one each with one shaker)."""
+        k, n = self.n_references, len(self.excitations)
+        return tuple(tuple(range(i, i + k)) for i in range(0, n, k))
 
     @property
     def exc_nodes(self) -> NDArray[np.int64]:
@@ -274,7 +300,8 @@ class TestPlan:
             "record": rec,
             "shaker": {"waveform": s.waveform, "level": s.level, "f_start": s.f_start,
                        "f_stop": s.f_stop, "averages": s.averages, "nperseg": s.nperseg,
-                       "ramp": s.ramp, "settle": s.settle, "duty": s.duty},
+                       "ramp": s.ramp, "settle": s.settle, "duty": s.duty,
+                       "shakers": s.shakers},
             "excitation": [{"node": e.node, "xyz": list(e.xyz), "direction": list(e.direction)}
                            for e in self.excitations],
             "response": [{"node": r.node, "xyz": list(r.xyz), "channels": list(r.channels)}
@@ -389,7 +416,7 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
         raise c.fail("record.length", f"{length:g} s at {fs:g} Hz is under 64 samples")
     record = RecordSettings(fs, length, pre, level, tau, est)
     s = c.table(data, "shaker", {"waveform", "level", "f_start", "f_stop", "averages",
-                                 "nperseg", "ramp", "settle", "duty"})
+                                 "nperseg", "ramp", "settle", "duty", "shakers"})
     wf = s.get("waveform", "random")
     if wf not in ("random", "burst-random", "chirp"):
         raise c.fail("shaker.waveform", f"must be random, burst-random or chirp, got {wf!r}")
@@ -401,7 +428,8 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
         int(c.number(s, "nperseg", "shaker", 2048, integer=True, minimum=8)),
         float(c.number(s, "ramp", "shaker", 1.0, strict=False)),
         float(c.number(s, "settle", "shaker", 1.0, strict=False)),
-        float(c.number(s, "duty", "shaker", 0.5)))
+        float(c.number(s, "duty", "shaker", 0.5)),
+        int(c.number(s, "shakers", "shaker", 1, integer=True)))
     if shaker.duty > 1:
         raise c.fail("shaker.duty", f"must be <= 1, got {shaker.duty:g}")
     if shaker.f_start >= shaker.f_stop:
@@ -432,6 +460,26 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
             seen[nm] = i
         resps.append(ResponsePoint(c.node(rp, key), c.vector(rp, "xyz", key, nonzero=False),
                                    tuple(ch)))
+    k = shaker.shakers
+    if k > 1:
+        if method != "shaker":
+            raise c.fail("shaker.shakers", f"{k} shakers need plan.method = 'shaker'")
+        if shaker.waveform == "chirp":
+            raise c.fail("shaker.shakers", f"{k} shakers need random or burst-random signals "
+                         "(every shaker would play the same chirp: the forces could not be "
+                         "told apart)")
+        if shaker.averages <= k:
+            raise c.fail("shaker.averages", f"must be more than shaker.shakers ({k}): with "
+                         f"{shaker.averages} blocks for {k} forces the coherence is 1 whatever "
+                         "the data, and nothing is averaged")
+        if len(excs) % k:
+            raise c.fail("excitation", f"{len(excs)} excitations for shaker.shakers = {k}: "
+                         f"give them {k} at a time (the points driven together)")
+        for i in range(0, len(excs), k):
+            dofs = {(e.node, e.direction) for e in excs[i:i + k]}
+            if len(dofs) < k:
+                raise c.fail(f"excitation[{i}]", f"the {k} excitations driven together "
+                             f"(excitation[{i}] to [{i + k - 1}]) must differ")
     plan = TestPlan(name, method, int(hits), record, tuple(excs), tuple(resps), shaker, source)
     plan.geometry()  # nodes with two coordinates
     return plan

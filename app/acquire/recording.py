@@ -106,7 +106,7 @@ class RecordingProcedure(Procedure):
             None if res is None or res.coherence is None else res.coherence[:, 0, :],
             0 if res is None else res.n_accepted))
         self.emit("on_progress", Progress(
-            self.point_index, len(self.plan.excitations), self.analysis.n_used(self.point_index),
+            self.point_index, len(self.plan.drives), self.analysis.n_used(self.point_index),
             self._records_needed(), len(self.hits), sum(h.accepted for h in self.hits),
             self._bad_frames(), time.monotonic() - self._t0))
 

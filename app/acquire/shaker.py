@@ -15,7 +15,10 @@ The output goes off at the end of each point, on pause and stop, on any error
 procedure dies: with an SG-1 (``shaker-scpi``) the device's watchdog is fed by
 the procedure's own worker, after every read, not by a free-running thread, so a
 worker that hangs (a listener blocking it, a deadlock) turns the output off
-within ``heartbeat`` s as surely as a killed process does.
+within ``heartbeat`` s as surely as a killed process does. So that the first
+block's analysis is no slower than the others', the spectral kernels are loaded
+and run once (:meth:`~app.acquire.blocks.BlockAnalysis.warm_up`) before any
+device is opened.
 
 Example
 -------
@@ -41,7 +44,7 @@ from app.acquire.hammer import station_summary
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
 from app.acquire.procedure import StopRequestedError
 from app.acquire.recording import RecordingProcedure
-from app.acquire.shaker_io import BlockStream, ShakerDrive
+from app.acquire.shaker_io import BlockStream, ShakerDrive, ShakerDrives
 from app.io.runfile import RunWriter, iter_record_data, read_run
 from drivers.base import AcquisitionFrontEnd, ChannelConfig, ExcitationDevice
 from drivers.errors import DeviceError
@@ -117,7 +120,7 @@ class ShakerProcedure(RecordingProcedure):
             [c.full_scale for c in self.rows]),
             loader=lambda ids: iter_record_data(self.path, ids))
         self.frontend: AcquisitionFrontEnd | None = None
-        self.drive: ShakerDrive | None = None
+        self.drive: ShakerDrives | None = None
         self.stream: BlockStream | None = None
         self.writer: RunWriter | None = None
         self.point_index = 0
@@ -129,6 +132,11 @@ class ShakerProcedure(RecordingProcedure):
         self._t_offset = 0.0
 
     # -- set-up ---------------------------------------------------------------------------------
+    def startup(self) -> None:
+        # the first spectrum loads the kernels: before the output is on and its watchdog armed
+        self.analysis.warm_up()
+        super().startup()
+
     def _resolve(self, force_choice: str | None, shaker_choice: str | None) -> None:
         st, plan = self.station, self.plan
         resp = plan.response_channels(st)
@@ -140,16 +148,24 @@ class ShakerProcedure(RecordingProcedure):
             raise PlanError(f"{st.source}: no force channel{which} on front end "
                             f"{self.ref_name!r}: wire the shaker's force sensor to it (one "
                             "clock for force and responses)")
-        self.force_channel = forces[0]
-        self.rows: tuple[ChannelConfig, ...] = (self.force_channel, *resp)
+        n = plan.n_references
         shakers = [d.name for d in st.devices.values()
                    if issubclass(get_backend(d.backend), ExcitationDevice)
                    and (shaker_choice is None or d.name == shaker_choice)]
-        if len(shakers) != 1:
+        if n > 1:  # several shakers at once: the first n force channels and shakers, in order
+            if len(forces) < n or len(shakers) < n:
+                raise PlanError(f"{st.source}: the plan drives {n} shakers at once; the "
+                                f"station has {len(shakers)} excitation devices and "
+                                f"{len(forces)} force channels on front end {self.ref_name!r}"
+                                ": give each shaker its own force input")
+        elif len(shakers) != 1:
             raise PlanError(f"{st.source}: " + (f"no excitation device {shaker_choice!r}"
                             if shaker_choice else f"{len(shakers)} excitation devices: "
                             "give one (shaker=...)" if shakers else
                             "no excitation device (a shaker backend such as shaker-scpi)"))
+        self.force_channel = forces[0]
+        self.rows: tuple[ChannelConfig, ...] = (*forces[:n], *resp)
+        self.shaker_names = shakers[:n]
         self.shaker_name = shakers[0]
 
     def _open_devices(self) -> None:
@@ -162,14 +178,16 @@ class ShakerProcedure(RecordingProcedure):
         if fe.fs != self.plan.record.fs:
             raise PlanError(f"{self.plan.source}: record.fs is {self.plan.record.fs:g} Hz but "
                             f"front end {self.ref_name!r} runs at {fe.fs:g} Hz: make them equal")
-        cfg = self.station.devices[self.shaker_name]
-        opts = dict(self.device_options.get(self.shaker_name, {}))
-        if cfg.backend == "shaker-scpi":  # the worker feeds the watchdog (see the module doc)
-            opts = {"ramp": self.plan.shaker.ramp, "heartbeat": 0.0, **opts}
-        dev = create_device(cfg, **opts)
-        if not isinstance(dev, ExcitationDevice):
-            raise PlanError(f"{self.station.source}: {self.shaker_name!r} is not a shaker")
-        self.drive = ShakerDrive(dev, self.plan, self.heartbeat)
+        self.drive = ShakerDrives([])
+        for name in self.shaker_names:
+            cfg = self.station.devices[name]
+            opts = dict(self.device_options.get(name, {}))
+            if cfg.backend == "shaker-scpi":  # the worker feeds the watchdog (module doc)
+                opts = {"ramp": self.plan.shaker.ramp, "heartbeat": 0.0, **opts}
+            dev = create_device(cfg, **opts)
+            if not isinstance(dev, ExcitationDevice):
+                raise PlanError(f"{self.station.source}: {name!r} is not a shaker")
+            self.drive.drives.append(ShakerDrive(dev, self.plan, self.heartbeat))
         self.drive.should_stop = lambda: self.stop_asked
         self.drive.open()
         names = [c.name for c in fe.channels]
@@ -200,7 +218,7 @@ class ShakerProcedure(RecordingProcedure):
             channels=self.rows, devices=[self.ref_name] * len(self.rows),
             geometry=self.plan.geometry(), fs=self.plan.record.fs, n_samples=s.nperseg,
             method="shaker", attrs={"waveform": s.waveform, "window": WINDOWS[s.waveform],
-                                    "shaker": self.shaker_name})
+                                    "shaker": ",".join(self.shaker_names)})
 
     def _replay_row(self, i: int, point: int, data: NDArray[np.float64], stored_auto: bool,
                     override: str) -> None:
@@ -213,20 +231,29 @@ class ShakerProcedure(RecordingProcedure):
     def execute(self) -> None:
         assert self.stream is not None
         self.stream.start()
-        while todo := [p for p in self.plan.excitations
-                       if self.analysis.n_used(p.index) < self.plan.shaker.averages]:
-            self._acquire_point(todo[0])
+        while todo := [d for d in range(len(self.plan.drives))
+                       if self.analysis.n_used(d) < self.plan.shaker.averages]:
+            self._acquire_drive(todo[0])
         self.stream.stop()
         self._complete()
 
-    def _acquire_point(self, point: ExcitationPoint) -> None:
+    def _announce(self, points: list[ExcitationPoint]) -> None:
+        """``on_next_point`` for each point driven now (shaker ``k`` at the ``k``-th)."""
+        for point in points:
+            self.emit("on_next_point", point)
+
+    def _acquire_drive(self, d: int) -> None:
+        """Blocks of drive ``d`` (its excitation points, one shaker each) until enough."""
         assert self.stream is not None and self.drive is not None
-        self.point_index = point.index
-        self.emit("on_next_point", point)
+        points = [self.plan.excitations[j] for j in self.plan.drives[d]]
+        self.point_index = d
+        self._announce(points)
         if self.confirm_attach:
-            self.pause_for(f"attach the shaker at {point.label}, then resume")
+            where = " and ".join(p.label for p in points)
+            self.pause_for(f"attach the shaker{'s' if len(points) > 1 else ''} at {where}, "
+                           "then resume")
         need = self.plan.shaker.averages
-        while self.analysis.n_used(point.index) < need:
+        while self.analysis.n_used(d) < need:
             self.poll()
             try:
                 if not self.drive.driving:
@@ -238,17 +265,17 @@ class ShakerProcedure(RecordingProcedure):
                 self._stop_drive_quietly()
                 self.pause_for(f"{err}; acquired blocks are saved. Check the devices, "
                                "then resume")
-                self.emit("on_next_point", point)
+                self._announce(points)
                 continue
             if problem and block is None:  # the block in progress, NaN-padded: kept, unused
                 block = self.stream.take_partial()
             if block is not None:
-                self._store(point, block, problem)
+                self._store(d, block, problem)
             if problem:
                 self._stop_drive_quietly()
                 self.pause_for(f"{problem}; acquired blocks are saved. Check the shaker, "
                                "then resume")
-                self.emit("on_next_point", point)
+                self._announce(points)
         self.drive.off(self.stream)
 
     def _stop_drive_quietly(self) -> None:
@@ -279,22 +306,23 @@ class ShakerProcedure(RecordingProcedure):
         self.stream = None
 
     # -- blocks ---------------------------------------------------------------------------------
-    def _store(self, point: ExcitationPoint, data: NDArray[np.float64], problem: str) -> None:
+    def _store(self, d: int, data: NDArray[np.float64], problem: str) -> None:
+        """Store, judge and average a block of drive ``d``."""
         assert self.writer is not None and self.stream is not None
         hit_id = self.writer.n_records
-        v = self.analysis.add(hit_id, point.index, data)
+        v = self.analysis.add(hit_id, d, data)
         auto, reason, peak = v if v is not None else block_verdict(
-            data, self.analysis.names, self.analysis.ranges)
+            data, self.analysis.names, self.analysis.ranges, self.plan.n_references)
         if problem:
             auto, reason = False, problem
         missing = int(np.count_nonzero(np.isnan(data).any(axis=0)))
         bad = self.stream.take_bad_frames()
         t = time.monotonic() - self._t0 + self._t_offset
-        self.writer.add_record(point.index, data, time=t, peak_force=peak, auto_accepted=auto,
+        self.writer.add_record(d, data, time=t, peak_force=peak, auto_accepted=auto,
                                reason=reason, bad_frames=bad, missing=missing)
         self._auto[hit_id] = auto
         self.analysis.set_used(hit_id, auto and v is not None)
-        self._report(HitRecord(hit_id, point.index, t, peak, auto, reason, "", bad, missing,
+        self._report(HitRecord(hit_id, d, t, peak, auto, reason, "", bad, missing,
                                data=data, fs=self.plan.record.fs))
 
     def _records_needed(self) -> int:
@@ -322,7 +350,7 @@ class ShakerProcedure(RecordingProcedure):
 
     def _complete(self) -> None:
         assert self.writer is not None
-        points = [self.analysis.point(j) for j in range(len(self.plan.excitations))]
+        points = [self.analysis.point(d) for d in range(len(self.plan.drives))]
         frf = shaker_frfset(self.plan, points, self.plan.geometry(),
                             *self.plan.response_dofs(self.station))
         self._finish_run(frf)

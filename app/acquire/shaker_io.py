@@ -23,7 +23,7 @@ from drivers.base import AcquisitionFrontEnd, DeviceState, ExcitationDevice
 from drivers.errors import DeviceError, DeviceTimeoutError
 from drivers.shaker_scpi import ScpiShaker, ShakerError
 
-__all__ = ["BURST_PRE", "BlockStream", "ShakerDrive", "burst_onset"]
+__all__ = ["BURST_PRE", "BlockStream", "ShakerDrive", "ShakerDrives", "burst_onset"]
 
 logger = logging.getLogger(__name__)
 
@@ -81,12 +81,26 @@ class ShakerDrive:
 
     def on(self, stream: BlockStream) -> None:
         """Waveform, level, output on; stream through the ramp and the settling time."""
+        self.start_output()
+        self.wait_ramp(stream)
+        self._discard(stream, self.settings.settle)
+        logger.info("%s: %s at %g V, ramped and settled", self.device.name,
+                    self.settings.waveform, self.settings.level)
+
+    def start_output(self) -> None:
+        """Waveform, level, output on (its ramp starts)."""
         s = self.settings
         dev = self.device
         dev.set_waveform(s.waveform, **self._params())
         dev.set_level(s.level)
         dev.start()
         self.driving = True
+
+    def wait_ramp(self, stream: BlockStream) -> None:
+        """Stream until the output has ramped up to its level (the ramp time, without
+        an SG-1 to ask)."""
+        s = self.settings
+        dev = self.device
         deadline = time.monotonic() + s.ramp + 3.0
         if isinstance(dev, ScpiShaker):
             while abs(dev.output_level() - s.level) > 1e-6 * max(1.0, s.level):
@@ -100,8 +114,6 @@ class ShakerDrive:
                 stream.discard(stream.CHUNK)
         else:
             self._discard(stream, s.ramp)
-        self._discard(stream, s.settle)
-        logger.info("%s: %s at %g V, ramped and settled", dev.name, s.waveform, s.level)
 
     def _stop_if_asked(self) -> None:
         if self.should_stop():
@@ -158,6 +170,68 @@ class ShakerDrive:
             self.device.shutdown()
         except DeviceError as err:
             logger.error("%s: shutdown failed: %s", self.device.name, err)
+
+
+class ShakerDrives:
+    """Several :class:`ShakerDrive` driven at once (one per shaker of a drive), as one.
+
+    The outputs go on together, each ramp is waited for, then the settling time once;
+    :meth:`check` reports the first output that went off; off, emergency off and
+    shutdown act on every shaker.
+    """
+
+    def __init__(self, drives: Sequence[ShakerDrive]) -> None:
+        self.drives = list(drives)
+
+    @property
+    def driving(self) -> bool:
+        return any(d.driving for d in self.drives)
+
+    @property
+    def should_stop(self) -> Callable[[], bool]:
+        return self.drives[0].should_stop
+
+    @should_stop.setter
+    def should_stop(self, fn: Callable[[], bool]) -> None:
+        for d in self.drives:
+            d.should_stop = fn
+
+    def open(self) -> None:
+        for d in self.drives:
+            d.open()
+
+    def beat(self) -> None:
+        for d in self.drives:
+            d.beat()
+
+    def on(self, stream: BlockStream) -> None:
+        for d in self.drives:
+            d.start_output()
+        for d in self.drives:
+            d.wait_ramp(stream)
+        first = self.drives[0]
+        first._discard(stream, first.settings.settle)
+        logger.info("%s: %s at %g V, ramped and settled",
+                    ", ".join(d.device.name for d in self.drives), first.settings.waveform,
+                    first.settings.level)
+
+    def check(self) -> str:
+        return next((p for d in self.drives if (p := d.check())), "")
+
+    def off(self, stream: BlockStream) -> None:
+        for d in self.drives:  # every output down at once, then each waited for
+            d.device.stop()
+            d.driving = False
+        for d in self.drives:
+            d.off(stream)
+
+    def emergency_off(self) -> None:
+        for d in self.drives:
+            d.emergency_off()
+
+    def shutdown(self) -> None:
+        for d in self.drives:
+            d.shutdown()
 
 
 def burst_onset(force: NDArray[np.float64], quiet: int, threshold: float) -> int | None:

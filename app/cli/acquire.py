@@ -17,7 +17,9 @@ another process (``insitu mock-bench --station BENCH.toml``), through the same
 drivers and transports as real hardware; a simulated operator hits each point
 the run names (or attaches the shaker there) through the bench's control
 channel, whose address is in the station's ``[extra.mock_bench]`` table. A run
-that pauses then (a device stopped answering) is stopped, its records kept.
+on a mock bench (``--mock`` or ``--mock-operator``) that pauses (a device stopped
+answering, the shaker's amplifier tripped) is stopped, its records kept: nobody is
+there to fix the bench and resume.
 """
 
 from __future__ import annotations
@@ -119,16 +121,16 @@ def _mock_plan(args: argparse.Namespace) -> TestPlan:
     return plan_for_bench(args.bench, points=pts, hits=args.hits, length=args.length)
 
 
-def _in_process_bench(name: str, fs: float) -> InProcessBench:
-    """The built-in mock bench ``name`` in this process (front end at ``fs`` Hz); one line
-    where it cannot run."""
+def _in_process_bench(name: str, fs: float, shakers: int = 1) -> InProcessBench:
+    """The built-in mock bench ``name`` in this process (front end at ``fs`` Hz, ``shakers``
+    shakers); one line where it cannot run."""
     from app.mockbench import unavailable
 
     if why := unavailable():
         raise UserError(f"--mock: {why}")
     from app.mockbench.bench import InProcessBench
 
-    return InProcessBench(name, fs_frontend=fs)
+    return InProcessBench(name, fs_frontend=fs, shakers=shakers)
 
 
 def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Namespace,
@@ -272,7 +274,8 @@ def run(args: argparse.Namespace) -> int:
             known = plan if plan is not None or not args.resume else parse_plan(
                 read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan")
             fs = known.record.fs if known is not None else 1024.0
-            bench = stack.enter_context(_in_process_bench(args.bench, fs))
+            shakers = known.n_references if known is not None else 1
+            bench = stack.enter_context(_in_process_bench(args.bench, fs, shakers))
             station = bench.station
             if plan is None and not args.resume:
                 plan = _mock_plan(args)
@@ -295,10 +298,13 @@ def run(args: argparse.Namespace) -> int:
             proc.start()
             try:
                 while proc.wait(0.2) is not RunState.FINISHED and proc.running:
-                    if operator is not None and (operator.error
-                                                 or proc.state is RunState.PAUSED):
-                        # nobody at the bench to fix and resume: stop, the records are kept
-                        gave_up = operator.error or f"run paused: {proc.message}"
+                    if ((operator is not None and operator.error) or (
+                            proc.state is RunState.PAUSED
+                            and (operator is not None or bench is not None))):
+                        # a simulated bench: nobody there to fix and resume: stop, the
+                        # records are kept
+                        gave_up = (operator.error if operator is not None else "") or \
+                            f"run paused: {proc.message}"
                         _stop(proc, args.out)
                     elif proc.state is RunState.PAUSED and bars.paused.startswith(ATTACH):
                         bars.paused = ""

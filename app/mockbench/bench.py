@@ -26,7 +26,7 @@ import numpy as np
 from app.acquire.plan import TestPlan, parse_plan
 from drivers.station import StationConfig, parse_station
 from hardware_mocks.benches import Bench, get_bench
-from hardware_mocks.frontend_device import FORCE, FrontEndDevice
+from hardware_mocks.frontend_device import FORCE, FrontEndDevice, shaker_force
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.operator import MockOperator, MockShakerOperator
 from hardware_mocks.physics import BenchPhysics
@@ -104,32 +104,48 @@ class InProcessBench:
         force channel.
     force_per_volt : float
         The shaker's force per volt of output, N/V.
+    shakers : int
+        Shakers on the bench (``shaker``, ``shaker2``...), each with its own random
+        signal (seed) and its force sensor on its own front-end input (``F1_fe``,
+        ``F2_fe``...; with more than one, these replace ``F_fe``); their generators
+        share one time origin (bursts start together, as one generator's channels).
     """
 
     def __init__(self, name: str = "engine", *, fs_frontend: float = 1024.0,
                  fs_hammer: float = 4096.0, accel_noise: float = 0.0, force_noise: float = 0.0,
                  hammer_ppm: float = 0.0, hammer_offset: float = 0.0,
                  operator: dict[str, Any] | None = None, fe_force: bool = True,
-                 force_per_volt: float = 50.0) -> None:
+                 force_per_volt: float = 50.0, shakers: int = 1) -> None:
         self.bench = get_bench(name)
         self.physics = BenchPhysics(self.bench)
         n_resp = len(self.bench.resp_nodes)
         channel = f"insitu-inproc-{next(_counter)}"
+        forces = ([FORCE] if shakers == 1 else [shaker_force(k) for k in range(shakers)]
+                  ) if fe_force else []
         self.frontend = FrontEndDevice(self.physics, channel=channel,
-                                       wiring=[*range(n_resp), *([FORCE] if fe_force else [])],
+                                       wiring=[*range(n_resp), *forces],
                                        accel_noise=accel_noise, force_noise=force_noise,
                                        tail=4.0)
         self.hammer = HammerDevice(self.physics, ppm=hammer_ppm, offset=hammer_offset,
                                    noise=force_noise)
-        self.shaker = ShakerDevice(self.physics, force_per_volt=force_per_volt)
+        self.shakers = [ShakerDevice(self.physics, force_per_volt=force_per_volt, seed=k,
+                                     sensor=k, serial_number=f"{7 + k:04d}")
+                        for k in range(shakers)]
+        for dev in self.shakers[1:]:
+            dev._t_origin = self.shakers[0]._t_origin  # one generator, several channels
+        self.shaker = self.shakers[0]
         dirs = self.bench.resp_dirs
         chans = [{"name": n, "input": i, "quantity": "acceleration", "sensitivity": 10.2,
                   "range": 10.0, "node": int(node), "direction": dirs[i].tolist()}
                  for i, (n, node) in enumerate(zip(_channel_names(self.bench),
                                                    self.bench.resp_nodes.tolist(), strict=True))]
-        if fe_force:
-            chans.append({"name": "F_fe", "input": n_resp, "quantity": "force",
-                          "sensitivity": 2.25, "range": 5.0})
+        for k in range(len(forces)):
+            chans.append({"name": "F_fe" if shakers == 1 else f"F{k + 1}_fe",
+                          "input": n_resp + k, "quantity": "force", "sensitivity": 2.25,
+                          "range": 5.0})
+        shaker_devices = {"shaker" if k == 0 else f"shaker{k + 1}": {
+            "backend": "shaker-scpi", "transport": {"url": dev.path, "baudrate": 115200}}
+            for k, dev in enumerate(self.shakers)}
         self.station: StationConfig = parse_station({
             "station": {"name": f"in-process mock bench ({name})"},
             "devices": {
@@ -141,15 +157,15 @@ class InProcessBench:
                            "transport": {"url": self.hammer.path, "baudrate": 921600},
                            "channels": [{"name": "F", "input": 0, "quantity": "force",
                                          "sensitivity": 2.25, "range": 5.0}]},
-                "shaker": {"backend": "shaker-scpi",
-                           "transport": {"url": self.shaker.path, "baudrate": 115200}},
+                **shaker_devices,
             }}, "in-process mock station")
         self.operator = MockOperator(self.hammer, **(operator or {}))
-        self.shaker_operator = MockShakerOperator(self.shaker)
+        self.shaker_operator = MockShakerOperator(*self.shakers)
 
     def shutdown(self) -> None:
         self.operator.shutdown()
-        self.shaker.shutdown()
+        for dev in self.shakers:
+            dev.shutdown()
         self.hammer.shutdown()
         self.frontend.shutdown()
 

@@ -3,25 +3,31 @@ and the output turned off on a device error, when the worker hangs, and on stop.
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from app.acquire import Listener, RunState
+from app.acquire import Listener, RunState, load_plan
 from app.acquire.analysis import analyse_run
 from app.acquire.shaker import ShakerProcedure
+from app.acquire.shaker_io import BURST_PRE
 from app.cli.main import main
 from app.io.runfile import read_run
 from app.mockbench.bench import InProcessBench, plan_for_bench
+from hardware_mocks.benches import get_bench
+from hardware_mocks.operator import MockShakerOperator
 from processing.inertia import inertia_properties
 
 #: well-conditioned subset of the engine's 18 excitations (cond(T) 7.5), as the hammer test
 POINTS = [0, 1, 3, 4, 6, 8, 9, 12, 15]
 FS = 512.0
+ROOT = Path(__file__).resolve().parents[2]
 
 
 class Recorder(Listener):
@@ -182,3 +188,83 @@ def test_stop_during_the_ramp_turns_the_output_off_at_once(tmp_path: Path) -> No
             proc.wait(10)
     assert took < 0.5, f"output went off {took:.2f} s after Stop"
     assert not rec.hits  # stopped before the first block
+
+
+def test_burst_random_plan_acquired_and_identified_from_the_command_line(
+        tmp_path: Path) -> None:
+    """docs/shaker_burst_plan.toml on the built-in engine bench: ``insitu acquire --mock``,
+    then ``insitu identify`` of the run file, against the bench's own mass, CoG, inertia, K."""
+    plan_file = ROOT / "docs" / "shaker_burst_plan.toml"
+    plan = load_plan(plan_file)
+    s = plan.shaker
+    assert s.waveform == "burst-random" and s.averages == 2
+    path, out = tmp_path / "burst.h5", tmp_path / "burst.json"
+    assert main(["acquire", "--mock", "--bench", "engine-rigid", "--plan", str(plan_file),
+                 "--out", str(path)]) == 0
+    assert main(["identify", str(path), "--out", str(out)]) == 0
+
+    run = read_run(path)
+    n_pts = len(plan.excitations)
+    assert run.method == "shaker" and run.state == "finished"
+    with h5py.File(path, "r") as f:
+        assert f["records"].attrs["waveform"] == "burst-random"
+        assert f["records"].attrs["window"] == "boxcar"
+    assert run.records.data.shape == (2 * n_pts, 13, s.nperseg)
+    assert run.records.accepted.all()
+    assert run.records.point.tolist() == [j for j in range(n_pts) for _ in range(2)]
+    force = run.records.data[:, 0]
+    # every block starts at its burst (BURST_PRE samples before it) and ends in silence
+    burst = round(s.duty * s.nperseg)
+    assert (np.abs(force[:, :BURST_PRE]) < 0.05 * np.abs(force).max(axis=1, keepdims=True)).all()
+    on = np.abs(force) > 1e-9
+    assert_allclose(on.sum(axis=1), burst, atol=3)
+    assert not on[:, BURST_PRE + burst + 3:].any()
+    assert run.frf is not None and run.frf.meta["n_averages"] == [2] * n_pts
+    band = (run.frf.freq >= 5.0) & (run.frf.freq <= 150.0)
+    # two bursts of a random multisine per point: coherence 1 but for leakage (none seen)
+    assert np.median(run.frf.coherence[..., band]) > 0.999
+
+    model = get_bench("engine-rigid").model
+    truth = inertia_properties(model.theta)
+    res = json.loads(out.read_text())
+    # measured: mass 0.015 %, CoG 0.011 mm, inertia 0.03 % of the largest, K 0.03 % of the
+    # largest; the tolerances are the hammer and chirp tests'
+    assert res["mass"] == pytest.approx(truth.mass, rel=0.005)
+    assert_allclose(res["cog"], truth.cog, atol=0.002)
+    assert_allclose(res["inertia_cog"], truth.inertia_cog,
+                    atol=0.01 * np.abs(truth.inertia_cog).max())
+    assert_allclose(res["stiffness"], model.K, atol=0.02 * np.abs(model.K).max())
+
+
+def test_a_mock_run_that_pauses_stops_with_its_blocks_kept(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``insitu acquire --mock``: nobody at the simulated bench resumes a paused run, so the
+    command stops it (output off, blocks kept) and says so in one line, instead of waiting."""
+    import app.cli.acquire as cli_acquire
+
+    made = cli_acquire._in_process_bench
+
+    class Tripping(MockShakerOperator):
+        def on_hit(self, hit: object) -> None:
+            if not self.shaker.errors and self.shaker.output:
+                self.shaker.amplifier_fault()
+
+    def bench(name: str, fs: float, shakers: int = 1) -> InProcessBench:
+        b = made(name, fs, shakers)
+        b.shaker_operator = Tripping(b.shaker)
+        return b
+
+    monkeypatch.setattr(cli_acquire, "_in_process_bench", bench)
+    out = tmp_path / "tripped.h5"
+    t0 = time.monotonic()
+    assert main(["acquire", "--mock", "--bench", "engine-rigid", "--method", "shaker",
+                 "--length", "0.25", "--hits", "3", "--out", str(out)]) == 2
+    assert time.monotonic() - t0 < 60
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    last = err.strip().splitlines()[-1]  # after the pause's own warning, the one error line
+    assert last.startswith("insitu acquire: error: run paused") and "Amplifier fault" in last
+    assert f"records are in {out}" in last
+    run = read_run(out)
+    assert run.state == "stopped" and len(run.records) >= 1

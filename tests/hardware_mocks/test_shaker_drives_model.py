@@ -10,7 +10,7 @@ import pytest
 from drivers.base import ChannelConfig
 from drivers.frontend_can import CanFrontEnd
 from drivers.shaker_scpi import ScpiShaker
-from hardware_mocks.frontend_device import FrontEndDevice
+from hardware_mocks.frontend_device import FORCE, FrontEndDevice, shaker_force
 from hardware_mocks.physics import BenchPhysics
 from hardware_mocks.shaker_device import ShakerDevice
 from processing.spectral import coherence, h1, welch_spectra
@@ -27,8 +27,10 @@ def test_random_excitation_gives_the_models_frf(engine_physics_factory,
     with ShakerDevice(physics, exc=exc, force_per_volt=50.0) as shaker_dev, \
             FrontEndDevice(physics, channel=channel) as fe_dev:
         shaker = ScpiShaker("shaker", shaker_dev.path, ramp=0.1)
-        fe = CanFrontEnd("fe", chans, fs=FS, bus_kwargs={"interface": "virtual",
-                                                         "channel": channel})
+        # the mock simulates the shaker's past (one impulse response long) when it starts:
+        # allow it more than the default 0.5 s of silence on a loaded machine
+        fe = CanFrontEnd("fe", chans, fs=FS, stall_timeout=5.0,
+                         bus_kwargs={"interface": "virtual", "channel": channel})
         try:
             shaker.open()
             shaker.set_waveform("random", f_start=2.0, f_stop=FS / 2.56)
@@ -91,3 +93,59 @@ def test_waveforms_ramp_and_attachment(engine_physics_factory) -> None:
         assert f[1] == 0.0
         dev.attach(None)
         assert physics.continuous_force(t) == {}
+
+
+def test_two_shakers_each_on_its_own_force_input(engine_physics_factory,
+                                                 request: pytest.FixtureRequest) -> None:
+    """Two shakers driven at once (different random signals), each force sensor on its own
+    front-end input: the two-reference H1 gives both excitations' FRFs of the model."""
+    physics: BenchPhysics = engine_physics_factory()
+    excs, channel = (2, 5), f"shk2-{request.node.name}"
+    chans = [ChannelConfig(f"a{i}", i, "acceleration", 10.2, range_v=1.0) for i in range(12)]
+    chans += [ChannelConfig(f"F{k + 1}", 12 + k, "force", 2.25, range_v=5.0) for k in (0, 1)]
+    chans.append(ChannelConfig("Fsum", 14, "force", 2.25, range_v=5.0))
+    wiring = [*range(12), shaker_force(0), shaker_force(1), FORCE]
+    with ShakerDevice(physics, exc=excs[0], seed=0, sensor=0) as dev1, \
+            ShakerDevice(physics, exc=excs[1], seed=1, sensor=1) as dev2, \
+            FrontEndDevice(physics, channel=channel, wiring=wiring) as fe_dev:
+        shakers = [ScpiShaker(f"shaker{k}", d.path, ramp=0.1) for k, d in enumerate((dev1, dev2))]
+        # the mock simulates both shakers' past (one impulse response long) when it starts:
+        # allow it more than the default 0.5 s of silence on a loaded machine
+        fe = CanFrontEnd("fe", chans, fs=FS, stall_timeout=5.0,
+                         bus_kwargs={"interface": "virtual", "channel": channel})
+        try:
+            for s in shakers:
+                s.open()
+                s.set_waveform("random", f_start=2.0, f_stop=FS / 2.56)
+                s.set_level(0.5)
+                s.start()
+            for s in shakers:
+                s.wait_ramp()
+            fe.open()
+            fe.start()
+            block = fe.read_block(int(16 * FS), timeout=30.0)
+        finally:
+            fe.shutdown()
+            for s in shakers:
+                s.shutdown()
+        assert fe_dev.frames_sent > 0
+    assert block.complete and fe.health.ok()
+    f1, f2 = block.channel("F1"), block.channel("F2")
+    # 0.5 V RMS x 50 N/V each (23.7 N seen once on a loaded machine)
+    assert f1.std() == pytest.approx(25.0, rel=0.1) and f2.std() == pytest.approx(25.0, rel=0.1)
+    # each input shows its own shaker: the sum input is their sum (to the 24-bit step)
+    assert np.abs(block.channel("Fsum") - f1 - f2).max() < 1e-3 * f1.std()
+    assert abs(np.corrcoef(f1, f2)[0, 1]) < 0.1  # two seeds: two signals
+    sp = welch_spectra(np.vstack([f1, f2, block.data[:12]]), FS, 512, references=(0, 1))
+    H, coh = h1(sp), coherence(sp)
+    f = np.fft.rfftfreq(512, 1 / FS)
+    b = physics.bench
+    exact = b.model.frf(f, physics.resp_xyz, b.resp_dirs, physics.exc_xyz[list(excs)],
+                        b.exc_dirs[list(excs)])
+    band = (f >= 3.0) & (f <= FS / 2.56 - 2.0)
+    good = coh[:, band] > 0.99
+    for k in (0, 1):
+        rel = np.abs(H[:, k] - exact[:, k])[:, band] / np.abs(exact[:, k])[:, band]
+        # leakage (Hann, 1 Hz lines) as with one shaker; the second force is solved for.
+        # Measured: median 0.2 % on both columns, 84 % of the lines coherent above 0.99
+        assert np.median(rel[good]) < 0.02, (k, np.median(rel[good]))
