@@ -315,8 +315,11 @@ def analyse_run(run: RunData, options: IdentifyOptions | None = None) -> (
 
 def run_units(ana: RecordAnalysis, max_averages: int | None = None) -> TimeUnits | None:
     """The per-hit (hammer) or per-block (shaker) spectra of every point with a used record,
-    for the bootstrap (:mod:`processing.bootstrap`); None when no point has one."""
+    for the bootstrap (:mod:`processing.bootstrap`); None when no point has one, or when the
+    plan drives several shakers at once (the bootstrap resamples one reference per column)."""
     plan = ana.plan
+    if plan.n_references > 1:
+        return None
     cols, keep = [], []
     for j in range(len(plan.excitations)):
         u = ana.unit_spectra(j, max_averages)
