@@ -74,6 +74,8 @@ from processing.uncertainty import (
     draw_covariance,
     draw_variances,
     fit_covariance,
+    force_noise_ratio,
+    regressor_weights,
 )
 from processing.windows import correct_dynamic_stiffness
 
@@ -626,10 +628,16 @@ def uncertainty(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fi
     if fitted.mass_line is None or fitted.mass_rhs is None or fitted.stiffness_map is None:
         return None
     used = weights.stiffness_lines[bands.in_stiffness]
+    msel = weights.mass_lines
+    coh = problem.coherence
     cov: FitCovariance = fit_covariance(
         fitted.mass_line, fitted.theta, fitted.mass_rhs, fitted.stiffness_map,
         checks.stiffness_per_line[used], problem.w[weights.stiffness_lines], fitted.K, fitted.C,
-        half_thetas=fitted.half_thetas, D=fitted.D)
+        half_thetas=fitted.half_thetas, D=fitted.D, w_mass=problem.w[msel],
+        force_noise=0.0 if coh is None else force_noise_ratio(coh[..., msel], weights.mass),
+        stiff_weight=regressor_weights(problem.X[..., weights.stiffness_lines],
+                                       weights.stiffness, problem.row_scale),
+        elastic_hz=tuple(p.frequency for p in problem.peaks))
     stated = problem.options.stated
     sources: tuple[str, ...] = (_COV_SOURCE,)
     extra = extra_cov = None
