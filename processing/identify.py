@@ -589,8 +589,9 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
 # --- stage 5: uncertainty --------------------------------------------------------------------
 
 
-_COV_SOURCE = ("fit covariance: mass-line residual (block-robust over lines) and "
-               "stiffness-line scatter, propagated to first order")
+_COV_SOURCE = ("fit covariance: mass-line residual (block-robust over lines, band drift), "
+               "stiffness-line scatter, force-noise bias (coherence) and body flexibility, "
+               "propagated to first order")
 
 
 def monte_carlo_model(problem: Problem, weights: LineWeights, fitted: Fit,
