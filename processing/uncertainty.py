@@ -286,7 +286,11 @@ def flexibility_bias(Ks_lines: NDArray[np.complex128], w: NDArray[np.float64],
     changes with frequency (largest at the lowest lines, none at the rigid-body modes).
     The fit of a constant K absorbs its mean: ``K_fit ~ K - <D R D>``. ``R`` (symmetric,
     21 numbers) is fitted to how ``Re K*_j`` varies over the lines (weighted least
-    squares of the deviations from their weighted means), and ``<D R D>`` returned.
+    squares of the deviations from their weighted means), and ``<D R D>`` returned, scaled
+    by the positive-part James-Stein factor ``max(0, 1 - 21 / F)``, ``F = r^T N r / s^2``
+    the fitted R's size against its own noise (about 21 when the lines show none): a
+    flexibility fitted to the noise of a stiff body's lines is dropped, the lines' scatter
+    having that noise already.
 
     Parameters
     ----------
@@ -306,17 +310,26 @@ def flexibility_bias(Ks_lines: NDArray[np.complex128], w: NDArray[np.float64],
     # on the diagonal)
     A = Dj[:, :, i].transpose(0, 2, 1)[..., None] * Dj[:, :, j].transpose(0, 2, 1)[:, :, None]
     A = A + np.where((i != j)[None, :, None, None], np.swapaxes(A, 2, 3), 0.0)
-    A = A.reshape(n, 21, 36)
-    y = np.real(Ks_lines).reshape(n, 36)
+    iu = i * 6 + j  # the 21 distinct entries of the symmetric matrices
+    A = A.reshape(n, 21, 36)[:, :, iu]
+    Ks_re = np.real(Ks_lines)
+    y = (0.5 * (Ks_re + np.swapaxes(Ks_re, 1, 2))).reshape(n, 36)[:, iu]
     A = A - np.tensordot(nu, A, axes=1)[None]
     y = y - nu @ y
-    Af = np.ascontiguousarray(A.transpose(1, 0, 2)).reshape(21, n * 36)
-    Anf = Af * np.repeat(nu, 36)[None]
+    Af = np.ascontiguousarray(A.transpose(1, 0, 2)).reshape(21, n * 21)
+    Anf = Af * np.repeat(nu, 21)[None]
     N = Anf @ Af.T
     g = Anf @ y.ravel()
     # minus sign: K* = D - D R D, so the deviations of Re K* are -(D R D - <D R D>)
     r = -np.linalg.lstsq(N, g, rcond=None)[0]
-    R = np.einsum("k,kab->ab", r, _sym_basis())
+    # how far R stands out of the lines' noise: F = r^T N r / s^2 with s^2 the residual
+    # variance (21 on average when there is no flexibility); the positive-part James-Stein
+    # factor 1 - 21 / F keeps a real flexibility and drops one fitted to noise
+    e = y + (Af.T @ r).reshape(n, 21)
+    s2 = float(np.sum(nu[:, None] * e**2)) / max(21 * n - 21, 1)
+    F = float(r @ N @ r) / s2 if s2 > 0 else np.inf
+    shrink = max(0.0, 1.0 - 21.0 / F) if F > 0 else 0.0
+    R = shrink * np.einsum("k,kab->ab", r, _sym_basis())
     return np.asarray(np.einsum("l,lab,bc,lcd->ad", nu, Dj, R, Dj))
 
 
