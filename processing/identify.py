@@ -75,6 +75,8 @@ from processing.uncertainty import (
     draw_covariance,
     draw_variances,
     fit_covariance,
+    force_noise_ratio,
+    regressor_weights,
 )
 from processing.units import MIN_UNITS, TimeUnits
 from processing.windows import correct_dynamic_stiffness
@@ -662,8 +664,9 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
 # --- stage 5: uncertainty --------------------------------------------------------------------
 
 
-_COV_SOURCE = ("fit covariance: mass-line residual (block-robust over lines) and "
-               "stiffness-line scatter, propagated to first order")
+_COV_SOURCE = ("fit covariance: mass-line residual (block-robust over lines, band drift), "
+               "stiffness-line scatter, force-noise bias (coherence) and body flexibility, "
+               "propagated to first order")
 
 
 def monte_carlo_model(problem: Problem, weights: LineWeights, fitted: Fit,
@@ -725,10 +728,16 @@ def uncertainty(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fi
     if fitted.mass_line is None or fitted.mass_rhs is None or fitted.stiffness_map is None:
         return None
     used = weights.stiffness_lines[bands.in_stiffness]
+    msel = weights.mass_lines
+    coh = problem.coherence
     cov: FitCovariance = fit_covariance(
         fitted.mass_line, fitted.theta, fitted.mass_rhs, fitted.stiffness_map,
         checks.stiffness_per_line[used], problem.w[weights.stiffness_lines], fitted.K, fitted.C,
-        half_thetas=fitted.half_thetas, D=fitted.D)
+        half_thetas=fitted.half_thetas, D=fitted.D, w_mass=problem.w[msel],
+        force_noise=0.0 if coh is None else force_noise_ratio(coh[..., msel], weights.mass),
+        stiff_weight=regressor_weights(problem.X[..., weights.stiffness_lines],
+                                       weights.stiffness, problem.row_scale),
+        elastic_hz=tuple(p.frequency for p in problem.peaks))
     stated = problem.options.stated
     sources: tuple[str, ...] = (_COV_SOURCE,)
     extra = extra_cov = None

@@ -50,9 +50,14 @@ __all__ = [
     "combine",
     "draw_covariance",
     "draw_variances",
+    "drift_factor",
     "excitation_jackknife",
     "fit_covariance",
+    "flexibility_bias",
+    "force_noise_ratio",
     "propagate",
+    "regressor_weights",
+    "series_softening",
     "theta_covariance",
 ]
 
@@ -161,17 +166,195 @@ def _largest(covs: list[NDArray[np.float64]]) -> NDArray[np.float64]:
 def stiffness_scatter(Ks_lines: NDArray[np.complex128], w: NDArray[np.float64],
                       K: NDArray[np.float64], C: NDArray[np.float64],
                       n_blocks: int = DEFAULT_BLOCKS,
-                      D: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+                      D: NDArray[np.float64] | None = None,
+                      weight: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """(72, 72) covariance of [vec K, vec C] from the scatter of ``K*_j`` (n, 6, 6) about
-    ``K + j w_j C + j D`` over the stiffness lines ``w`` (rad/s)."""
+    ``K + j w_j C + j D`` over the stiffness lines ``w`` (rad/s).
+
+    ``K`` is the weighted mean of ``Re``; ``C`` the weighted least squares of ``Im = w C``
+    or, when a structural ``D`` was fitted alongside (non-zero), of ``Im = w C + D`` (a
+    slope with an intercept: its variance grows by ``sum w^2 / sum (w - mean w)^2``).
+    ``weight`` (n,) is each line's share of the fit (:func:`regressor_weights`; equal
+    without): a line whose accelerances are small and noisy scatters most and counts
+    least, in the fit as here. Per entry, the
+    larger of the block-robust form with ``n_blocks`` blocks and the two-block jackknife
+    (the lower against the upper half of the lines: a drift of ``K*`` with frequency that
+    the many small blocks average out).
+    """
     n = w.size
+    nu = np.ones(n) if weight is None else np.clip(np.asarray(weight, float), 0.0, None)
+    if not np.sum(nu) > 0:
+        nu = np.ones(n)
     E = Ks_lines - (K[None] + 1j * w[:, None, None] * C[None])
+    with_d = D is not None and bool(np.any(D))
     if D is not None:
         E = E - 1j * D[None]
-    terms = np.concatenate([E.real.reshape(n, 36).T / n,
-                            (w[:, None] * E.imag.reshape(n, 36)).T / np.sum(w**2)])
-    dof = max(n - 2, 1)
-    return block_covariance(terms, n_blocks) * n / dof
+    wc = w - np.average(w, weights=nu) if with_d else w
+    denom = float(np.sum(nu * wc**2))
+    terms = np.concatenate([(nu[:, None] * E.real.reshape(n, 36)).T / np.sum(nu),
+                            ((nu * wc)[:, None] * E.imag.reshape(n, 36)).T
+                            / max(denom, 1e-300)])
+    n_eff = float(np.sum(nu) ** 2 / np.sum(nu**2))
+    dof = max(n_eff - (3 if with_d else 2), 1.0)
+    return _largest([block_covariance(terms, n_blocks), block_covariance(terms, 2)]) * n_eff / dof
+
+
+def drift_factor(w: NDArray[np.float64], weight: NDArray[np.float64]) -> float:
+    """How far the estimate of the whole mass line lies from the residual-free one, in units
+    of the difference between its upper and lower halves (the split of the half-band fits).
+
+    Modes above the band add a residual growing like ``w^2`` to the accelerances below them
+    (the first term of ``w^2 / (w_e^2 - w^2)``); on a mass line where the regressors are
+    nearly flat, a least-squares estimate over a set of lines is then biased by
+    ``v <w^2>``, ``<.>`` the mean over those lines weighted by their share of the normal
+    matrix, ``v`` the same for every set. The two halves give
+    ``d = v (<w^2>_upper - <w^2>_lower)``, so the bias of the whole band is
+    ``d <w^2>_all / (<w^2>_upper - <w^2>_lower)``: this factor.
+
+    Parameters
+    ----------
+    w : (n,) rad/s, the mass lines in ascending order
+    weight : (n,) each line's weight in the fit (non-negative)
+
+    Returns
+    -------
+    The factor (0.5 when the halves carry no information about the drift, e.g. < 2 lines).
+    """
+    n = w.size
+    h = n // 2
+    wt = np.clip(np.asarray(weight, float), 0.0, None)
+    if h < 1 or np.sum(wt[:h]) <= 0 or np.sum(wt[h:]) <= 0:
+        return 0.5
+    w2 = np.asarray(w, float) ** 2
+    lo = float(np.average(w2[:h], weights=wt[:h]))
+    hi = float(np.average(w2[h:], weights=wt[h:]))
+    al = float(np.average(w2, weights=wt))
+    return max(al / (hi - lo), 0.5) if hi > lo else 0.5
+
+
+def regressor_weights(X: NDArray[np.complexfloating], weights: NDArray[np.float64] | None,
+                      row_scale: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """(n_lines,) each line's share of a fit whose regressors are the accelerances X
+    (6, n_exc, n_lines): their weighted squared size ``sum_e weight_el sum_i (s_i |X_iel|)^2``
+    (``s`` the equations' row scale)."""
+    s2 = (np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2)[:, None, None]
+    size = np.sum(s2 * np.abs(X) ** 2, axis=0)  # (n_e, n_l)
+    if weights is not None:
+        size = size * weights
+    return np.asarray(np.sum(size, axis=0))
+
+
+def force_noise_ratio(coherence: NDArray[np.float64], weight: NDArray[np.float64]) -> float:
+    """Upper bound of the force channels' noise-to-signal power ratio from the coherence.
+
+    Noise on the force biases an H1 estimate low by ``Sff_true / Sff = 1 / (1 + a_f)``
+    (errors in variables; noise on the responses does not bias it). Per excitation and
+    line, ``1 - g_r = 1 - 1 / ((1 + a_f)(1 + a_r))`` for each response r of that run, so
+    the best-coherent response bounds ``a_f <= 1 / max_r g_r - 1``. Returned: that bound,
+    averaged over columns and lines with the fit's weights.
+
+    Parameters
+    ----------
+    coherence : (n_resp, n_exc, n_lines) on the lines of the fit
+    weight : (n_exc, n_lines) each value's weight in the fit
+    """
+    g = np.clip(np.max(coherence, axis=0), 1e-6, 1.0)
+    wt = np.clip(np.asarray(weight, float), 0.0, None)
+    if np.sum(wt) <= 0:
+        return 0.0
+    return float(np.average(1.0 / g - 1.0, weights=wt))
+
+
+def _sym_basis() -> NDArray[np.float64]:
+    """(21, 6, 6) basis of the symmetric 6x6 matrices (upper-triangle order)."""
+    iu = np.triu_indices(6)
+    out = np.zeros((21, 6, 6))
+    out[np.arange(21), iu[0], iu[1]] = 1.0
+    out[np.arange(21), iu[1], iu[0]] = 1.0
+    return out
+
+
+def flexibility_bias(Ks_lines: NDArray[np.complex128], w: NDArray[np.float64],
+                     M: NDArray[np.float64], K: NDArray[np.float64],
+                     weight: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+    """(6, 6) bias of K from a flexibility in series with the rigid body, fitted to the
+    stiffness lines.
+
+    The body's elastic modes above the band add a nearly constant flexibility ``R``
+    (rigid-body coordinates at O) in series with the mounts: a line's dynamic stiffness is
+    then ``(D_j^-1 + R)^-1 ~ D_j - D_j R D_j`` with ``D_j = K - w_j^2 M``, a term that
+    changes with frequency (largest at the lowest lines, none at the rigid-body modes).
+    The fit of a constant K absorbs its mean: ``K_fit ~ K - <D R D>``. ``R`` (symmetric,
+    21 numbers) is fitted to how ``Re K*_j`` varies over the lines (weighted least
+    squares of the deviations from their weighted means), and ``<D R D>`` returned, scaled
+    by the positive-part James-Stein factor ``max(0, 1 - 21 / F)``, ``F = r^T N r / s^2``
+    the fitted R's size against its own noise (about 21 when the lines show none): a
+    flexibility fitted to the noise of a stiff body's lines is dropped, the lines' scatter
+    having that noise already.
+
+    Parameters
+    ----------
+    Ks_lines : (n, 6, 6) K* of each stiffness line; w : (n,) rad/s
+    M, K : (6, 6) the fitted mass and stiffness matrices at O
+    weight : (n,) each line's share of the fit (equal without)
+    """
+    n = w.size
+    nu = np.ones(n) if weight is None else np.clip(np.asarray(weight, float), 0.0, None)
+    if n < 8 or not np.sum(nu) > 0:
+        return np.zeros((6, 6))
+    nu = nu / np.sum(nu)
+    Dj = K[None] - (np.asarray(w, float) ** 2)[:, None, None] * M[None]
+    Dj = 0.5 * (Dj + np.swapaxes(Dj, 1, 2))
+    i, j = np.triu_indices(6)
+    # d(D R D)/dR_ij = d_i d_j^T + d_j d_i^T (d_i the i-th column of the symmetric D; once
+    # on the diagonal)
+    A = Dj[:, :, i].transpose(0, 2, 1)[..., None] * Dj[:, :, j].transpose(0, 2, 1)[:, :, None]
+    A = A + np.where((i != j)[None, :, None, None], np.swapaxes(A, 2, 3), 0.0)
+    iu = i * 6 + j  # the 21 distinct entries of the symmetric matrices
+    A = A.reshape(n, 21, 36)[:, :, iu]
+    Ks_re = np.real(Ks_lines)
+    y = (0.5 * (Ks_re + np.swapaxes(Ks_re, 1, 2))).reshape(n, 36)[:, iu]
+    A = A - np.tensordot(nu, A, axes=1)[None]
+    y = y - nu @ y
+    Af = np.ascontiguousarray(A.transpose(1, 0, 2)).reshape(21, n * 21)
+    Anf = Af * np.repeat(nu, 21)[None]
+    N = Anf @ Af.T
+    g = Anf @ y.ravel()
+    # minus sign: K* = D - D R D, so the deviations of Re K* are -(D R D - <D R D>)
+    r = -np.linalg.lstsq(N, g, rcond=None)[0]
+    # how far R stands out of the lines' noise: F = r^T N r / s^2 with s^2 the residual
+    # variance (21 on average when there is no flexibility); the positive-part James-Stein
+    # factor 1 - 21 / F keeps a real flexibility and drops one fitted to noise
+    e = y + (Af.T @ r).reshape(n, 21)
+    s2 = float(np.sum(nu[:, None] * e**2)) / max(21 * n - 21, 1)
+    F = float(r @ N @ r) / s2 if s2 > 0 else np.inf
+    shrink = max(0.0, 1.0 - 21.0 / F) if F > 0 else 0.0
+    R = shrink * np.einsum("k,kab->ab", r, _sym_basis())
+    return np.asarray(np.einsum("l,lab,bc,lcd->ad", nu, Dj, R, Dj))
+
+
+def series_softening(M: NDArray[np.float64], K: NDArray[np.float64],
+                     elastic_hz: float | tuple[float, ...],
+                     C: NDArray[np.float64] | None = None,
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(6, 6) sizes of the changes of K and C by a body flexibility with elastic modes at
+    ``elastic_hz`` (Hz): ``K M^-1 K s`` and ``(K M^-1 C + C M^-1 K) s``, ``s = sum 1 / w_e^2``.
+
+    The mounts act on the body at points that the body's elastic modes move: the rigid-body
+    model sees their dynamic stiffness ``Z = K + j w C`` in series with the body's
+    flexibility there, ``(Z^-1 + R_m)^-1 ~ Z - Z R_m Z``, a change of K and C that no
+    rigid-body residual shows. Each mode at ``w_e`` with a unit share at the mounts adds
+    ``M^-1 / w_e^2`` to ``R_m``; the relative change of a rigid-body mode's ``w_r^2`` is then
+    ``w_r^2 sum 1 / w_e^2``.
+    """
+    f = np.atleast_1d(np.asarray(elastic_hz, dtype=float))
+    f = f[f > 0]
+    s = float(np.sum(1.0 / (2 * np.pi * f) ** 2)) if f.size else 0.0
+    Minv = np.linalg.pinv(M)
+    S = K @ Minv @ K * s
+    Cz = np.zeros((6, 6)) if C is None else C
+    T = (K @ Minv @ Cz + Cz @ Minv @ K) * s
+    return np.asarray(0.5 * (S + S.T)), np.asarray(0.5 * (T + T.T))
 
 
 def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
@@ -181,6 +364,10 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
                    n_blocks: int = DEFAULT_BLOCKS,
                    half_thetas: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
                    D: NDArray[np.float64] | None = None,
+                   w_mass: NDArray[np.float64] | None = None,
+                   force_noise: float = 0.0,
+                   stiff_weight: NDArray[np.float64] | None = None,
+                   elastic_hz: tuple[float, ...] = (),
                    ) -> FitCovariance:
     """Joint covariance of theta, K and C of one fit.
 
@@ -190,15 +377,26 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
     stiffness_map : M (6, 6) -> (K, C), the fit's stiffness step (affine in M)
     Ks_lines : (n, 6, 6) K* of each stiffness line used, w_stiff (n,) rad/s
     K, C : the fitted stiffness and damping
-    half_thetas : theta of the same model on the lower and upper half of the mass lines:
-        their difference d gives the two-block jackknife ``d d^T / 4`` (the estimate's drift
-        with the band, i.e. model error), a further candidate of the largest-variance rule
+    half_thetas : theta of the same model on the lower and upper half of the mass lines;
+        their difference d gives the band-drift term ``(f d)(f d)^T``, f from
+        :func:`drift_factor` on ``w_mass`` (rad/s, the mass lines; without them the
+        two-block jackknife ``d d^T / 4``), a further candidate of the largest-variance rule
+    force_noise : bound of the force noise-to-signal ratio (:func:`force_noise_ratio`):
+        the H1 bias it causes scales theta, K and C alike, its part is
+        ``a^2 p p^T`` for ``p = [theta, vec K, vec C]``
+    stiff_weight : (n,) each stiffness line's share of the stiffness fit
+        (:func:`regressor_weights`), for :func:`stiffness_scatter` and
+        :func:`flexibility_bias` (whose result is a part of its own)
+    elastic_hz : the elastic modes seen in the data (Hz), if any: the part
+        :func:`series_softening` of K and C
     """
     cov_t = theta_covariance(ml, theta, B, n_blocks)
     if half_thetas is not None:
         d = np.asarray(half_thetas[1]) - np.asarray(half_thetas[0])
         if np.all(np.isfinite(d)):
-            cov_t = _largest([cov_t, np.outer(d, d) / 4])
+            f = 0.5 if w_mass is None else drift_factor(
+                np.asarray(w_mass), regressor_weights(ml.X, ml.weights, ml._row_scale))
+            cov_t = _largest([cov_t, np.outer(d, d) * f**2])
     # floor: the precision of the arithmetic, relative to m, m L and m L^2
     m = abs(float(theta[0]))
     L = np.sqrt(max(abs(float(np.sum(theta[4:7]))) / max(m, 1e-300), 1e-12))
@@ -211,7 +409,7 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
         Kp, Cp = stiffness_map(M0 + MASS_BASIS[p])
         J[:36, p] = (Kp - K0).ravel()
         J[36:, p] = (Cp - C0).ravel()
-    scatter = stiffness_scatter(Ks_lines, w_stiff, K, C, n_blocks, D)
+    scatter = stiffness_scatter(Ks_lines, w_stiff, K, C, n_blocks, D, stiff_weight)
     dk = np.sqrt(np.abs(np.diag(K)))
     dc = np.sqrt(np.abs(np.diag(C)))
     scatter = scatter + np.diag(np.concatenate([np.outer(dk, dk).ravel(),
@@ -221,7 +419,20 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
     from_lines = np.zeros((82, 82))
     from_lines[10:, 10:] = scatter
     parts = {"mass-line fit": from_theta, "stiffness-line scatter": from_lines}
-    return FitCovariance(from_theta + from_lines, parts)
+    if elastic_hz:
+        v = np.zeros(82)
+        dK, dC = series_softening(M0, K, tuple(elastic_hz), C)
+        v[10:46], v[46:] = dK.ravel(), dC.ravel()
+        parts["mounts softened by the body's flexibility"] = np.outer(v, v)
+    dK = flexibility_bias(Ks_lines, w_stiff, M0, K, stiff_weight)
+    if np.all(np.isfinite(dK)) and np.any(dK):
+        v = np.zeros(82)
+        v[10:46] = dK.ravel()
+        parts["body flexibility in the stiffness lines"] = np.outer(v, v)
+    if force_noise > 0:
+        p_all = np.concatenate([theta, np.ravel(K), np.ravel(C)])
+        parts["force noise (H1 bias)"] = force_noise**2 * np.outer(p_all, p_all)
+    return FitCovariance(np.sum(list(parts.values()), axis=0), parts)
 
 
 # --- propagation -----------------------------------------------------------------------------

@@ -19,7 +19,13 @@ from processing.data import FRFSet, Geometry
 from processing.montecarlo import StatedUncertainty, simulate
 from processing.problem import IdentifyOptions, prepare
 from processing.results import UNCERTAIN_KEYS
-from processing.uncertainty import block_covariance
+from processing.uncertainty import (
+    block_covariance,
+    drift_factor,
+    flexibility_bias,
+    force_noise_ratio,
+    series_softening,
+)
 
 
 def _frfset(sc: Scenario) -> FRFSet:
@@ -52,9 +58,9 @@ def _ratios(sc: Scenario, r: idm.IdentificationResult) -> np.ndarray:
 
 def test_intervals_cover_the_truth_on_stiff_bodies() -> None:
     """Five scenarios with 1 % noise, +-2 mm locations, 1 deg misalignment; the stated
-    uncertainties are those levels as standard deviations. Measured: 140 of 155 entries (90 %)
-    within 1.96 std, median |error|/std 0.59, before the coherence weighting and the damping
-    model choice; with them 155 of 155, median 0.28 (the intervals about twice too wide)."""
+    uncertainties are those levels as standard deviations. Measured: 155 of 155 entries within
+    1.96 std, median |error|/std 0.41 (0.28 before the stiffness scatter was weighted like
+    the fit; a normal error gives 0.67)."""
     z = []
     for seed, shape in [(21, "block"), (22, "engine"), (23, "gearbox"), (24, "block"),
                         (25, "engine")]:
@@ -86,13 +92,105 @@ def test_std_shrinks_with_the_noise() -> None:
     assert max(ratios.values()) < 0.65, ratios
 
 
-@pytest.mark.xfail(strict=True, reason="with the coherence weights the fit's std of the mass "
-                   "(0.005 %) is 7x under its error (0.038 %) at 2 % noise: the H1 and "
-                   "errors-in-variables bias is not in the covariance yet (issue 15)")
 def test_noise_only_interval_holds_the_truth() -> None:
+    """Noise only (no geometry error): the mass error is the H1 bias of the noisy force
+    (errors in variables, about noise^2); the coherence bound of the force noise puts it
+    inside the interval without making it wide (measured |error|/std 0.49 at 2 %, 0.56 at
+    0.5 %; without the term the std was 7x under the error)."""
     for noise in (0.02, 0.005):
         sc, r = _noise_only(noise)
-        assert abs(r.properties.mass - sc.truth.mass) < 3 * r.uncertainty.std["mass"]  # type: ignore[union-attr]
+        err = abs(r.properties.mass - sc.truth.mass)
+        std = r.uncertainty.std["mass"]  # type: ignore[union-attr]
+        assert err <= 1.96 * std <= 8 * err, (noise, err, std)
+
+
+def test_force_noise_ratio_bounds_the_reference_force_noise() -> None:
+    """The reference measurement adds force noise of power noise^2 of the force's
+    (hardware_mocks/reference/measurement.py); the bound from the best-coherent response of
+    each run lies above it and within 3x (measured 1.86-1.91x at 0.5-2 %)."""
+    for noise, seed, shape in ((0.02, 21, "block"), (0.005, 22, "engine")):
+        sc = build_scenario(_spec(seed, shape, noise=noise, location=0.0, misalignment=0.0))
+        frf = _frfset(sc)
+        pb = prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
+                     coherence=frf.coherence, options=IdentifyOptions(), exponential_tau=None)
+        weights = idm.weigh_lines(pb, idm.choose_bands(pb))
+        assert pb.coherence is not None
+        a = force_noise_ratio(pb.coherence[..., weights.mass_lines], weights.mass)
+        assert noise**2 <= a <= 3 * noise**2, (noise, a / noise**2)
+
+
+def test_drift_factor_recovers_a_residual_growing_like_w2() -> None:
+    """A quantity measured on lines with a residual ``v w^2`` (modes above the band): the
+    weighted least-squares estimate over a band is biased by ``v <w^2>``; the factor times
+    the difference between the upper and lower halves' estimates gives that bias."""
+    rng = np.random.default_rng(3)
+    w = np.sort(2 * np.pi * rng.uniform(20.0, 45.0, 301))
+    wt = rng.uniform(0.2, 1.0, w.size)
+    m, v = 3.0, 2e-6
+    y = m + v * w**2
+
+    def est(sl: slice) -> float:
+        return float(np.average(y[sl], weights=wt[sl]))
+
+    h = w.size // 2
+    d = est(slice(h, None)) - est(slice(0, h))
+    np.testing.assert_allclose(drift_factor(w, wt) * d, est(slice(None)) - m, rtol=1e-10)
+    assert drift_factor(w[:1], wt[:1]) == 0.5  # no halves: the two-block jackknife
+
+
+def test_flexibility_bias_recovers_a_series_flexibility() -> None:
+    """Stiffness lines of a rigid body on mounts K with a flexibility R in series
+    (``K* = ((K - w^2 M)^-1 + R)^-1 + w^2 M``, exact, written here): the fitted bias of a
+    constant K over the lines matches ``<D R D>`` to first order in R (|R K| ~ 1 %)."""
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(6, 6))
+    M = A @ A.T + 6 * np.eye(6)
+    B = rng.normal(size=(6, 6))
+    K = 1e4 * (B @ B.T + 6 * np.eye(6))
+    R = rng.normal(size=(6, 6))
+    R = 0.5 * (R + R.T) * 1e-2 / np.linalg.norm(K, 2)
+    w = np.linspace(0.5, 1.5, 400) * np.sqrt(np.max(np.linalg.eigvals(np.linalg.solve(M, K)).real))
+    Dj = K[None] - w[:, None, None] ** 2 * M[None]
+    Ks = np.linalg.inv(np.linalg.inv(Dj) + R[None]) + w[:, None, None] ** 2 * M[None]
+    got = flexibility_bias(Ks + 0j, w, M, K)
+    want = np.mean(Dj @ R @ Dj, axis=0)
+    np.testing.assert_allclose(got, want, atol=0.05 * np.abs(want).max())
+
+
+def test_flexibility_bias_drops_a_flexibility_fitted_to_noise() -> None:
+    """Stiffness lines of a rigid body (no flexibility) with white noise on each K*_j: the
+    fitted R stands no higher than its own noise, and the James-Stein factor drops or
+    shrinks it (measured: zero in 7 of 20 draws, median largest entry 0.015 of the lines'
+    noise)."""
+    rng = np.random.default_rng(8)
+    A = rng.normal(size=(6, 6))
+    M = A @ A.T + 6 * np.eye(6)
+    B = rng.normal(size=(6, 6))
+    K = 1e4 * (B @ B.T + 6 * np.eye(6))
+    w = np.linspace(0.5, 1.5, 300) * np.sqrt(np.max(np.linalg.eigvals(np.linalg.solve(M, K)).real))
+    sigma = 1e-3 * np.abs(K).max()
+    sizes = []
+    for _ in range(20):
+        E = rng.normal(size=(w.size, 6, 6)) * sigma
+        Ks = K[None] + 0.5 * (E + np.swapaxes(E, 1, 2)) + 0j
+        sizes.append(np.abs(flexibility_bias(Ks, w, M, K)).max())
+    assert np.mean(np.array(sizes) == 0) >= 0.3, sizes
+    assert np.median(sizes) < 0.05 * sigma, sizes
+
+
+def test_series_softening_matches_a_flexible_mount_stack() -> None:
+    """One DOF at a time: a mount k in series with a body flexibility 1 / (m w_e^2) has the
+    stiffness (1/k + 1/(m w_e^2))^-1; the term is its first-order change k^2 / (m w_e^2)."""
+    M, K = np.diag([2.0, 3.0, 4.0, 0.5, 0.6, 0.7]), np.diag([4e4, 5e4, 6e4, 1e3, 2e3, 3e3])
+    fe = 150.0
+    we2 = (2 * np.pi * fe) ** 2
+    exact = K.diagonal() - 1 / (1 / K.diagonal() + 1 / (M.diagonal() * we2))
+    C = np.diag([40.0, 50.0, 60.0, 1.0, 2.0, 3.0])
+    dK, dC = series_softening(M, K, fe, C)
+    np.testing.assert_allclose(dK.diagonal(), exact, rtol=0.05)
+    z = K.diagonal() + 1j * C.diagonal()  # at w = 1 rad/s: Im Z = C
+    exact_c = (z - 1 / (1 / z + 1 / (M.diagonal() * we2))).imag
+    np.testing.assert_allclose(dC.diagonal(), exact_c, rtol=0.1)
 
 
 def test_result_json_and_switch() -> None:
