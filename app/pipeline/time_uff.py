@@ -351,4 +351,29 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
                    first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),
                    np.array([k[1] for k in keys]), geometry, meta,
                    s.fmax if s.fmax is not None else first.fs / 2.56, reports)
+    if s.excitation == "random":
+        out = _from_signal(out, s.coherence, reports)
     return out, reports + check_reports(out, s.coherence)
+
+
+#: fewest lines left by :func:`_from_signal`
+MIN_LINES = 8
+
+
+def _from_signal(frf: FRFSet, gate: float, reports: list[RunReport]) -> FRFSet:
+    """Random excitation: the FRFs from the lowest line where the median coherence over all
+    FRFs reaches ``gate`` (the lines below it hold responses under their noise: accelerances
+    fall as the square of the frequency under the rigid-body modes); a line says so.
+    Unchanged when ``gate`` is 0, there is no coherence or fewer than :data:`MIN_LINES`
+    would be left."""
+    if frf.coherence is None or not gate > 0:
+        return frf
+    med = np.median(frf.coherence, axis=(0, 1))
+    k = int(np.argmax(med >= gate)) if np.any(med >= gate) else 0
+    if k == 0 or frf.freq.size - k < MIN_LINES:
+        return frf
+    reports.insert(0, RunReport(
+        f"FRFs from {frf.freq[k]:.4g} Hz: the {k} lines below have a median coherence under "
+        f"{gate:g} (responses under their noise; --coherence 0 keeps them)"))
+    return dataclasses.replace(frf, freq=frf.freq[k:], H=frf.H[..., k:],
+                               coherence=frf.coherence[..., k:])
