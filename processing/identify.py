@@ -692,14 +692,15 @@ def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]
     data's top; the same with the threshold raised to 3x the check's error floor (noise,
     location or sensor errors), used when the first leaves no mass line; and notes. When
     the lowest lines are above the threshold (accelerances, falling as the square of the
-    frequency under the rigid-body modes, under the noise), the band starts at the first
-    line under it."""
+    frequency under the rigid-body modes, under the noise) while most lines are within it
+    (the check's error floor, its lower quartile, at most twice the threshold), the band
+    starts at the first line under it."""
     fmin = float(frf.freq[frf.freq > 0][0]) if np.any(frf.freq > 0) else 0.0
     try:
         rc = rigidity_check(frf, fmin=fmin)
     except GeometryError:
         return None, None, []  # under 3 response nodes: the elastic-mode detection bounds it
-    if rc.band is None:
+    if rc.band is None and rc.error_floor(fmin) <= 2 * rc.threshold:
         heard = (rc.freq >= fmin) & (rc.worst <= rc.threshold)
         if np.any(heard):
             fmin = float(rc.freq[heard][0])
