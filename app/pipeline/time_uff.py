@@ -44,6 +44,16 @@ Column = tuple[NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64]]
 DofKey = tuple[int, tuple[float, ...]]
 
 
+def _apart(onsets: NDArray[np.int64], length: int) -> NDArray[np.int64]:
+    """The onsets that start after the record of the previous one kept (a loud moment inside
+    a burst, e.g. the armature's force while the structure rings, starts no record)."""
+    kept: list[int] = []
+    for o in onsets.tolist():  # a few dozen bursts
+        if not kept or o >= kept[-1] + length:
+            kept.append(o)
+    return np.asarray(kept, dtype=np.int64)
+
+
 def _record_spectra(r: TimeRun, s: Settings) -> CrossSpectra:
     """Spectra of whole periods (``s.records == "periodic"``, the first ones skipped until
     the responses repeat) or of one record from each burst's onset (``"burst"``),
@@ -56,7 +66,7 @@ def _record_spectra(r: TimeRun, s: Settings) -> CrossSpectra:
         starts = np.arange(skip * L, n - L + 1, L)
         what = f"period of {L} samples after the first {skip}"
     else:
-        starts = burst_onsets(r.force, r.fs)
+        starts = _apart(burst_onsets(r.force, r.fs), L)
         starts = starts[starts + L <= n]
         what = f"burst of {L} samples"
     if s.averages is not None:
