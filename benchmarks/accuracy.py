@@ -235,6 +235,8 @@ def write_coverage_docs(body: list[list[str]], n: int, refused: int, passing: in
     """Replace (or append) the coverage section of docs/accuracy.md."""
     text = DOCS.read_text() if DOCS.exists() else ""
     head = text.split(COVERAGE_TITLE)[0].rstrip("\n")
+    after = text.split(COVERAGE_TITLE, 1)[1] if COVERAGE_TITLE in text else ""
+    later = after[after.index("\n## ") + 1:] if "\n## " in after else ""  # other sections
     shown = [a for i, a in enumerate(sys.argv[1:])
              if a != "--json" and (i == 0 or sys.argv[i] != "--json")]
     lines = [
@@ -260,7 +262,7 @@ def write_coverage_docs(body: list[list[str]], n: int, refused: int, passing: in
         *("| " + " | ".join(c) + " |" for c in body),
         "",
     ]
-    DOCS.write_text(head + "\n".join(lines))
+    DOCS.write_text(head + "\n".join(lines) + ("\n\n" + later if later else ""))
 
 
 def worse_than_article(row: dict[str, Any]) -> bool:
@@ -441,7 +443,8 @@ def write_docs(body: list[list[str]], rows: list[dict[str, Any]], worse: list[st
                       "example):", "",
                       *(f"- {n}: `{k}` (e.g. `{ex}`)" for n, k, ex in kinds), ""]
     old = DOCS.read_text() if DOCS.exists() else ""
-    kept = old[old.index("\n## ") + 1:] if "\n## " in old else ""  # the other sections
+    # the sections after this one (coverage, time data: written by their own benchmarks)
+    kept = old[old.index("\n## ") + 1:] if "\n## " in old else ""
     DOCS.write_text("\n".join(lines) + ("\n\n" + kept if kept else ""))
 
 

@@ -17,8 +17,11 @@ Figures: refusals (with their messages), hits rejected (true: double or clipped;
 hits), excitation type detected, and the errors of ``hardware_mocks/reference/metrics.py``
 (mass %, CoG mm, inertia % of the largest principal moment), median and 95th percentile.
 
+With ``--write-docs`` the table goes into its own section of docs/accuracy.md (the sections
+``benchmarks/accuracy.py`` writes are kept as they are).
+
 Run: ``.venv/bin/python benchmarks/timedata.py [--hammer 50] [--shaker 50] [--jobs 2]
-[--json FILE]``.
+[--json FILE] [--write-docs]``.
 """
 
 from __future__ import annotations
@@ -33,12 +36,14 @@ import contextlib  # noqa: E402
 import dataclasses  # noqa: E402
 import io  # noqa: E402
 import json  # noqa: E402
+import platform  # noqa: E402
 import re  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from collections import Counter  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from datetime import UTC, datetime  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -59,6 +64,13 @@ from hardware_mocks.reference.timedata import (  # noqa: E402
 )
 
 FIGURES = ("mass", "cog", "inertia")
+#: the table's figures: key, heading
+TABLE = (("mass", "mass %"), ("cog", "CoG mm"), ("inertia", "inertia %"), ("stiffness", "K %"))
+#: what each identification is, in the table
+SOURCES = (("time", "time data, default options"), ("exact", "exact FRFs, same lines"),
+           ("bands", "time data in the exact FRFs' bands"))
+DOCS = Path(__file__).resolve().parent.parent / "docs" / "accuracy.md"
+TITLE = "## Time data: hammer and shaker tests"
 
 
 def case(i: int, kind: str) -> TimeTest:
@@ -114,9 +126,8 @@ def _hit_counts(t: TimeTest, out: str) -> dict[str, int]:
             c["run left out"] += 1
             continue
         for k, h in enumerate(r.hits):
-            c["bad rejected" if not h.good and k in rej else
-              "bad accepted" if not h.good else
-              "good rejected" if k in rej else "good accepted"] += 1
+            what = "double" if h.double else "clipped" if h.clipped else "good"
+            c[f"{what} {'rejected' if k in rej else 'accepted'}"] += 1
     return dict(c)
 
 
@@ -132,7 +143,8 @@ def evaluate(i: int, kind: str) -> dict[str, Any]:
         m = re.search(r"^excitation (\w+) ", out, re.M)
         row["detected"] = m.group(1) if m else "?"
         row["defaults"] = [ln for ln in out.splitlines()
-                           if ln.startswith(("excitation ", "record ", "trigger level"))]
+                           if ln.startswith(("excitation ", "record ", "trigger level",
+                                             "shaker force"))]
         row["time"] = {"refused": why} if res is None else {"errors": _errs(t, res)}
         if kind == "hammer":
             row["hits"] = _hit_counts(t, out)
@@ -200,13 +212,115 @@ def report(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _cell(rows: list[dict[str, Any]], key: str, fig: str) -> tuple[float, float] | None:
+    v = [r[key]["errors"][fig] for r in rows if key in r and "errors" in r[key]]
+    return (float(np.median(v)), float(np.percentile(v, 95))) if v else None
+
+
+def _fmt(x: tuple[float, float] | None) -> str:
+    return "-" if x is None else f"{x[0]:.3g} / {x[1]:.3g}"
+
+
+def table(rows: list[dict[str, Any]]) -> list[list[str]]:
+    """Per kind: one row per source (cases, refusals, median / p95 of each figure) and the
+    ratio time data / exact FRFs of the medians and of the 95th percentiles."""
+    body = []
+    for kind in ("hammer", "shaker"):
+        rs = [r for r in rows if r["kind"] == kind]
+        if not rs:
+            continue
+        for key, name in SOURCES:
+            have = [r for r in rs if key in r]
+            refused = sum("refused" in r[key] for r in have)
+            body.append([kind, name, str(len(have)), str(refused),
+                         *(_fmt(_cell(rs, key, f)) for f, _ in TABLE)])
+        ratio = []
+        for f, _ in TABLE:
+            t, e = _cell(rs, "time", f), _cell(rs, "exact", f)
+            ratio.append("-" if t is None or e is None else
+                         f"{t[0] / max(e[0], 1e-300):.2f} / {t[1] / max(e[1], 1e-300):.2f}")
+        body.append([kind, "ratio time data / exact FRFs", "", "", *ratio])
+    return body
+
+
+HEADER = ["test", "FRFs", "cases", "refused", *(f"{h} (median / p95)" for _, h in TABLE)]
+
+
+def hits_line(rows: list[dict[str, Any]]) -> str:
+    """The hammer hits' verdicts against the generator's labels."""
+    c = Counter[str]()
+    for r in rows:
+        c.update(r.get("hits", {}))
+    def of(what: str) -> str:
+        n = c[f"{what} rejected"] + c[f"{what} accepted"]
+        return f"{c[f'{what} rejected']} of {n}"
+    return (f"hammer hits rejected: double hits {of('double')}, clipped hits {of('clipped')}, "
+            f"good hits {of('good')}; runs left out: {c['run left out']}")
+
+
+def write_docs(rows: list[dict[str, Any]], elapsed: float, argv: list[str]) -> None:
+    """Replace (or append) this benchmark's section of docs/accuracy.md."""
+    shown = [a for i, a in enumerate(argv) if a != "--json" and (i == 0 or argv[i - 1] != "--json")]
+    detected = {kind: dict(Counter(r["detected"] for r in rows if r["kind"] == kind))
+                for kind in ("hammer", "shaker")}
+    drives = Counter((r["drive"], next((ln.split(" (")[0] for ln in r["defaults"]
+                                        if ln.startswith("shaker force")), "?"))
+                     for r in rows if r["kind"] == "shaker")
+    lines = [
+        TITLE, "",
+        "Produced by `benchmarks/timedata.py` (do not edit by hand). Each case is a "
+        "reference-model scenario measured as time records by "
+        "`hardware_mocks/reference/timedata.py` (no code from `processing/`): hammer tests "
+        "(5 hits a point, 2.5-5 s apart +-20 %, one double hit and one clipped hit per test, "
+        "mount damping x0.2-x3, noise on force and responses, DC offset and drift, IEPE "
+        "settling) and shaker tests (continuous random, burst random, periodic chirp; 40 s a "
+        "point; armature 1-4 kg: force drop-outs at resonances). `time data` is `insitu "
+        "identify FILE.uff` with no option (every time-data setting read from the data); "
+        "`exact FRFs` the same scenario's exact accelerances on the same lines, identified "
+        "the same way; `time data in the exact FRFs' bands` the time data with the bands "
+        "the exact FRFs chose and `--coherence 0`. Errors as in the table above; each cell "
+        "median / 95th percentile over the cases answered; the ratio row divides the time "
+        "data's median and 95th percentile by the exact FRFs'.",
+        "",
+        f"- date: {datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}",
+        f"- machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}",
+        f"- command: `python benchmarks/timedata.py {' '.join(shown)}` ({elapsed:.0f} s)",
+        f"- excitation read from the data: hammer tests {detected['hammer']}, shaker tests "
+        f"{detected['shaker']}",
+        "- shaker records read from the force: " + "; ".join(
+            f"{d}: '{how}' x{n}" for (d, how), n in sorted(drives.items())),
+        f"- {hits_line(rows)}",
+        "",
+        "| " + " | ".join(HEADER) + " |",
+        "| " + " | ".join("---" if i < 2 else "---:" for i in range(len(HEADER))) + " |",
+        *("| " + " | ".join(c) + " |" for c in table(rows)),
+        "",
+    ]
+    refusals = Counter(f"{r['kind']} ({key}): " + re.sub(r"[-\d.]+", "#", r[key]["refused"])[:160]
+                       for r in rows for key, _ in SOURCES if key in r and "refused" in r[key])
+    if refusals:
+        lines += ["Refusals (count, message with its numbers as #):", "",
+                  *(f"- {n}: `{m}`" for m, n in refusals.most_common()), ""]
+    old = DOCS.read_text() if DOCS.exists() else ""
+    if TITLE in old:
+        head, rest = old.split(TITLE, 1)
+        tail = rest[rest.index("\n## ") + 1:] if "\n## " in rest else ""
+    else:
+        head, tail = old.rstrip("\n") + "\n\n\n", ""
+    DOCS.write_text(head + "\n".join(lines) + ("\n\n" + tail if tail else ""))
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--hammer", type=int, default=50)
     p.add_argument("--shaker", type=int, default=50)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--json", type=Path)
+    p.add_argument("--write-docs", action="store_true",
+                   help=f"write the table into its section of {DOCS.name}")
     a = p.parse_args(argv)
+    t0 = time.perf_counter()
     todo = [(i, "hammer") for i in range(a.hammer)] + [(i, "shaker") for i in range(a.shaker)]
     rows: list[dict[str, Any]] = []
     with ProcessPoolExecutor(a.jobs) as pool:
@@ -218,6 +332,13 @@ def main(argv: list[str] | None = None) -> int:
             if a.json:
                 a.json.write_text(json.dumps(rows, indent=1, default=float))
     print(report(rows))
+    print(hits_line(rows))
+    print("| " + " | ".join(HEADER) + " |")
+    for cells in table(rows):
+        print("| " + " | ".join(cells) + " |")
+    if a.write_docs:
+        write_docs(rows, time.perf_counter() - t0, sys.argv[1:] if argv is None else argv)
+        print(f"written to {DOCS}")
     return 0
 
 

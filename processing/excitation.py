@@ -14,15 +14,22 @@ How each is analysed (see ``docs/processing.md``):
 - periodic chirp: a sweep repeated every ``period`` samples; after the first
   period(s) the response is periodic too, and each period analysed with a
   rectangular window is leakage-free.
+
+:func:`shaker_signal` tells them apart on a recorded force, and :func:`burst_onsets`,
+:func:`steady_periods` place the records of the last two.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import scipy.signal
 from numpy.typing import NDArray
 
-__all__ = ["burst_random", "continuous_random", "periodic_chirp"]
+__all__ = ["ShakerSignal", "burst_onsets", "burst_random", "continuous_random", "periodic_chirp",
+           "shaker_signal", "steady_periods"]
 
 
 def _check(fs: float, band: tuple[float, float] | None) -> None:
@@ -134,3 +141,117 @@ def periodic_chirp(
     f0, f1 = k0 * df, k1 * df
     one = amplitude * np.sin(2 * np.pi * (f0 * t + (f1 - f0) * t**2 / (2 * T)))
     return np.tile(one, n_periods)
+
+
+# ---- what a recorded shaker force is ----
+
+#: a force whose autocorrelation (normalised, unbiased) reaches this at a lag of at least
+#: :data:`MIN_PERIOD` s and at most half the recording is periodic
+PERIODIC_CORRELATION = 0.9
+#: shortest period looked for, s
+MIN_PERIOD = 0.05
+#: a block whose RMS is under this fraction of the loud blocks' (90th percentile) is quiet
+QUIET_FRACTION = 0.1
+#: burst onsets this close to their median spacing (relative) make a regular burst train
+BURST_REGULARITY = 0.05
+
+
+@dataclass(frozen=True)
+class ShakerSignal:
+    """What a shaker's force looks like (:func:`shaker_signal`).
+
+    Attributes
+    ----------
+    kind : 'periodic' (repeats every ``period`` samples), 'burst' (bursts starting every
+        ``period`` samples, quiet in between) or 'continuous'
+    period : samples (None for continuous)
+    correlation : the force's normalised autocorrelation at ``period`` (periodic), else its
+        largest value over the lags looked at
+    duty : fraction of the recording where the force is on (1 for a continuous drive)
+    """
+
+    kind: Literal["periodic", "burst", "continuous"]
+    period: int | None
+    correlation: float
+    duty: float
+
+
+def _blocks(x: NDArray[np.float64], fs: float) -> tuple[int, NDArray[np.bool_]]:
+    """Block length (samples, about 10 ms) and which blocks are loud (RMS above
+    :data:`QUIET_FRACTION` of the 90th percentile), with dips of one or two blocks filled."""
+    b = max(4, round(0.01 * fs))
+    nb = x.size // b
+    rms = np.sqrt(np.mean(x[: nb * b].reshape(nb, b) ** 2, axis=1))
+    loud = rms > QUIET_FRACTION * np.percentile(rms, 90)
+    pad = np.pad(loud, 2)  # a centred maximum over five blocks: random dips filled
+    filled = np.any(np.lib.stride_tricks.sliding_window_view(pad, 5), axis=1)
+    return b, np.asarray(filled)
+
+
+def burst_onsets(force: NDArray[np.float64], fs: float) -> NDArray[np.int64]:
+    """First sample of each burst of a burst-random force (N), in order: the start of each
+    loud stretch (10 ms blocks) that follows a quiet one."""
+    x = np.asarray(force, dtype=float).ravel()
+    b, loud = _blocks(x - np.median(x), fs)
+    rise = np.flatnonzero(loud[1:] & ~loud[:-1]) + 1
+    if loud.size and loud[0]:
+        rise = np.r_[0, rise]
+    return np.asarray(rise * b, dtype=np.int64)
+
+
+def shaker_signal(force: NDArray[np.float64], fs: float) -> ShakerSignal:
+    """Periodic, burst or continuous, from a recorded shaker force (N) at ``fs`` Hz.
+
+    Periodic: the autocorrelation (about the median, unbiased, normalised) reaches
+    :data:`PERIODIC_CORRELATION` at some lag from :data:`MIN_PERIOD` s to half the
+    recording; the period is the shortest lag within 2 % of the highest peak. Burst: quiet
+    stretches (:func:`burst_onsets`), at least three bursts whose onsets are evenly spaced
+    within :data:`BURST_REGULARITY`; the period is the shortest spacing. Anything else is
+    continuous.
+
+    >>> fs = 256.0
+    >>> t = np.arange(8192) / fs
+    >>> shaker_signal(np.sin(2 * np.pi * (t % 2) ** 2 * 20), fs).kind
+    'periodic'
+    >>> shaker_signal(np.random.default_rng(0).normal(size=8192), fs).kind
+    'continuous'
+    """
+    x = np.asarray(force, dtype=float).ravel()
+    x = x - np.median(x)
+    n = x.size
+    X = np.fft.rfft(x, 2 * n)
+    r = np.fft.irfft(np.abs(X) ** 2, 2 * n)[:n] / (n - np.arange(n))
+    lo, hi = max(1, round(MIN_PERIOD * fs)), n // 2
+    if not r[0] > 0 or hi <= lo + 2:
+        return ShakerSignal("continuous", None, 0.0, 1.0)
+    rho = r[lo:hi] / r[0]
+    best = float(rho.max())
+    b, loud = _blocks(x, fs)
+    duty = float(np.mean(loud)) if loud.size else 1.0
+    if best >= PERIODIC_CORRELATION:
+        peak = (rho[1:-1] >= rho[:-2]) & (rho[1:-1] >= rho[2:]) & (rho[1:-1] >= 0.98 * best)
+        k = int(np.flatnonzero(peak)[0]) + 1 if peak.any() else int(np.argmax(rho))
+        return ShakerSignal("periodic", lo + k, float(rho[k]), duty)
+    on = burst_onsets(x, fs)
+    if on.size >= 3 and duty < 0.95:
+        gaps = np.diff(on)
+        med = float(np.median(gaps))
+        if np.all(np.abs(gaps - med) <= BURST_REGULARITY * med + b):
+            return ShakerSignal("burst", int(gaps.min()), best, duty)
+    return ShakerSignal("continuous", None, best, duty)
+
+
+def steady_periods(responses: NDArray[np.float64], period: int) -> int:
+    """Periods to skip at the start of a periodic test before the responses repeat: the
+    first period ``k`` (at least 1: the start from rest) whose difference from the next,
+    relative to it (RMS, worst channel), is within twice the median of the later half's."""
+    y = np.atleast_2d(np.asarray(responses, dtype=float))
+    m = y.shape[1] // period
+    if m < 3:
+        return min(1, max(m - 1, 0))
+    p = y[:, : m * period].reshape(y.shape[0], m, period)
+    d = np.sqrt(np.mean(np.diff(p, axis=1) ** 2, axis=-1))
+    d = np.max(d / np.maximum(np.sqrt(np.mean(p[:, 1:] ** 2, axis=-1)), 1e-300), axis=0)
+    floor = float(np.median(d[d.size // 2:]))
+    steady = np.flatnonzero(d <= 2 * floor)
+    return int(max(1, steady[0] if steady.size else 1))

@@ -807,12 +807,22 @@ def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
 def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]]:
     """Top of the rigid band of the rigidity check (article section 5.1), Hz, when below the
     data's top; the same with the threshold raised to 3x the check's error floor (noise,
-    location or sensor errors), used when the first leaves no mass line; and notes."""
+    location or sensor errors), used when the first leaves no mass line; and notes. When
+    the lowest lines are above the threshold (accelerances, falling as the square of the
+    frequency under the rigid-body modes, under the noise) while most lines are within it
+    (the check's error floor, its lower quartile, at most twice the threshold), the band
+    starts at the first line under it when it holds at least three lines from there."""
     fmin = float(frf.freq[frf.freq > 0][0]) if np.any(frf.freq > 0) else 0.0
     try:
         rc = rigidity_check(frf, fmin=fmin)
     except GeometryError:
         return None, None, []  # under 3 response nodes: the elastic-mode detection bounds it
+    if rc.band is None and rc.error_floor(fmin) <= 2 * rc.threshold:
+        heard = (rc.freq >= fmin) & (rc.worst <= rc.threshold)
+        band = rc.band_at(rc.threshold, fmin=float(rc.freq[heard][0])) if np.any(heard) else None
+        if band is not None and np.count_nonzero((rc.freq >= band[0])
+                                                 & (rc.freq <= band[1])) >= 3:
+            rc = dataclasses.replace(rc, band=band)  # a stretch, not a lone quiet line
     top = float(frf.freq[-1])
 
     def below_top(band: tuple[float, float] | None) -> float | None:

@@ -297,5 +297,8 @@ def choose_bands(
                    + ", ".join(set_aside))
     s_hi = min(1.5 * f_rig, lo)
     s_lo = float(freq[freq > 0][0])
+    if s_hi <= s_lo:  # the rigid-body modes lie under the first line given: up to the mass line
+        above = freq[freq > s_lo]
+        s_hi = max(lo, float(above[0])) if above.size else lo
     return BandChoice((float(lo), float(f_hi)), (s_lo, float(s_hi)), f_rig, fr, elastic,
                       reason, bool(set_aside))

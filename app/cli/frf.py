@@ -5,7 +5,9 @@ INPUT is a UFF file of time records or a run file (``.h5``) written by ``insitu 
 UFF: each run (its records sharing a load case: one force, the accelerations) gives
 the FRF column of its excitation DOF; runs at the same DOF are averaged together.
 ``--method random`` (shaker: continuous random, Welch with Hann window and overlap;
-also burst random and periodic chirp with ``--window boxcar --overlap 0``) or
+a periodic force, e.g. periodic chirp, one record per period with a rectangular window
+once the responses repeat; burst random, one record from each burst's onset, rectangular;
+read from the force unless ``--nperseg``, ``--overlap`` or ``--window`` is given) or
 ``--method impact`` (hammer: trigger, per-hit checks, force and exponential windows).
 
 Run file: every stored hit is processed again with the plan's settings and the
@@ -57,10 +59,13 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
                         "channel, an impulsive force is a hammer test; a hammer option given "
                         "means impact)")
     p.add_argument("--estimator", choices=ESTIMATORS, default="H1")
-    p.add_argument("--nperseg", type=int, default=2048,
-                   help="random: samples per segment (line spacing fs/nperseg)")
-    p.add_argument("--overlap", type=float, default=0.5, help="random: segment overlap, 0..<1")
-    p.add_argument("--window", default="hann", help="random: window (hann, boxcar, ...)")
+    p.add_argument("--nperseg", type=int,
+                   help="random: samples per Welch segment (line spacing fs/nperseg; default "
+                        "from the force: one period of a periodic force, one burst of burst "
+                        "random, else 2048)")
+    p.add_argument("--overlap", type=float,
+                   help="random: Welch segment overlap, 0..<1 (default 0.5)")
+    p.add_argument("--window", help="random: Welch window (hann, boxcar, ...; default hann)")
     p.add_argument("--averages", type=int, metavar="N",
                    help="use at most N averages: random, the first N segments of each run; "
                         "impact, the first N accepted hits of each excitation point "

@@ -36,9 +36,16 @@ class Settings:
         reads it from the data (an impulsive force is a hammer test; a hammer option given,
         ``level``, ``record``, ``pretrigger`` or ``exp_tau``, means one)
     estimator : FRF estimator (``"H1"``, ``"H2"``, ...: :data:`processing.spectral.ESTIMATORS`)
-    nperseg : random: samples per segment (line spacing fs / nperseg)
-    overlap : random: segment overlap, in [0, 1)
-    window : random: window name (``"hann"``, ``"boxcar"``, ...)
+    nperseg : random: samples per segment (line spacing fs / nperseg); None: from the data
+        (see ``records``), 2048 for Welch segments
+    overlap : random: segment overlap, in [0, 1); None: 0.5 for Welch segments
+    window : random: window name (``"hann"``, ``"boxcar"``, ...); None: Hann for Welch segments
+    records : random: how records are cut: ``"welch"`` (overlapping windowed segments),
+        ``"periodic"`` (whole periods of ``nperseg`` samples, rectangular window, the first
+        ones skipped until the responses repeat) or ``"burst"`` (``nperseg`` samples from
+        each burst's onset, rectangular window); None reads it from the force
+        (:func:`processing.excitation.shaker_signal`) unless ``nperseg``, ``overlap`` or
+        ``window`` is given (then Welch)
     averages : at most this many averages (random: the first segments of each run; impact and
         run files: the first used hits or blocks of each point); None for all
     level : impact: trigger level, N (None: from each run's force noise,
@@ -59,9 +66,10 @@ class Settings:
 
     excitation: Literal["random", "impact"] | None = None
     estimator: str = "H1"
-    nperseg: int = 2048
-    overlap: float = 0.5
-    window: str = "hann"
+    nperseg: int | None = None
+    overlap: float | None = None
+    window: str | None = None
+    records: Literal["welch", "periodic", "burst"] | None = None
     averages: int | None = None
     level: float | None = None
     record: float | None = None
@@ -74,16 +82,20 @@ class Settings:
 
     def __post_init__(self) -> None:
         """Every option checked once, here, in the units the user typed; one line each."""
-        _between("--nperseg", self.nperseg, 8, MAX_NPERSEG, "samples")
-        if not isinstance(self.nperseg, int):
-            raise InputError(f"--nperseg must be a whole number of samples, got {self.nperseg}")
-        if not (math.isfinite(self.overlap) and 0 <= self.overlap < 1):
+        if self.nperseg is not None:
+            _between("--nperseg", self.nperseg, 8, MAX_NPERSEG, "samples")
+            if not isinstance(self.nperseg, int):
+                raise InputError(f"--nperseg must be a whole number of samples, got "
+                                 f"{self.nperseg}")
+        if self.overlap is not None and not (math.isfinite(self.overlap)
+                                             and 0 <= self.overlap < 1):
             raise InputError(f"--overlap must be at least 0 and below 1, got {self.overlap:g}")
-        try:
-            scipy.signal.get_window(self.window, 16)
-        except (ValueError, TypeError) as err:
-            raise InputError(f"--window {self.window!r} is not a window scipy knows: use hann, "
-                             "hamming, blackman, flattop, boxcar, ...") from err
+        if self.window is not None:
+            try:
+                scipy.signal.get_window(self.window, 16)
+            except (ValueError, TypeError) as err:
+                raise InputError(f"--window {self.window!r} is not a window scipy knows: use "
+                                 "hann, hamming, blackman, flattop, boxcar, ...") from err
         if self.averages is not None and self.averages < 1:
             raise InputError(f"--averages must be at least 1, got {self.averages}")
         if self.level is not None and not (math.isfinite(self.level) and self.level > 0):
@@ -117,6 +129,11 @@ class Settings:
             raise InputError(f"--record {self.record:g} s is longer than every run (the "
                              f"longest is {longest:g} s): give at most that, or leave it out")
 
+
+    @property
+    def welch_given(self) -> bool:
+        """A Welch option was given (segment length, overlap, window)."""
+        return any(v is not None for v in (self.nperseg, self.overlap, self.window))
 
     @property
     def hammer_given(self) -> bool:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections import Counter
 from pathlib import Path
 from typing import Literal
 
@@ -22,7 +23,9 @@ from app.io.uff_time import TimeRun
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
+from processing.excitation import burst_onsets, shaker_signal, steady_periods
 from processing.impact import (
+    MIN_RECORD,
     ImpactDefaults,
     ImpactResult,
     ImpactSettings,
@@ -32,8 +35,8 @@ from processing.impact import (
     merge_results,
     process_impacts,
 )
-from processing.spectral import CrossSpectra, SpectralAccumulator, combine, frf
-from processing.units import TimeUnits, UnitSpectra, welch_units
+from processing.spectral import CrossSpectra, SpectralAccumulator, combine, frf, record_spectra
+from processing.units import MIN_UNITS, TimeUnits, UnitSpectra, record_units, welch_units
 
 __all__ = ["open_time_uff"]
 
@@ -44,8 +47,48 @@ Column = tuple[NDArray[np.complex128], NDArray[np.float64], NDArray[np.float64],
 DofKey = tuple[int, tuple[float, ...]]
 
 
+def _apart(onsets: NDArray[np.int64], length: int) -> NDArray[np.int64]:
+    """The onsets that start after the record of the previous one kept (a loud moment inside
+    a burst, e.g. the armature's force while the structure rings, starts no record)."""
+    kept: list[int] = []
+    for o in onsets.tolist():  # a few dozen bursts
+        if not kept or o >= kept[-1] + length:
+            kept.append(o)
+    return np.asarray(kept, dtype=np.int64)
+
+
+def _record_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra | None]:
+    """Spectra of whole periods (``s.records == "periodic"``, the first ones skipped until
+    the responses repeat) or of one record from each burst's onset (``"burst"``),
+    ``s.nperseg`` samples each, rectangular window; and each record's spectra (the
+    bootstrap's units, None under :data:`processing.units.MIN_UNITS` records)."""
+    L = s.nperseg
+    assert L is not None
+    n = r.n_samples
+    if s.records == "periodic":
+        skip = steady_periods(r.responses, L)
+        starts = np.arange(skip * L, n - L + 1, L)
+        what = f"period of {L} samples after the first {skip}"
+    else:
+        starts = _apart(burst_onsets(r.force, r.fs), L)
+        starts = starts[starts + L <= n]
+        what = f"burst of {L} samples"
+    if s.averages is not None:
+        starts = starts[:s.averages]
+    if starts.size == 0:
+        raise InputError(f"load case {r.load_case}: no whole {what}: record longer or give "
+                         "--nperseg")
+    data = np.vstack([r.force[None], r.responses])
+    records = data[:, starts[:, None] + np.arange(L)].transpose(1, 0, 2)
+    units = record_units(records, r.fs) if starts.size >= MIN_UNITS else None
+    return record_spectra(records, r.fs), units
+
+
 def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra | None]:
+    if s.records in ("periodic", "burst"):
+        return _record_spectra(r, s)
     nperseg = s.nperseg
+    assert nperseg is not None and s.overlap is not None and s.window is not None
     if r.n_samples < nperseg:
         raise InputError(f"load case {r.load_case}: {r.n_samples} samples, fewer than "
                          f"--nperseg {nperseg}: lower --nperseg or record longer")
@@ -191,13 +234,65 @@ def _excitation(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunRep
         RunReport(f"excitation {kind} ({why}; --excitation {other} to change)")]
 
 
+#: Welch defaults for a continuous random force: segment samples, overlap, window
+WELCH = (2048, 0.5, "hann")
+
+
+def _shaker(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]]:
+    """``s`` with how random-excitation records are cut (``records``, ``nperseg``,
+    ``overlap``, ``window``) read from the forces when not given, and the line saying so."""
+    if s.records is not None and s.nperseg is not None:
+        return s, []
+    if s.welch_given or s.records == "welch":
+        return dataclasses.replace(s, records="welch", nperseg=s.nperseg or WELCH[0],
+                                   overlap=WELCH[1] if s.overlap is None else s.overlap,
+                                   window=s.window or WELCH[2]), []
+    sig = [shaker_signal(r.force, r.fs) for r in runs]
+    kind = Counter(g.kind for g in sig).most_common(1)[0][0]
+    same = [g for g in sig if g.kind == kind]
+    fs = runs[0].fs
+    change = "--nperseg, --overlap, --window for Welch segments"
+    if kind == "periodic":
+        period = Counter(g.period for g in same).most_common(1)[0][0]
+        assert period is not None
+        return dataclasses.replace(s, records="periodic", nperseg=period, overlap=0.0,
+                                   window="boxcar"), [RunReport(
+            f"shaker force periodic in {len(same)} of {len(runs)} runs (period {period / fs:.4g}"
+            f" s, autocorrelation {np.median([g.correlation for g in same]):.3g}): one record "
+            "a period, rectangular window, once the responses repeat (" + change + ")")]
+    if kind == "burst":
+        length = min(g.period for g in same if g.period is not None)
+        return dataclasses.replace(s, records="burst", nperseg=length, overlap=0.0,
+                                   window="boxcar"), [RunReport(
+            f"shaker force in bursts in {len(same)} of {len(runs)} runs (every "
+            f"{length / fs:.4g} s at least, on {np.median([g.duty for g in same]) * 100:.0f} % "
+            f"of the time): one record of {length / fs:.4g} s from each burst's onset, "
+            "rectangular window (" + change + ")")]
+    n, ov, win = WELCH
+    return dataclasses.replace(s, records="welch", nperseg=n, overlap=ov, window=win), [
+        RunReport(f"shaker force continuous in {len(same)} of {len(runs)} runs: Welch segments "
+                  f"of {n} samples ({n / fs:.4g} s, lines {fs / n:.3g} Hz apart), Hann window, "
+                  f"{ov * 100:.0f} % overlap (--nperseg, --overlap, --window to change)")]
+
+
+def _record(d: list[ImpactDefaults], decay: float, pre: float) -> float:
+    """Record length, s, for every run: the runs' median decay plus the pre-trigger (at least
+    :data:`processing.impact.MIN_RECORD`), as far as the closest hits of any run allow (95 %
+    of their spacing), and never shorter than the shortest run's own choice."""
+    want = np.ceil(max(decay + pre, MIN_RECORD) * 100) / 100
+    limit = min(x.record if x.spacing is None else np.floor(0.95 * x.spacing * 100) / 100
+                for x in d)
+    return float(max(min(want, limit), min(x.record for x in d)))
+
+
 def _resolve(runs: list[TimeRun], s: Settings,
              ) -> tuple[Settings, dict[int, float], list[RunReport]]:
     """The settings with every default read from the data, the runs' trigger levels (N, by
     load case) and one line per default chosen."""
     s, lines = _excitation(runs, s)
     if s.excitation != "impact":
-        return s, {}, lines
+        s, more = _shaker(runs, s)
+        return s, {}, lines + more
     pre = s.pretrigger if s.pretrigger is not None else PRETRIGGER
     found: dict[int, ImpactDefaults] = {}
     for r in runs:
@@ -219,7 +314,7 @@ def _resolve(runs: list[TimeRun], s: Settings,
     spacing = [x.spacing for x in d if x.spacing is not None]
     decay = float(np.median([x.decay for x in d]))
     ratio = float(np.median([x.ratio for x in d]))
-    record = s.record if s.record is not None else min(x.record for x in d)
+    record = s.record if s.record is not None else _record(d, decay, pre)
     tau = s.exp_tau if s.exp_tau is not None else exponential_for(record, pre, decay, ratio)
     hits = f"hits {min(spacing):.2g} s apart at least" if spacing else "one hit a run"
     if s.record is None or s.exp_tau is None:
@@ -251,7 +346,8 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
             raise OpenError(str(err), reports) from err
         s, levels, chosen = _resolve(runs, s)
         reports = chosen + reports
-    if runs and s.excitation == "random" and max(r.n_samples for r in runs) < s.nperseg:
+    if (runs and s.excitation == "random" and s.nperseg is not None
+            and max(r.n_samples for r in runs) < s.nperseg):
         raise OpenError(f"the longest run has {max(r.n_samples for r in runs)} samples, fewer "
                         f"than --nperseg {s.nperseg}: lower --nperseg", reports)
     good = _consistent(runs, reports) if runs else []
@@ -279,4 +375,29 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
             "hit" if s.excitation == "impact" else "block",
             tuple(u for k in keys if (u := cols[k][3]) is not None),
             np.array([k[0] for k in keys]), np.array([k[1] for k in keys]), s.estimator)
+    if s.excitation == "random":
+        out = _from_signal(out, s.coherence, reports)
     return out, reports + check_reports(out, s.coherence)
+
+
+#: fewest lines left by :func:`_from_signal`
+MIN_LINES = 8
+
+
+def _from_signal(frf: FRFSet, gate: float, reports: list[RunReport]) -> FRFSet:
+    """Random excitation: the FRFs from the lowest line where the median coherence over all
+    FRFs reaches ``gate`` (the lines below it hold responses under their noise: accelerances
+    fall as the square of the frequency under the rigid-body modes); a line says so.
+    Unchanged when ``gate`` is 0, there is no coherence or fewer than :data:`MIN_LINES`
+    would be left."""
+    if frf.coherence is None or not gate > 0:
+        return frf
+    med = np.median(frf.coherence, axis=(0, 1))
+    k = int(np.argmax(med >= gate)) if np.any(med >= gate) else 0
+    if k == 0 or frf.freq.size - k < MIN_LINES:
+        return frf
+    reports.insert(0, RunReport(
+        f"FRFs from {frf.freq[k]:.4g} Hz: the {k} lines below have a median coherence under "
+        f"{gate:g} (responses under their noise; --coherence 0 keeps them)"))
+    return dataclasses.replace(frf, freq=frf.freq[k:], H=frf.H[..., k:],
+                               coherence=frf.coherence[..., k:])

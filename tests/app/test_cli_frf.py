@@ -51,7 +51,10 @@ def test_random_runs_to_frf_file(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert "averages" in text and "rigid from" in text and "written to" in text
     frf = read_frf_uff(out)
     b, _, rx, ex = _engine()
-    assert frf.H.shape == (12, 2, 400) and frf.coherence is not None  # up to fs / 2.56
+    # up to fs / 2.56, from the first line whose median coherence reaches the gate's 0.8
+    n_low = 400 - frf.H.shape[-1]
+    assert frf.H.shape[:2] == (12, 2) and 0 <= n_low <= 4 and frf.coherence is not None
+    assert (f"the {n_low} lines below have a median coherence under 0.8" in text) == (n_low > 0)
     He = b.model.frf(frf.freq, rx, b.resp_dirs, ex[list(EXC)], b.exc_dirs[list(EXC)])
     m = (frf.coherence > 0.99) & (frf.freq > 5) & (frf.freq < 90)
     assert m.mean() > 0.5

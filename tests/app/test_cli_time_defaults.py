@@ -76,3 +76,27 @@ def test_shaker_data_is_processed_as_random(tmp_path: Path,
     text = capsys.readouterr().out
     assert "excitation random (force not impulsive in 6 of 6 runs" in text
     assert "averages" in text and "trigger level" not in text
+
+
+@pytest.mark.parametrize(("kind", "line"), [
+    ("chirp", "shaker force periodic in 6 of 6 runs (period 2 s"),
+    ("burst", "shaker force in bursts in 6 of 6 runs (every"),
+    ("random", "shaker force continuous in 6 of 6 runs: Welch segments of 2048 samples"),
+])
+def test_shaker_records_read_from_the_force(kind: str, line: str, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Periodic chirp: one record a period (rectangular window) once the responses repeat;
+    burst random: one record from each burst's onset; continuous: Welch. Given Welch options
+    are used as given."""
+    sc = build_scenario(ScenarioSpec(seed=2, n_forces=6, n_sensors=3, elastic_ratio=None))
+    t = shaker_test(sc, ShakerSpec(seed=2, kind=kind, duration=20.0, period=2.0))  # type: ignore[arg-type]
+    src = tmp_path / "time.uff"
+    write_uff(t, src)
+    assert main(["frf", str(src), "--out", str(tmp_path / "f.uff")]) == 0
+    text = capsys.readouterr().out
+    assert line in text
+    n_avg = int(text.split("excitation node ")[1].split(": ")[1].split()[0])
+    assert n_avg == {"chirp": 9, "burst": 10, "random": 4}[kind]  # chirp: first period skipped
+    assert main(["frf", str(src), "--nperseg", "512", "--out", str(tmp_path / "g.uff")]) == 0
+    text = capsys.readouterr().out
+    assert "shaker force" not in text and "excitation node" in text

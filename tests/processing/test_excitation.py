@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from processing.excitation import burst_random, continuous_random, periodic_chirp
+from processing.excitation import (
+    burst_onsets,
+    burst_random,
+    continuous_random,
+    periodic_chirp,
+    shaker_signal,
+    steady_periods,
+)
 
 
 def test_continuous_random_is_seeded_and_scaled():
@@ -37,3 +44,41 @@ def test_periodic_chirp_is_periodic_and_in_band():
     assert inside > 0.95
     # continuing the sweep one sample past the period gives the period's first sample
     assert abs(x[1023] - x[1022]) < 2 * np.pi * 200 / 1024 * 1.01
+
+
+# ---- what a recorded shaker force is ----
+
+FS = 256.0
+
+
+def test_shaker_signal_tells_periodic_burst_and_continuous_apart():
+    rng = np.random.default_rng(3)
+    chirp = periodic_chirp(10, 1024, FS, band=(0.5, 100.0)) + 1e-3 * rng.normal(size=10240)
+    s = shaker_signal(chirp, FS)
+    assert (s.kind, s.period) == ("periodic", 1024) and s.correlation > 0.99
+    burst = burst_random(10, 1024, FS, burst_fraction=0.6, band=(0.0, 100.0), seed=4)[0]
+    s = shaker_signal(burst + 1e-3 * rng.normal(size=burst.size), FS)
+    assert s.kind == "burst" and abs(s.duty - 0.6) < 0.05
+    assert 1024 - 3 * round(0.01 * FS) <= s.period <= 1024  # onsets found to a block or two
+    s = shaker_signal(continuous_random(10240, FS, seed=5)[0], FS)
+    assert s.kind == "continuous" and s.period is None and s.correlation < 0.2
+
+
+def test_burst_onsets_are_at_the_bursts():
+    x = np.zeros(8 * 512)
+    for k in range(8):
+        x[k * 512 + 100: k * 512 + 400] = np.random.default_rng(k).normal(size=300)
+    on = burst_onsets(x, FS)
+    assert on.size == 8
+    assert np.all((on >= np.arange(8) * 512 + 100 - 3 * 4) & (on <= np.arange(8) * 512 + 100))
+
+
+def test_steady_periods_skips_the_transient():
+    t = np.arange(10 * 512) / FS
+    y = np.sin(2 * np.pi * 4 * t)[None] + 1e-4 * np.random.default_rng(1).normal(size=(2, t.size))
+    y_tr = y + 3 * np.exp(-t / 2.0) * np.cos(2 * np.pi * 3.1 * t)  # decays over ~5 periods
+    assert steady_periods(y, 512) == 1  # at least the first: the start from rest
+    k = steady_periods(y_tr, 512)
+    assert 3 <= k <= 7
+    d = np.abs(y_tr[:, k * 512:(k + 1) * 512] - y_tr[:, (k + 1) * 512:(k + 2) * 512]).max()
+    assert d < 0.1

@@ -104,3 +104,44 @@ def test_line_operators_of_a_zero_line() -> None:
     np.testing.assert_allclose(B[keep], line_operators(X[..., keep], T, w[keep]).B, rtol=1e-10)
     X[3:] = 0.0  # rank 3 on every line
     assert quick_rigid_modes(X, T, w).shape == (6,)
+
+
+def test_rigid_band_starts_past_noisy_lowest_lines() -> None:
+    """Time data leave the lowest lines (accelerances falling as f^2 under the rigid-body
+    modes) under the noise: the rigidity check fails from the lowest line. When most lines
+    are rigid (error floor within twice the threshold) the band starts at the first rigid
+    line and ends where the clean data's does; when the noise is everywhere it stays none."""
+    import dataclasses
+
+    from processing.identify import _rigid_band_tops
+    from processing.rigidity import rigidity_check
+
+    frf = get_bench("engine").frfset()
+    clean_top = _rigid_band_tops(frf)[0]
+    assert clean_top is not None and 95.0 < clean_top < 118.5
+    rng = np.random.default_rng(1)
+    H = frf.H.copy()
+    H[..., :6] *= 1 + 0.5 * (rng.standard_normal(H[..., :6].shape)
+                             + 1j * rng.standard_normal(H[..., :6].shape))
+    noisy = dataclasses.replace(frf, H=H)
+    assert rigidity_check(noisy, fmin=float(frf.freq[frf.freq > 0][0])).band is None
+    top, _, notes = _rigid_band_tops(noisy)
+    assert top == clean_top and not notes
+    H = frf.H * (1 + 0.5 * rng.standard_normal(frf.H.shape))
+    assert _rigid_band_tops(dataclasses.replace(frf, H=H))[0] is None
+
+
+def test_stiffness_band_when_the_first_line_is_above_the_rigid_modes() -> None:
+    """Lines given from above 1.5x the highest rigid-body mode (the lower ones left out):
+    the stiffness band runs up to the mass line instead of being empty."""
+    from processing.geometry import excitation_matrix, response_matrix
+    from processing.selection import choose_bands
+
+    frf = get_bench("engine-rigid").frfset()
+    E = response_matrix(frf.resp_xyz, frf.resp_dirs)
+    T = excitation_matrix(frf.exc_xyz, frf.exc_dirs)
+    X = np.einsum("ir,ref->ief", np.linalg.pinv(E), frf.H)
+    keep = frf.freq >= 50.0  # the rigid-body modes reach 31.5 Hz
+    c = choose_bands(frf.freq[keep], X[..., keep], T, ())
+    lo, hi = c.stiffness_band
+    assert lo == frf.freq[keep][0] and hi > lo and hi >= c.mass_band[0]
