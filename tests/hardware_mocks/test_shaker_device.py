@@ -88,7 +88,7 @@ def test_output_off_when_heartbeats_stop(device: ShakerDevice, shaker: ScpiShake
 def test_shutdown_turns_output_off(device: ShakerDevice, shaker: ScpiShaker) -> None:
     shaker.start()
     shaker.shutdown()
-    assert not device.output
+    assert wait_for(lambda: not device.output, 2.0) < 2.0  # the device thread takes it
     # the last command is not answered: give the device thread time to log it
     deadline = time.monotonic() + 5.0
     while device.commands[-1:] != ["SYST:HEART:TIM 0"] and time.monotonic() < deadline:
