@@ -508,7 +508,7 @@ def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tu
     An elastic mode the residual does not show (its shape looks rigid at the sensors, or it
     sits at the edge of the data) still bends the mass line: the estimate then drifts with
     the band. The chosen band's top and ``BAND_CANDIDATES - 1`` lower tops (geometric, down
-    to 1.5x its bottom and at least 16 lines) are each fitted on the two halves of their
+    to the band's 16th line) are each fitted on the two halves of their
     lines; the widest whose halves disagree at most ``BAND_TOLERANCE`` times the least
     disagreement is kept, and the reason says so. Bands given in the options, the plain
     method and mass lines under 32 lines are left as they are.
