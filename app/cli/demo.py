@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from app.acquire.events import Listener
 from app.cli.common import UserError
 from app.cli.summary import print_result
 from app.io.uff import read_frf_uff, write_frf_uff
@@ -39,6 +41,34 @@ def add_parser(sub: Any) -> None:
                         "numbered if it exists)")
     p.add_argument("--length", type=float, default=1.5, help="record length per hit, s")
     p.set_defaults(run=run)
+
+
+#: how often the demo resumes its simulated bench after a pause before it stops the run
+DEMO_RESUMES = 3
+#: s the demo waits before resuming, so a device that lagged under load catches up
+RESUME_DELAY = 0.5
+
+
+class _Resumer(Listener):
+    """Resumes a paused demo run (nobody stands at the simulated bench), :data:`DEMO_RESUMES`
+    times at most, then stops it: the records stay in the run file.
+
+    Called on the run's worker thread, which reads the command after the pause's listeners."""
+
+    def __init__(self, proc: Any, console: Console) -> None:
+        self.proc, self.console, self.pauses, self.reason = proc, console, 0, ""
+
+    def on_paused(self, reason: str) -> None:
+        self.pauses += 1
+        self.reason = reason
+        if self.pauses > DEMO_RESUMES:
+            self.console.print(f"[yellow]paused again: {reason}; stopping the demo run[/yellow]")
+            self.proc.stop()
+            return
+        self.console.print(f"[yellow]paused: {reason}; resuming the simulated bench "
+                           f"({self.pauses} of {DEMO_RESUMES})[/yellow]")
+        time.sleep(RESUME_DELAY)
+        self.proc.resume()
 
 
 def _acquire(args: argparse.Namespace, console: Console) -> int:
@@ -64,10 +94,15 @@ def _acquire(args: argparse.Namespace, console: Console) -> int:
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
             proc.add_listener(_Bars(progress, len(plan.excitations), console))
+            resumer = _Resumer(proc, console)
+            proc.add_listener(resumer)
             proc.start()
             proc.wait()
         if proc.state is not RunState.FINISHED or proc.result is None:
-            raise UserError(f"demo run {proc.state.value}: {proc.message}")
+            why = (f"paused {resumer.pauses} times ({resumer.reason})"
+                   if resumer.pauses > DEMO_RESUMES else f"{proc.state.value}: {proc.message}")
+            raise UserError(f"demo run {why}; its {len(proc.hits)} hits are in {path} "
+                            f"(see them with insitu replay {path})")
         model = bench.bench.model
         print_result(proc.result, console, truth=inertia_properties(model.theta),
                      K_truth=model.K, C_truth=model.C)

@@ -1,0 +1,66 @@
+"""``insitu demo`` on the in-process bench when a device stops answering: the demo resumes
+the simulated bench (nobody stands at it) and finishes, or stops with the hits kept."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import pytest
+
+import app.cli.demo as demo
+import app.mockbench.bench as mockbench
+from app.cli.main import main
+from app.io.runfile import read_run
+
+
+def _silent_bench(monkeypatch: pytest.MonkeyPatch, heal_after: float | None) -> None:
+    """Benches whose front end stops answering after the first hit; it answers again
+    ``heal_after`` s later (never when None)."""
+    made = mockbench.InProcessBench
+
+    class Flaky(made):  # type: ignore[misc, valid-type]
+        def __enter__(self) -> mockbench.InProcessBench:
+            bench = super().__enter__()
+            orig = bench.operator.on_hit
+
+            def go_silent(hit: object) -> None:
+                if hit.hit_id == 0:  # type: ignore[attr-defined]
+                    bench.frontend.faults.silent = True
+                    if heal_after is not None:
+                        threading.Timer(heal_after, setattr,
+                                        (bench.frontend.faults, "silent", False)).start()
+                orig(hit)
+
+            bench.operator.on_hit = go_silent  # type: ignore[method-assign]
+            return bench
+
+    monkeypatch.setattr(mockbench, "InProcessBench", Flaky)
+
+
+def test_demo_resumes_a_paused_simulated_bench(monkeypatch: pytest.MonkeyPatch,
+                                               tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    _silent_bench(monkeypatch, heal_after=1.0)
+    out = tmp_path / "demo.h5"
+    assert main(["demo", "--bench", "engine-rigid", "--length", "0.5", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "resuming the simulated bench (1 of 3)" in text
+    run = read_run(out)
+    assert run.state == "finished" and int(run.records.accepted.sum()) == 18
+
+
+def test_demo_stops_when_the_bench_stays_silent(monkeypatch: pytest.MonkeyPatch,
+                                               tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(demo, "RESUME_DELAY", 0.05)
+    _silent_bench(monkeypatch, heal_after=None)
+    out = tmp_path / "demo.h5"
+    assert main(["demo", "--bench", "engine-rigid", "--length", "0.5", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("insitu demo: error: demo run paused 4 times")
+    assert "frontend" in last and f"1 hits are in {out}" in last
+    run = read_run(out)
+    assert run.state == "stopped" and len(run.records) == 1
