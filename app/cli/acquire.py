@@ -54,10 +54,12 @@ ATTACH = "attach the shaker"
 STOP_WAIT = 15.0
 
 class _Bars(Listener):
-    def __init__(self, progress: Progress, n_points: int, console: Console) -> None:
+    def __init__(self, progress: Progress, plan: TestPlan, console: Console) -> None:
         self.progress = progress
         self.console = console
-        self.points = progress.add_task("points", total=n_points)
+        # a stop of the run: a point, or the points two shakers drive together
+        self.points = progress.add_task("points" if plan.n_references == 1 else "drives",
+                                        total=len(plan.drives))
         self.hits = progress.add_task("hits at point", total=1)
         self.paused = ""
 
@@ -289,11 +291,10 @@ def run(args: argparse.Namespace) -> int:
             _check_rate(proc, proc.plan, station)
             operator = _remote_operator(station, proc.plan, stack)
             proc.add_listener(operator)
-        n = len(proc.plan.excitations)
         gave_up = ""
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
-            bars = _Bars(progress, n, console)
+            bars = _Bars(progress, proc.plan, console)
             proc.add_listener(bars)
             proc.start()
             try:

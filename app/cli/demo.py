@@ -93,7 +93,7 @@ def _acquire(args: argparse.Namespace, console: Console) -> int:
         proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
-            proc.add_listener(_Bars(progress, len(plan.excitations), console))
+            proc.add_listener(_Bars(progress, plan, console))
             resumer = _Resumer(proc, console)
             proc.add_listener(resumer)
             proc.start()

@@ -41,6 +41,11 @@ _HIT_COLUMNS = ("hit", "point", "time (s)", "peak force (N)", "used", "operator"
                 "automatic verdict")
 _USED = 4
 _OPERATOR_PAUSE = "paused by the operator"
+#: an SG-1's watchdog, s: its output goes off when the run's worker has not fed it for this long
+SHAKER_HEARTBEAT = 0.5
+#: the simulated bench's watchdog, s: its devices run in this process and share its interpreter
+#: with the worker and the plots, which stall the worker's reads for 0.5 s on a loaded machine
+MOCK_HEARTBEAT = 2.0
 
 
 class AcquisitionView(QtWidgets.QWidget):
@@ -164,6 +169,12 @@ class AcquisitionView(QtWidgets.QWidget):
         station, plan = self.station_view.station, self.plan_view.plan
         if self.procedure is not None and self.procedure.running:
             return False
+        mock = self.station_view.mock
+        if (mock is not None and plan is not None and plan.method == "shaker"
+                and plan.n_references != len(mock.shakers)):
+            # the simulated bench gets as many shakers as the plan drives at once
+            self.station_view.use_mock(mock.bench.name, plan.n_references, offer_plan=False)
+            station = self.station_view.station
         if station is None:
             self.message.emit("error", "no station: choose the mock bench or a station file "
                               "in the Station tab")
@@ -184,8 +195,10 @@ class AcquisitionView(QtWidgets.QWidget):
             partial = not plan.check(station, strict=False).ok
             path.parent.mkdir(parents=True, exist_ok=True)
             if shaker:
-                self.procedure = ShakerProcedure(plan, station, path, listeners=listeners,
-                                                 partial=partial, confirm_attach=not simulated)
+                self.procedure = ShakerProcedure(
+                    plan, station, path, listeners=listeners, partial=partial,
+                    confirm_attach=not simulated,
+                    heartbeat=MOCK_HEARTBEAT if mock is not None else SHAKER_HEARTBEAT)
             else:
                 self.procedure = HammerProcedure(plan, station, path, listeners=listeners,
                                                  partial=partial)
@@ -204,7 +217,10 @@ class AcquisitionView(QtWidgets.QWidget):
         self.reject_button.setToolTip(f"{w} not used although the automatic verdict "
                                       "accepted it")
         self.clear_button.setToolTip(f"Back to the automatic verdict of the selected {self.word}")
-        self.progress_bar.setRange(0, len(plan.excitations))
+        # the bar counts the run's stops: points, or the pairs two shakers drive together
+        self.progress_bar.setRange(0, len(plan.drives))
+        stops = "points" if plan.n_references == 1 else "drives"
+        self.progress_bar.setFormat(f"%v of %m {stops}")
         self.progress_bar.setValue(0)
         self.progress_label.setText("")
         self.plots.start(self.word)
@@ -308,8 +324,10 @@ class AcquisitionView(QtWidgets.QWidget):
         self.progress_bar.setValue(p.points_done)
         w = self.word
         done = "averaged" if w == "block" else "accepted"
+        plan = self.plan_view.plan
+        stop = "point" if plan is None or plan.n_references == 1 else "drive"
         self.progress_label.setText(
-            f"point {p.point + 1}: {p.point_accepted} of {p.point_needed} {w}s {done}; "
+            f"{stop} {p.point + 1}: {p.point_accepted} of {p.point_needed} {w}s {done}; "
             f"{p.hits} {w}s in all, {p.accepted} accepted; {p.bad_frames} bad frames; "
             f"{p.elapsed:.0f} s")
 

@@ -145,19 +145,20 @@ class StationView(QtWidgets.QWidget):
             self.load_file(Path(last))
 
     # --- choosing the station ----------------------------------------------------------------
-    def use_mock(self, name: str) -> None:
-        """Start the in-process mock bench ``name`` and use its station and plan (a message
-        instead where it cannot run)."""
+    def use_mock(self, name: str, shakers: int = 1, offer_plan: bool = True) -> None:
+        """Start the in-process mock bench ``name`` with ``shakers`` shakers and use its
+        station, and its plan when ``offer_plan`` (a message instead where it cannot run)."""
         if self.mock_unavailable:
             self.message.emit("error", self.mock_unavailable)
             return
         from app.mockbench.bench import InProcessBench
 
         self._close_mock()
-        self.mock = InProcessBench(name, operator={"pause": 0.05})
+        self.mock = InProcessBench(name, operator={"pause": 0.05}, shakers=shakers)
         self.bench_combo.setCurrentText(name)
         self._set_station(self.mock.station, f"{_MOCK}{name}")
-        self.plan_offered.emit(self.mock_plan())
+        if offer_plan:
+            self.plan_offered.emit(self.mock_plan())
 
     def mock_plan(self, points: list[int] | None = None) -> TestPlan | None:
         """The mock bench's built-in plan, hammer or shaker as chosen (None without a mock

@@ -21,6 +21,11 @@ SHORT = {"waveform": "chirp", "level": 0.5, "f_start": 4.0, "f_stop": 400.0, "av
          "nperseg": 256, "ramp": 0.1, "settle": 0.2}
 
 
+#: two shakers need random signals (burst random, bursts started together); four 0.5 s blocks
+#: (more blocks than forces)
+PAIR = {"shakers": 2, "waveform": "burst-random", "duty": 0.5, "nperseg": 512, "averages": 4}
+
+
 def _shaker_window(make_window: Callable[..., MainWindow], points: list[int],
                    averages: int = 2) -> tuple[MainWindow, ShakerDevice]:
     window = make_window()
@@ -145,3 +150,26 @@ def test_shaker_output_off_on_stop_device_error_and_close(
     assert _output_went_off_by_command(dev)
     stored = read_run(path, with_data=False)
     assert stored.state == "stopped" and len(stored.records) >= 2
+
+
+def test_two_shaker_plan_runs_on_the_mock_bench_counting_drives(
+        qtbot, make_window: Callable[..., MainWindow], tmp_path: Path) -> None:
+    """A plan that drives two shakers at once: the simulated bench gets its second shaker
+    at Start, and the progress counts drives (pairs of points), not points."""
+    window, _ = _shaker_window(make_window, [0, 4, 8, 12])
+    window.plan_view.set_plan(plan_for_bench("engine-rigid", points=[0, 4, 8, 12],
+                                             method="shaker", shaker={**SHORT, **PAIR}))
+    acq = window.acquisition_view
+    run = tmp_path / "pair.h5"
+    acq.run_path.setText(str(run))
+    acq.start_button.click()
+    bench = window.station_view.mock
+    assert bench is not None and len(bench.shakers) == 2
+    assert acq.progress_bar.maximum() == 2 and acq.progress_bar.format() == "%v of %m drives"
+    qtbot.waitUntil(lambda: acq.state is not RunState.RUNNING, timeout=30000)
+    assert acq.state is RunState.FINISHED, (acq.next_label.text(), window.messages.text)
+    assert acq.progress_bar.value() == 2
+    assert acq.progress_label.text().startswith("drive 2: 4 of 4 blocks averaged")
+    stored = read_run(run, with_data=False)
+    assert stored.state == "finished" and len(stored.records) == 8
+    assert [c.name for c in stored.channels[:2]] == ["F1_fe", "F2_fe"]
