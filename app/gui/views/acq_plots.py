@@ -56,16 +56,19 @@ class AcquisitionPlots(QtWidgets.QWidget):
         grid.addWidget(self.frf_plot, 0, 1, 3, 1)
         grid.addWidget(self.coh_plot, 3, 1, 3, 1)
         self.word = "hit"
+        self.stop_word = "point"
 
-    def start(self, word: str) -> None:
-        """A run starts: ``word`` is "hit" (hammer) or "block" (shaker)."""
+    def start(self, word: str, n_forces: int = 1) -> None:
+        """A run starts: ``word`` is "hit" (hammer) or "block" (shaker); the records' first
+        ``n_forces`` rows are forces (two shakers driven at once: 2)."""
         self.word = word
+        self.stop_word = "point" if n_forces == 1 else "drive"
         self._record_curve.setData([], [])
         self.record_plot.getPlotItem().setTitle(f"Force record of the latest {word}",
                                                 size="10pt")
         for c in self._frf_curves + self._coh_curves:
             c.setData([], [])
-        self.live.start()
+        self.live.start(n_forces)
 
     def stop(self) -> None:
         self.live.stop()
@@ -77,11 +80,14 @@ class AcquisitionPlots(QtWidgets.QWidget):
         t = np.arange(hit.data.shape[1]) / hit.fs
         self._record_curve.setData(t, hit.data[0])
         self.record_plot.getPlotItem().setTitle(
-            f"Force record of {self.word} {hit.hit_id + 1} (point {hit.point + 1}): {verdict}",
+            f"Force record of {self.word} {hit.hit_id + 1} ({self.stop_word} {hit.point + 1}): "
+            f"{verdict}",
             size="10pt")
 
-    def show_frf(self, frf: PointFRF, names: list[str]) -> None:
-        """The averaged FRF and coherence of one point (lines above 0 Hz, up to fs/2.56)."""
+    def show_frf(self, frf: PointFRF, names: list[str], where: str = "") -> None:
+        """The averaged FRF and coherence of one point (lines above 0 Hz, up to fs/2.56);
+        ``where`` names it in the titles (default "point N")."""
+        where = where or f"point {frf.point + 1}"
         n = 0 if frf.H is None else frf.H.shape[0]
         for curves, plot in ((self._frf_curves, self.frf_plot),
                              (self._coh_curves, self.coh_plot)):
@@ -106,8 +112,8 @@ class AcquisitionPlots(QtWidgets.QWidget):
             else:
                 c.setData(frf.freq[keep], np.nan_to_num(frf.coherence[k, keep]))
         self.frf_plot.getPlotItem().setTitle(
-            f"FRF magnitude, point {frf.point + 1} ({frf.n_averages} {self.word}"
+            f"FRF{'' if 'drive' in where else ' magnitude'}, {where} ({frf.n_averages} {self.word}"
             f"{'' if frf.n_averages == 1 else 's'} averaged)", size="10pt")
         note = f" (1 by definition with one {self.word})" if frf.n_averages == 1 else ""
-        self.coh_plot.getPlotItem().setTitle(f"Coherence, point {frf.point + 1}{note}",
+        self.coh_plot.getPlotItem().setTitle(f"Coherence, {where}{note}",
                                              size="10pt")

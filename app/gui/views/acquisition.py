@@ -209,7 +209,8 @@ class AcquisitionView(QtWidgets.QWidget):
         self.run_path.setText(str(path))
         self.hits = []
         self.hits_table.setRowCount(0)
-        self.hits_table.setHorizontalHeaderLabels([self.word, *_HIT_COLUMNS[1:]])
+        self.hits_table.setHorizontalHeaderLabels(
+            [self.word, "point" if plan.n_references == 1 else "drive", *_HIT_COLUMNS[2:]])
         w = self.word.capitalize()
         self.accept_button.setText(f"Accept selected {self.word}")
         self.reject_button.setText(f"Reject selected {self.word}")
@@ -223,7 +224,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.progress_bar.setFormat(f"%v of %m {stops}")
         self.progress_bar.setValue(0)
         self.progress_label.setText("")
-        self.plots.start(self.word)
+        self.plots.start(self.word, plan.n_references)
         self._pause_asked = False
         self.procedure.start()
         self._set_state(RunState.RUNNING)
@@ -312,12 +313,20 @@ class AcquisitionView(QtWidgets.QWidget):
 
     @QtCore.Slot(object)
     def _frf(self, frf: PointFRF) -> None:
-        self.plots.show_frf(frf, self._response_names())
+        plan = self.plan_view.plan
+        where = f"point {frf.point + 1}"
+        if plan is not None and plan.n_references > 1:  # the drive's first shaker's column
+            where = f"drive {frf.point + 1}, point {plan.drives[frf.point][0] + 1}"
+        self.plots.show_frf(frf, self._response_names(), where)
+
+    def _n_forces(self) -> int:
+        plan = self.plan_view.plan
+        return plan.n_references if plan is not None else 1
 
     def _response_names(self) -> list[str]:
-        """Channel names of the responses (rows after the force) of the running plan."""
+        """Channel names of the responses (rows after the forces) of the running plan."""
         rows = getattr(self.procedure, "rows", ())
-        return [c.name for c in rows[1:]]
+        return [c.name for c in rows[self._n_forces():]]
 
     @QtCore.Slot(object)
     def _progress(self, p: Progress) -> None:

@@ -34,7 +34,7 @@ __all__ = ["LiveTraces"]
 
 
 class LiveTraces(QtCore.QObject):
-    """The last ``seconds`` of the force (row 0) and responses, in two plots.
+    """The last ``seconds`` of the forces (the first rows) and responses, in two plots.
 
     Parameters
     ----------
@@ -64,7 +64,10 @@ class LiveTraces(QtCore.QObject):
         self._legend = self.acc_plot.getPlotItem().addLegend(
             offset=(-5, 5), labelTextSize="7pt", colCount=4)
         self._curves: list[pg.PlotDataItem] = []
+        self._n_force_curves = 0
+        self._force_legend: pg.LegendItem | None = None
         self.names: tuple[str, ...] = ()
+        self.n_forces = 1
         self.fs = 0.0
         self.ring: RevealRing | None = None
         self._t: NDArray[np.float64] = np.zeros(0)
@@ -80,8 +83,10 @@ class LiveTraces(QtCore.QObject):
     def widgets(self) -> tuple[QtWidgets.QWidget, QtWidgets.QWidget]:
         return self.force_plot, self.acc_plot
 
-    def start(self) -> None:
-        """Clear the traces and the counters and start redrawing (a run starts)."""
+    def start(self, n_forces: int = 1) -> None:
+        """Clear the traces and the counters and start redrawing (a run starts); the first
+        ``n_forces`` rows of the samples are forces."""
+        self.n_forces = n_forces
         while not self.source.empty():
             self.source.get_nowait()
         self.names, self.fs, self.ring = (), 0.0, None
@@ -101,13 +106,21 @@ class LiveTraces(QtCore.QObject):
         self.ring = RevealRing(len(names), fs, self.seconds, self.lag)
         n = self.ring.n
         self._t = (np.arange(n) - n + 1) / fs
-        if self._curves:
-            self.force_plot.getPlotItem().removeItem(self._curves[0])
-            for c in self._curves[1:]:
-                self.acc_plot.getPlotItem().removeItem(c)
+        nf = self.n_forces
+        for k, c in enumerate(self._curves):
+            (self.force_plot if k < self._n_force_curves else self.acc_plot
+             ).getPlotItem().removeItem(c)
         self._legend.clear()
-        self._curves = [self.force_plot.getPlotItem().plot(pen=pg.mkPen(COLORS[1]))]
-        for k, name in enumerate(self.names[1:]):
+        if self._force_legend is not None:
+            self._force_legend.clear()
+        elif nf > 1:
+            self._force_legend = self.force_plot.getPlotItem().addLegend(
+                offset=(-5, 5), labelTextSize="7pt", colCount=nf)
+        self._curves = [self.force_plot.getPlotItem().plot(
+            pen=pg.mkPen(COLORS[(1 + k) % len(COLORS)]), name=name if nf > 1 else None)
+            for k, name in enumerate(self.names[:nf])]
+        self._n_force_curves = nf
+        for k, name in enumerate(self.names[nf:]):
             self._curves.append(self.acc_plot.getPlotItem().plot(
                 pen=pg.mkPen(COLORS[k % len(COLORS)]), name=name, antialias=False))
 

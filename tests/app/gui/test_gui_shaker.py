@@ -15,6 +15,7 @@ from app.gui.main_window import MainWindow
 from app.io.runfile import read_run
 from app.mockbench.bench import plan_for_bench
 from hardware_mocks.shaker_device import ShakerDevice
+from tests.app.gui.test_gui_acquisition import _screenshot
 
 #: periodic chirp, 0.25 s blocks, 2 averages per point: about 1 s a point
 SHORT = {"waveform": "chirp", "level": 0.5, "f_start": 4.0, "f_stop": 400.0, "averages": 2,
@@ -155,21 +156,31 @@ def test_shaker_output_off_on_stop_device_error_and_close(
 def test_two_shaker_plan_runs_on_the_mock_bench_counting_drives(
         qtbot, make_window: Callable[..., MainWindow], tmp_path: Path) -> None:
     """A plan that drives two shakers at once: the simulated bench gets its second shaker
-    at Start, and the progress counts drives (pairs of points), not points."""
-    window, _ = _shaker_window(make_window, [0, 4, 8, 12])
-    window.plan_view.set_plan(plan_for_bench("engine-rigid", points=[0, 4, 8, 12],
-                                             method="shaker", shaker={**SHORT, **PAIR}))
+    at Start, the progress counts drives (pairs of points), not points, and both forces are
+    on the force plot, not among the accelerations."""
+    points = list(range(12))
+    window, _ = _shaker_window(make_window, points)
+    window.plan_view.set_plan(plan_for_bench("engine-rigid", points=points, method="shaker",
+                                             shaker={**SHORT, **PAIR}))
     acq = window.acquisition_view
     run = tmp_path / "pair.h5"
     acq.run_path.setText(str(run))
     acq.start_button.click()
     bench = window.station_view.mock
     assert bench is not None and len(bench.shakers) == 2
-    assert acq.progress_bar.maximum() == 2 and acq.progress_bar.format() == "%v of %m drives"
-    qtbot.waitUntil(lambda: acq.state is not RunState.RUNNING, timeout=30000)
+    assert acq.progress_bar.maximum() == 6 and acq.progress_bar.format() == "%v of %m drives"
+    assert acq.hits_table.horizontalHeaderItem(1).text() == "drive"
+    qtbot.waitUntil(lambda: acq.state is not RunState.RUNNING, timeout=60000)
     assert acq.state is RunState.FINISHED, (acq.next_label.text(), window.messages.text)
-    assert acq.progress_bar.value() == 2
-    assert acq.progress_label.text().startswith("drive 2: 4 of 4 blocks averaged")
+    assert acq.progress_bar.value() == 6
+    assert acq.progress_label.text().startswith("drive 6: 4 of 4 blocks averaged")
+    live = acq.plots.live
+    assert live.names[:2] == ("F1_fe", "F2_fe") and live._n_force_curves == 2
+    frf_title = acq.plots.frf_plot.getPlotItem().titleLabel.text
+    assert "FRF, drive 6, point 11 (4 blocks averaged)" in frf_title
+    frf_names = [item.text for _, item in acq.plots.frf_plot.getPlotItem().legend.items]
+    assert frf_names[0] == "a1x" and "F2_fe" not in frf_names
+    _screenshot(window, acq, "acquisition_two_shakers", tmp_path)
     stored = read_run(run, with_data=False)
-    assert stored.state == "finished" and len(stored.records) == 8
+    assert stored.state == "finished" and len(stored.records) == 24
     assert [c.name for c in stored.channels[:2]] == ["F1_fe", "F2_fe"]
