@@ -5,7 +5,8 @@
 
     -> {"cmd": "hit", "exc": 3, "peak": 250.0}
     <- {"ok": true, "hits": [{"t0": 5123.4567, "exc": 3, "peak": 250.0, "duration": 0.004}]}
-    -> {"cmd": "attach-shaker", "exc": 5}          <- {"ok": true, "exc": 5}
+    -> {"cmd": "attach-shaker", "exc": 5}          <- {"ok": true, "shaker": 1, "exc": 5}
+    -> {"cmd": "attach-shaker", "exc": 7, "shaker": 2}   (a bench with two shakers)
     -> {"cmd": "fault", "device": "hammer", "name": "drop_every", "value": 7}
     -> {"cmd": "status"}
     <- {"ok": false, "error": "hit: excitation index 99 out of range 0..17"}
@@ -157,12 +158,12 @@ class BenchControl:
             req["double"] = list(double)
         return list(self.request(**req)["hits"])
 
-    def attach_shaker(self, exc: int | None) -> None:
-        """Attach the shaker to excitation DOF ``exc`` (None detaches it)."""
-        self.request(cmd="attach-shaker", exc=exc)
+    def attach_shaker(self, exc: int | None, shaker: int = 1) -> None:
+        """Attach shaker ``shaker`` (from 1) to excitation DOF ``exc`` (None detaches it)."""
+        self.request(cmd="attach-shaker", exc=exc, shaker=shaker)
 
     def fault(self, device: str, name: str, value: int | bool | str) -> None:
-        """Set fault ``name`` of ``device`` (hammer, shaker, frontend) to ``value``."""
+        """Set fault ``name`` of ``device`` (hammer, shaker, shaker2, frontend) to ``value``."""
         self.request(cmd="fault", device=device, name=name, value=value)
 
     def status(self) -> dict[str, Any]:

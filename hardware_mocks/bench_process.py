@@ -2,7 +2,8 @@
 
 :class:`MockBench` starts every mock of one bench on one
 :class:`~hardware_mocks.physics.BenchPhysics`: the hammer digitiser on a
-pseudo-terminal, the shaker generator on another, and the accelerometer front end
+pseudo-terminal, each shaker generator on another (one, or two driven at once, each
+with its force sensor on its own front-end input), and the accelerometer front end
 on a python-can ``virtual`` bus served to other processes by a
 :class:`~hardware_mocks.socketcand.SocketcandServer` (classic CAN frames: python-can's
 socketcand client has no CAN FD). :meth:`MockBench.station_toml` is the station
@@ -31,10 +32,10 @@ from types import TracebackType
 from typing import Any
 
 from hardware_mocks.benches import Bench, get_bench
-from hardware_mocks.frontend_device import FORCE, FrontEndDevice
+from hardware_mocks.frontend_device import FrontEndDevice, shaker_force_inputs
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.physics import BenchPhysics
-from hardware_mocks.shaker_device import ShakerDevice
+from hardware_mocks.shaker_device import ShakerDevice, bench_shakers, shaker_name
 from hardware_mocks.socketcand import SocketcandServer
 
 __all__ = ["MockBench", "response_channel_names"]
@@ -76,11 +77,16 @@ class MockBench:
         Sensor noise of the front end, m/s^2 and N RMS.
     can_channel : str
         Bus name clients open on the socketcand server.
+    shakers : int
+        Shakers on the bench (``shaker``, ``shaker2``..., :func:`bench_shakers`). With
+        one, front-end input ``n_resp`` (``F``) carries every force (hammer and shaker);
+        with more, inputs ``n_resp + k`` (``F1``, ``F2``...) carry shaker ``k``'s force
+        sensor alone, for plans that drive them all at once.
     """
 
     def __init__(self, bench: str = "engine", *, fe_rate: float = 1024.0,
                  hammer_rate: float = 4096.0, accel_noise: float = 0.0,
-                 force_noise: float = 0.0, can_channel: str = "can0") -> None:
+                 force_noise: float = 0.0, can_channel: str = "can0", shakers: int = 1) -> None:
         self.bench_name = bench
         self.physics = BenchPhysics(get_bench(bench))
         self.fe_rate = fe_rate
@@ -88,19 +94,22 @@ class MockBench:
         self.can_channel = can_channel
         self._virtual = f"mock-bench-{os.getpid()}-{next(_counter)}"
         n_resp = len(self.physics.bench.resp_nodes)
-        self.wiring = [*range(n_resp), FORCE]
+        self.forces = shaker_force_inputs(shakers)  # (channel name, wiring code)
+        self.wiring = [*range(n_resp), *(w for _, w in self.forces)]
         if len(self.wiring) > FrontEndDevice.N_INPUTS:
             raise ValueError(f"bench {bench!r} has {n_resp} response DOFs; the front end has "
-                             f"{FrontEndDevice.N_INPUTS - 1} inputs besides the force")
+                             f"{FrontEndDevice.N_INPUTS - len(self.forces)} inputs besides "
+                             f"the {len(self.forces)} force inputs")
         self._started: list[Any] = []
         try:
             self.hammer = HammerDevice(self.physics, sensitivity=FORCE_SENSITIVITY)
             self._started.append(self.hammer)
-            self.shaker = ShakerDevice(self.physics)
-            self._started.append(self.shaker)
+            self.shakers: list[ShakerDevice] = bench_shakers(self.physics, shakers)
+            self._started.extend(self.shakers)
+            self.shaker = self.shakers[0]
             self.frontend = FrontEndDevice(
                 self.physics, channel=self._virtual, wiring=self.wiring,
-                sensitivity=[FORCE_SENSITIVITY if w == FORCE else ACCEL_SENSITIVITY
+                sensitivity=[FORCE_SENSITIVITY if w < 0 else ACCEL_SENSITIVITY
                              for w in self.wiring],
                 accel_noise=accel_noise, force_noise=force_noise)
             self._started.append(self.frontend)
@@ -134,6 +143,7 @@ class MockBench:
             f'control = "127.0.0.1:{self.control_port}"',
             f'bench = "{self.bench_name}"',
             f"pid = {os.getpid()}",
+            f"shakers = {len(self.shakers)}",
             "",
             "[devices.hammer]",
             'backend = "hammer-serial"',
@@ -147,11 +157,14 @@ class MockBench:
             f"sensitivity = {FORCE_SENSITIVITY}",
             "range = 5.0",
             "",
-            "[devices.shaker]",
-            'backend = "shaker-scpi"',
-            f'transport = {{ url = "{self.shaker.path}", baudrate = 115200 }}',
-            "options = { heartbeat = 0.5, ramp = 1.0 }",
-            "",
+        ]
+        for k, dev in enumerate(self.shakers):
+            lines += [f"[devices.{shaker_name(k)}]",
+                      'backend = "shaker-scpi"',
+                      f'transport = {{ url = "{dev.path}", baudrate = 115200 }}',
+                      "options = { heartbeat = 0.5, ramp = 1.0 }",
+                      ""]
+        lines += [
             "[devices.frontend]",
             'backend = "frontend-can"',
             f"fs = {self.fe_rate:g}",
@@ -160,10 +173,11 @@ class MockBench:
             'options = { frame = "classic" }  # python-can\'s socketcand client has no CAN FD',
         ]
         names = response_channel_names(b)
+        force_names = {w: name for name, w in self.forces}
         for i, w in enumerate(self.wiring):
             lines += ["", "[[devices.frontend.channels]]"]
-            if w == FORCE:
-                lines += ['name = "F"', f"input = {i}", 'quantity = "force"',
+            if w < 0:
+                lines += [f'name = "{force_names[w]}"', f"input = {i}", 'quantity = "force"',
                           f"sensitivity = {FORCE_SENSITIVITY}", "range = 5.0"]
             else:
                 d = ", ".join(repr(float(x)) for x in b.resp_dirs[w])
@@ -186,13 +200,20 @@ class MockBench:
                 return {"ok": True, "hits": [{"t0": h.t0, "exc": h.exc, "peak": h.peak,
                                               "duration": h.duration} for h in hits]}
             if cmd == "attach-shaker":
+                k = int(request.get("shaker", 1))
+                if not 1 <= k <= len(self.shakers):
+                    raise ValueError(f"no shaker {k}: the bench has "
+                                     + ("one (shaker 1)" if len(self.shakers) == 1 else
+                                        f"shakers 1..{len(self.shakers)}"))
                 exc = request.get("exc")
-                self.shaker.attach(None if exc is None else int(exc))
-                return {"ok": True, "exc": self.shaker.exc}
+                shaker = self.shakers[k - 1]
+                shaker.attach(None if exc is None else int(exc))
+                return {"ok": True, "shaker": k, "exc": shaker.exc}
             if cmd == "status":
+                shakers = [{"exc": s.exc, "output": s.output, "level": s.level_now}
+                           for s in self.shakers]
                 return {"ok": True, "bench": self.bench_name, "hits": len(self.physics.hits()),
-                        "shaker": {"exc": self.shaker.exc, "output": self.shaker.output,
-                                   "level": self.shaker.level_now},
+                        "shaker": shakers[0], "shakers": shakers,
                         "frontend": {"running": self.frontend.running,
                                      "frames_sent": self.frontend.frames_sent},
                         "hammer": {"streaming": self.hammer.streaming,
@@ -205,7 +226,9 @@ class MockBench:
                                       f"status or fault"}
 
     def _fault(self, request: dict[str, Any]) -> dict[str, Any]:
-        devices: dict[str, Any] = {"hammer": self.hammer.faults, "shaker": self.shaker.faults,
+        devices: dict[str, Any] = {"hammer": self.hammer.faults,
+                                   **{shaker_name(k): s.faults
+                                      for k, s in enumerate(self.shakers)},
                                    "frontend": self.frontend.faults}
         name = request.get("device")
         if not isinstance(name, str) or name not in devices:

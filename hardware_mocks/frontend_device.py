@@ -44,7 +44,8 @@ from hardware_mocks.benches import get_bench
 from hardware_mocks.physics import BenchPhysics, DeviceClock, sampled_pulse
 from hardware_mocks.signals import simulate
 
-__all__ = ["FORCE", "LOOKAHEAD", "FrontEndDevice", "FrontEndFaults", "shaker_force"]
+__all__ = ["FORCE", "LOOKAHEAD", "FrontEndDevice", "FrontEndFaults", "shaker_force",
+           "shaker_force_inputs"]
 
 logger = logging.getLogger(__name__)
 
@@ -55,6 +56,20 @@ def shaker_force(sensor: int) -> int:
     """Wiring code of an input that carries the force sensor ``sensor`` of a shaker only
     (:attr:`hardware_mocks.shaker_device.ShakerDevice.sensor`)."""
     return -2 - sensor
+
+
+def shaker_force_inputs(shakers: int, suffix: str = "") -> list[tuple[str, int]]:
+    """Channel name and wiring code of a mock bench's front-end force inputs.
+
+    With one shaker, one input ``F{suffix}`` carries every force (:data:`FORCE`: the
+    hammer's and the shaker's); with more, input ``k`` (from 0) is ``F{k+1}{suffix}``,
+    shaker ``k``'s force sensor alone (:func:`shaker_force`).
+    """
+    if shakers < 1:
+        raise ValueError(f"a bench has at least one shaker, not {shakers}")
+    if shakers == 1:
+        return [(f"F{suffix}", FORCE)]
+    return [(f"F{k + 1}{suffix}", shaker_force(k)) for k in range(shakers)]
 
 
 FULL = 8388607

@@ -279,7 +279,7 @@ class RemoteOperator(MockOperator):
 
 
 class RemoteShakerOperator:
-    """Attaches the shaker of a mock bench in another process at each point announced.
+    """Attaches the shakers of a mock bench in another process at each point announced.
 
     Parameters
     ----------
@@ -287,6 +287,9 @@ class RemoteShakerOperator:
         Connection to the bench's control channel; not closed here.
     bench : Bench, optional
         The bench (default: the one the bench process reports).
+    shakers : int
+        Shakers the plan drives at once (:attr:`app.acquire.plan.TestPlan.drives`): as
+        :class:`MockShakerOperator`, point ``index`` gets shaker ``index % shakers + 1``.
 
     Attributes
     ----------
@@ -294,29 +297,35 @@ class RemoteShakerOperator:
         Empty, or why the shaker could not be moved.
     """
 
-    def __init__(self, control: BenchControl, *, bench: Bench | None = None) -> None:
+    def __init__(self, control: BenchControl, *, bench: Bench | None = None,
+                 shakers: int = 1) -> None:
+        if shakers < 1:
+            raise ValueError(f"shakers must be at least 1, not {shakers}")
         self.control = control
         self.bench = bench if bench is not None else _remote_bench(control)
+        self.shakers = shakers
         self.points: list[int] = []
         self.error = ""
 
-    def _attach(self, exc: int | None) -> None:
+    def _attach(self, exc: int | None, shaker: int) -> None:
         if self.error:
             return
         try:
-            self.control.attach_shaker(exc)
+            self.control.attach_shaker(exc, shaker)
         except BenchControlError as err:
             self.error = str(err)
             logger.error("operator: %s", err)
 
     def on_next_point(self, point: Any) -> None:
         exc = excitation_index(self.bench, point)
-        logger.debug("operator: shaker attached at excitation %d", exc)
+        shaker = int(point.index) % self.shakers + 1
+        logger.debug("operator: shaker %d attached at excitation %d", shaker, exc)
         self.points.append(int(point.index))
-        self._attach(exc)
+        self._attach(exc, shaker)
 
     def on_finished(self, state: Any) -> None:
-        self._attach(None)
+        for shaker in range(1, self.shakers + 1):
+            self._attach(None, shaker)
 
 
 def _remote_bench(control: BenchControl) -> Bench:

@@ -50,7 +50,7 @@ from hardware_mocks.physics import BenchPhysics
 from hardware_mocks.pty_port import PtyPort
 from hardware_mocks.serial_device import SerialMockDevice
 
-__all__ = ["ShakerDevice", "ShakerFaults"]
+__all__ = ["ShakerDevice", "ShakerFaults", "bench_shakers", "shaker_name"]
 
 ERRORS = {
     -100: "Command error",
@@ -95,11 +95,15 @@ class ShakerDevice(SerialMockDevice):
         Its force sensor: the front-end input wired to
         :func:`~hardware_mocks.frontend_device.shaker_force` of it shows this shaker's
         force alone.
+    t_origin : float, optional
+        Time origin of its waveforms on ``time.monotonic()``, s (default: now). Shakers
+        given one origin start their periods and bursts together.
     """
 
     def __init__(self, physics: BenchPhysics | None = None, *, max_level: float = 2.0,
                  serial_number: str = "0007", exc: int | None = None,
-                 force_per_volt: float = 50.0, seed: int = 0, sensor: int = 0) -> None:
+                 force_per_volt: float = 50.0, seed: int = 0, sensor: int = 0,
+                 t_origin: float | None = None) -> None:
         self.max_level = max_level
         self.sensor = sensor
         self.serial_number = serial_number
@@ -109,7 +113,7 @@ class ShakerDevice(SerialMockDevice):
         self._seed = seed
         self._multisine: tuple[tuple[float, float], NDArray[np.float64],
                                NDArray[np.float64]] | None = None
-        self._t_origin = time.monotonic()
+        self._t_origin = time.monotonic() if t_origin is None else t_origin
         self.faults = ShakerFaults()
         self.commands: list[str] = []
         self.heartbeats = 0
@@ -344,3 +348,41 @@ class ShakerDevice(SerialMockDevice):
             setattr(self, attr, value)
             if attr == "watchdog":
                 self._last_heartbeat = time.monotonic()
+
+
+def shaker_name(k: int) -> str:
+    """Station device name of a mock bench's shaker ``k`` (from 0): ``shaker``, ``shaker2``..."""
+    return "shaker" if k == 0 else f"shaker{k + 1}"
+
+
+def bench_shakers(physics: BenchPhysics, n: int, *, force_per_volt: float = 50.0
+                  ) -> list[ShakerDevice]:
+    """The ``n`` SG-1 mocks of one bench, as one generator with ``n`` channels.
+
+    Shaker ``k`` (from 0) has seed ``k`` (its own random signal), force sensor ``k``
+    (:func:`~hardware_mocks.frontend_device.shaker_force`) and serial number
+    ``0007 + k``; all share one time origin (their bursts start together). A shaker
+    that fails to start shuts down those already started.
+
+    Parameters
+    ----------
+    physics : BenchPhysics
+        The bench they push on.
+    n : int
+        Number of shakers, at least 1.
+    force_per_volt : float
+        Force of each per volt of output, N/V.
+    """
+    if n < 1:
+        raise ValueError(f"a bench has at least one shaker, not {n}")
+    origin = time.monotonic()
+    out: list[ShakerDevice] = []
+    try:
+        for k in range(n):
+            out.append(ShakerDevice(physics, force_per_volt=force_per_volt, seed=k, sensor=k,
+                                    serial_number=f"{7 + k:04d}", t_origin=origin))
+    except BaseException:
+        for dev in out:
+            dev.shutdown()
+        raise
+    return out

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -156,7 +157,8 @@ def _remote_operator(station: StationConfig, plan: TestPlan, stack: contextlib.E
         host, port = control_address(station)
         control = stack.enter_context(BenchControl(host, port))
         if plan.method == "shaker":
-            operator: RemoteOperator | RemoteShakerOperator = RemoteShakerOperator(control)
+            operator: RemoteOperator | RemoteShakerOperator = RemoteShakerOperator(
+                control, shakers=plan.n_references)
         else:
             operator = RemoteOperator(control)
             stack.callback(operator.shutdown)
@@ -167,6 +169,25 @@ def _remote_operator(station: StationConfig, plan: TestPlan, stack: contextlib.E
     except ValueError as err:
         raise UserError(f"{plan.source}: {err} (mock bench {operator.bench.name!r})") from err
     return operator
+
+
+def _check_bench_shakers(plan: TestPlan, station: StationConfig) -> None:
+    """A station of ``insitu mock-bench`` says how many shakers the bench runs: refuse a plan
+    that needs another number now, in one line (its front end has one force input per
+    shaker, F1, F2..., with two or more, and no input for the hammer then)."""
+    table = station.extra.get("mock_bench")
+    have = table.get("shakers", 1) if isinstance(table, Mapping) else None
+    if not isinstance(have, int) or isinstance(have, bool):
+        return
+    need = plan.n_references
+    if plan.method == "shaker" and need != have:
+        raise UserError(f"{plan.source}: the plan drives {need} shaker{'s' if need > 1 else ''} "
+                        f"at once but the mock bench runs {have}: restart it with insitu "
+                        f"mock-bench --shakers {need}")
+    if plan.method != "shaker" and have > 1:
+        raise UserError(f"{plan.source}: a {plan.method} plan, but the mock bench runs {have} "
+                        "shakers (its front end records their forces, not the hammer's): "
+                        "restart it without --shakers")
 
 
 def _check_rate(proc: RecordingProcedure, plan: TestPlan, station: StationConfig) -> None:
@@ -285,6 +306,8 @@ def run(args: argparse.Namespace) -> int:
             station = load_station(args.station)
             if plan is None and not args.resume:
                 raise UserError("give --plan FILE (or --mock for the built-in bench's plan)")
+            _check_bench_shakers(plan if plan is not None else parse_plan(
+                read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan"), station)
         proc = _procedure(plan, station, args, bench)
         operator = None
         if args.mock_operator:

@@ -1,7 +1,8 @@
-"""``insitu mock-bench [--station FILE] [--bench engine]``: a simulated bench as its own process.
+"""``insitu mock-bench [--station FILE] [--bench engine] [--shakers 1|2]``: a simulated bench.
 
-Starts every mock device of the bench on one shared physical model: the hammer
-digitiser and the shaker generator on pseudo-terminals, the accelerometer front
+Starts every mock device of the bench, as its own process, on one shared physical
+model: the hammer digitiser and the shaker generator (two with ``--shakers 2``, for
+plans with ``[shaker] shakers = 2``) on pseudo-terminals, the accelerometer front
 end behind a socketcand server on 127.0.0.1 (classic CAN frames). Prints the
 station file that connects the drivers to it (and writes it to FILE), then runs
 until Ctrl-C or SIGTERM. An operator hits the structure or attaches the shaker
@@ -25,6 +26,7 @@ from app.mockbench import bench_names
 
 FE_RATES = (256, 512, 1024, 2048, 4096)
 HAMMER_RATES = (1024, 2048, 4096, 8192, 16384)
+SHAKERS = ("1", "2")
 
 
 def add_parser(sub: Any) -> None:
@@ -39,6 +41,9 @@ def add_parser(sub: Any) -> None:
                    help="hammer sampling rate in the station file, Hz")
     p.add_argument("--accel-noise", type=float, default=0.0, help="sensor noise, m/s^2 RMS")
     p.add_argument("--force-noise", type=float, default=0.0, help="sensor noise, N RMS")
+    p.add_argument("--shakers", default="1", metavar="N",
+                   help="shakers on the bench: 1, or 2 (each force on its own front-end "
+                        "input F1, F2; for plans with [shaker] shakers = 2)")
     p.set_defaults(run=run)
 
 
@@ -55,6 +60,9 @@ def _write_atomically(path: Path, text: str) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.accel_noise < 0 or args.force_noise < 0:
         raise UserError("--accel-noise and --force-noise must be >= 0")
+    if str(args.shakers) not in SHAKERS:
+        raise UserError(f"--shakers {args.shakers}: the mock bench has 1 or 2 shakers")
+    shakers = int(args.shakers)
     from app.mockbench import unavailable
 
     if why := unavailable():
@@ -69,13 +77,15 @@ def run(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         with MockBench(args.bench, fe_rate=args.fe_rate, hammer_rate=args.hammer_rate,
-                       accel_noise=args.accel_noise, force_noise=args.force_noise) as bench:
+                       accel_noise=args.accel_noise, force_noise=args.force_noise,
+                       shakers=shakers) as bench:
             text = bench.station_toml()
             if args.station is not None:
                 _write_atomically(args.station, text)
             sys.stdout.write(text)
             sys.stdout.flush()
             print(f"insitu mock-bench: bench {args.bench!r} running"
+                  + (f" with {shakers} shakers" if shakers > 1 else "")
                   + (f", station file {args.station}" if args.station else "")
                   + "; Ctrl-C to stop", file=sys.stderr, flush=True)
             while not stop.wait(0.2):

@@ -26,11 +26,11 @@ import numpy as np
 from app.acquire.plan import TestPlan, parse_plan
 from drivers.station import StationConfig, parse_station
 from hardware_mocks.benches import Bench, get_bench
-from hardware_mocks.frontend_device import FORCE, FrontEndDevice, shaker_force
+from hardware_mocks.frontend_device import FrontEndDevice, shaker_force_inputs
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.operator import MockOperator, MockShakerOperator
 from hardware_mocks.physics import BenchPhysics
-from hardware_mocks.shaker_device import ShakerDevice
+from hardware_mocks.shaker_device import bench_shakers, shaker_name
 
 __all__ = ["InProcessBench", "plan_for_bench"]
 
@@ -120,30 +120,24 @@ class InProcessBench:
         self.physics = BenchPhysics(self.bench)
         n_resp = len(self.bench.resp_nodes)
         channel = f"insitu-inproc-{next(_counter)}"
-        forces = ([FORCE] if shakers == 1 else [shaker_force(k) for k in range(shakers)]
-                  ) if fe_force else []
+        forces = shaker_force_inputs(shakers, "_fe") if fe_force else []
         self.frontend = FrontEndDevice(self.physics, channel=channel,
-                                       wiring=[*range(n_resp), *forces],
+                                       wiring=[*range(n_resp), *(w for _, w in forces)],
                                        accel_noise=accel_noise, force_noise=force_noise,
                                        tail=4.0)
         self.hammer = HammerDevice(self.physics, ppm=hammer_ppm, offset=hammer_offset,
                                    noise=force_noise)
-        self.shakers = [ShakerDevice(self.physics, force_per_volt=force_per_volt, seed=k,
-                                     sensor=k, serial_number=f"{7 + k:04d}")
-                        for k in range(shakers)]
-        for dev in self.shakers[1:]:
-            dev._t_origin = self.shakers[0]._t_origin  # one generator, several channels
+        self.shakers = bench_shakers(self.physics, shakers, force_per_volt=force_per_volt)
         self.shaker = self.shakers[0]
         dirs = self.bench.resp_dirs
         chans = [{"name": n, "input": i, "quantity": "acceleration", "sensitivity": 10.2,
                   "range": 10.0, "node": int(node), "direction": dirs[i].tolist()}
                  for i, (n, node) in enumerate(zip(_channel_names(self.bench),
                                                    self.bench.resp_nodes.tolist(), strict=True))]
-        for k in range(len(forces)):
-            chans.append({"name": "F_fe" if shakers == 1 else f"F{k + 1}_fe",
-                          "input": n_resp + k, "quantity": "force", "sensitivity": 2.25,
-                          "range": 5.0})
-        shaker_devices = {"shaker" if k == 0 else f"shaker{k + 1}": {
+        for k, (force, _) in enumerate(forces):
+            chans.append({"name": force, "input": n_resp + k, "quantity": "force",
+                          "sensitivity": 2.25, "range": 5.0})
+        shaker_devices = {shaker_name(k): {
             "backend": "shaker-scpi", "transport": {"url": dev.path, "baudrate": 115200}}
             for k, dev in enumerate(self.shakers)}
         self.station: StationConfig = parse_station({
