@@ -77,3 +77,44 @@ def _toml(text: str) -> dict[str, object]:
     import tomllib
 
     return tomllib.loads(text)
+
+
+def test_a_bench_with_two_shakers_addresses_each() -> None:
+    with MockBench("engine-rigid", shakers=2) as bench:
+        station = parse_station(_toml(bench.station_toml()), "bench.toml")
+        assert [n for n in station.devices if n.startswith("shaker")] == ["shaker", "shaker2"]
+        assert station.devices["shaker2"].transport.url == bench.shakers[1].path
+        forces = [(c.name, c.input) for c in station.devices["frontend"].channels
+                  if c.quantity == "force"]
+        assert forces == [("F1", 12), ("F2", 13)] and station.extra["mock_bench"]["shakers"] == 2
+        # one generator, two signals: one time origin, two seeds, two force sensors
+        a, b = bench.shakers
+        assert a._t_origin == b._t_origin and (a._seed, b._seed) == (0, 1)
+        assert (a.sensor, b.sensor) == (0, 1) and a.serial_number != b.serial_number
+        with BenchControl(*control_address(station)) as control:
+            control.request(cmd="attach-shaker", exc=4)          # the one-shaker request
+            control.attach_shaker(7, shaker=2)
+            assert (a.exc, b.exc) == (4, 7)
+            status = control.status()
+            assert status["shaker"]["exc"] == 4
+            assert [s["exc"] for s in status["shakers"]] == [4, 7]
+            with pytest.raises(BenchControlError, match=r"attach-shaker: no shaker 3: the bench "
+                                                        r"has shakers 1\.\.2"):
+                control.attach_shaker(1, shaker=3)
+            control.fault("shaker2", "silent", True)
+            assert b.faults.silent and not a.faults.silent
+            with pytest.raises(BenchControlError, match="one of hammer, shaker, shaker2, "
+                                                        "frontend"):
+                control.fault("shaker3", "silent", True)
+            # a drive of two points: shaker 1 at the first, shaker 2 at the second
+            op = RemoteShakerOperator(control, shakers=2)
+            op.on_next_point(_point(2, 104, (-1.0, 0.0, 0.0)))   # excitation 3
+            op.on_next_point(_point(3, 105, (0.0, 1.0, 0.0)))    # excitation 4
+            assert (a.exc, b.exc) == (3, 4) and op.points == [2, 3] and not op.error
+            op.on_finished(None)
+            assert (a.exc, b.exc) == (None, None)
+    with MockBench("engine-rigid") as one:
+        with BenchControl("127.0.0.1", one.control_port) as control:
+            with pytest.raises(BenchControlError, match=r"no shaker 2: the bench has one"):
+                control.attach_shaker(3, shaker=2)
+            assert len(control.status()["shakers"]) == 1
