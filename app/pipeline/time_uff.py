@@ -102,8 +102,12 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
     return welch_units(acc, np.vstack([r.force[None, :n], r.responses[:, :n]]))
 
 
-#: pre-trigger when none is given, s
+#: shortest default pre-trigger, s
 PRETRIGGER = 0.01
+#: the default pre-trigger holds this many times the samples the force rings above its noise
+#: before a pulse (the anti-alias filter's ringing, decaying as a power of the time; what is
+#: cut of it biases the force and response spectra alike, most at the lowest lines)
+RING_MARGIN = 4
 
 
 def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
@@ -123,6 +127,7 @@ def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
         level=level, record_length=round(s.record * r.fs),
         pretrigger=round(s.pretrigger * r.fs),
         slope="rising" if level > 0 else "falling", exp_tau=s.exp_tau or None,
+        ring=s.ring or 0,
     )
     names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
     res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
@@ -305,6 +310,15 @@ def _resolve(runs: list[TimeRun], s: Settings,
         return dataclasses.replace(s, pretrigger=pre, record=s.record or 1.0,
                                    exp_tau=s.exp_tau or 0.0), levels, lines
     d = list(found.values())
+    fs = runs[0].fs
+    ring_before = int(np.median([x.ring_before for x in d]))
+    ring = s.ring if s.ring is not None else int(np.median([x.ring_after for x in d]))
+    if s.pretrigger is None:
+        pre = max(PRETRIGGER, np.ceil(RING_MARGIN * ring_before) / fs)
+        lines.append(RunReport(
+            f"pre-trigger {pre:.3g} s ({round(pre * fs)} samples: {RING_MARGIN} x the "
+            f"{ring_before} samples the force rings above its noise before a pulse, at least "
+            f"{PRETRIGGER:g} s; --pretrigger to change)"))
     if s.level is None:
         lv = np.array(list(levels.values()))
         lines.append(RunReport(
@@ -323,10 +337,13 @@ def _resolve(runs: list[TimeRun], s: Settings,
             f"record {record:g} s ({hits}; responses decay in {decay:.2g} s): {window} "
             "(--record, --exp-tau to change)"))
     lines.append(RunReport(
-        f"force window: each pulse's end plus one pulse width (pulses "
-        f"{np.median([x.pulse_width for x in d]) * 1e3:.2g} ms wide)"))
-    return dataclasses.replace(s, pretrigger=pre, record=record, exp_tau=tau or 0.0), levels, \
-        lines
+        f"force window: each pulse's end plus the larger of its width (pulses "
+        f"{np.median([x.pulse_width for x in d]) * 1e3:.2g} ms wide) and {ring} samples ("
+        + ("--force-ring" if s.ring is not None else "the force rings above its noise after "
+           "it; --force-ring to change") + "), then a half-cosine as long; the force's median "
+        "over each record taken off"))
+    return dataclasses.replace(s, pretrigger=pre, record=record, exp_tau=tau or 0.0,
+                               ring=ring), levels, lines
 
 
 def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
