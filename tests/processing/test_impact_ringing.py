@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_less
 
-from processing.impact import ImpactSettings, impact_defaults, process_impacts, ringing
+from processing.impact import (
+    ImpactSettings,
+    exponential_for,
+    impact_defaults,
+    process_impacts,
+    ringing,
+)
 
 FS = 256.0
 M, FN, ZETA = 100.0, 6.0, 0.1  # kg, Hz: one mount mode, decayed to 1e-4 in 2.5 s
@@ -15,12 +21,14 @@ HIT_TIMES = (1.0, 4.0, 7.0, 10.0)  # s
 N = 13 * 256
 
 
-def _accelerance(f: np.ndarray) -> np.ndarray:
-    w, wn = 2 * np.pi * f, 2 * np.pi * FN
-    return -(w**2) / (M * (wn**2 - w**2 + 2j * ZETA * wn * w))
+def _accelerance(f: np.ndarray, a: float = 0.0, zeta: float = ZETA) -> np.ndarray:
+    """Accelerance at ``s = j 2 pi f + a`` (``a``: an exponential window's decay rate, 1/s)."""
+    s, wn = 2j * np.pi * f + a, 2 * np.pi * FN
+    return s**2 / (M * (wn**2 + s**2 + 2 * zeta * wn * s))
 
 
-def _recording(offset: float = 0.0, noise: float = 0.0, seed: int = 0) -> np.ndarray:
+def _recording(offset: float = 0.0, noise: float = 0.0, seed: int = 0,
+               zeta: float = ZETA, times: tuple[float, ...] = HIT_TIMES) -> np.ndarray:
     """Force (N) and acceleration of half-sine hits 2.56 samples wide through a zero-phase
     anti-alias filter (flat to fs / 2.56, raised cosine to 0 at fs / 2), as an acquisition
     records them; the response is exact (long zero tail)."""
@@ -28,14 +36,14 @@ def _recording(offset: float = 0.0, noise: float = 0.0, seed: int = 0) -> np.nda
     t = np.arange(n_pad) / FS
     f = np.zeros(n_pad)
     width = 2.56 / FS
-    for k, t0 in enumerate(HIT_TIMES):
+    for k, t0 in enumerate(times):
         u = (t - t0 - 0.3 * k / FS) / width
         f += np.where((u > 0) & (u < 1), 200.0 * np.sin(np.pi * np.clip(u, 0, 1)), 0.0)
     freq = np.fft.rfftfreq(n_pad, 1 / FS)
     lo, hi = FS / 2.56, FS / 2
     g = 0.5 * (1 + np.cos(np.pi * np.clip((freq - lo) / (hi - lo), 0, 1)))
     F = np.fft.rfft(f) * g
-    x = np.fft.irfft(_accelerance(freq) * F, n_pad)[:N]
+    x = np.fft.irfft(_accelerance(freq, zeta=zeta) * F, n_pad)[:N]
     force = np.fft.irfft(F, n_pad)[:N] + offset
     rng = np.random.default_rng(seed)
     return np.vstack([force + noise * rng.standard_normal(N),
@@ -90,3 +98,19 @@ def test_pretrigger_and_force_window_hold_the_ringing():
                   (0.8, 3.0))
     assert cut > 0.012
     assert_array_less(kept, 0.006)
+
+
+def test_exponential_for_below_the_noise():
+    """The window takes the envelope ``below`` times under the threshold at the record's end;
+    ``below`` = 1 is the former ``T d / (ln(r) (d - T))``; none when the responses are there
+    already."""
+    T, d, r = 1.9, 5.0, 300.0
+    assert exponential_for(2.0, 0.1, d, r) == pytest.approx(T * d / (np.log(r) * (d - T)))
+    for b in (1.0, 10.0, 30.0):
+        tau = exponential_for(2.0, 0.1, d, r, b)
+        assert tau is not None
+        assert r * np.exp(-np.log(r) * T / d - T / tau) == pytest.approx(1 / b)
+    assert exponential_for(2.0, 0.1, 1.0, r) is None
+    assert exponential_for(2.0, 0.1, 1.0, r, 10.0) is None  # 1.9 s > 1.4 s to 1/10
+    assert exponential_for(2.0, 0.1, 1.5, r, 10.0) is not None  # 1.9 s < 1.9 s to 1/10
+
