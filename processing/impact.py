@@ -591,9 +591,9 @@ class ImpactDefaults:
         under three times its noise (extrapolated exponentially past the next impact), s
     record : record length, s: the decay plus the pre-trigger (at least :data:`MIN_RECORD`),
         at most 95 % of the spacing (one impact: what follows it)
-    exp_tau : exponential window time constant, s, when the responses are not
-        :data:`TAIL_BELOW` times under their noise threshold by the end of the record (it
-        takes them there, :func:`exponential_for`); None otherwise
+    exp_tau : exponential window time constant, s, when the responses have not decayed by
+        the end of the record (it takes them down to their noise by then,
+        :func:`exponential_for`); None otherwise
     ratio : the slowest channel's envelope just after the impact over its noise threshold
     ring_before, ring_after : median over impacts of the samples the force stands above four
         noise standard deviations (about its local baseline) before the pulse's first sample
@@ -616,30 +616,18 @@ class ImpactDefaults:
 
 #: shortest default record, s (lines 0.5 Hz apart: a mount mode of a few Hz needs lines below it)
 MIN_RECORD = 2.0
-#: the default exponential window takes the responses this many times under their noise
-#: threshold by the end of the record (:func:`exponential_for`)
-TAIL_BELOW = 10.0
 
 
 def exponential_for(record: float, pretrigger: float, decay: float, ratio: float,
-                    below: float = 1.0) -> float | None:
+                    ) -> float | None:
     """Exponential window time constant (s) that brings responses decaying in ``decay`` s
-    (start-to-noise ratio ``ratio``) down to ``below`` times under their noise threshold by
-    the end of a ``record`` s record starting ``pretrigger`` s before the impact:
-    ``tau = T / (ln(r b) - ln(r) T / d)`` with ``T = record - pretrigger``, at least
-    ``T / 10`` (``b = 1``: ``tau = T d / (ln(r) (d - T))``); None when they are there by
-    then without a window.
-
-    A tail cut at the record's end adds up coherently at a resonance line while the noise
-    does not: at the threshold (three noise standard deviations) it still outweighs the
-    noise there, hence ``below`` > 1 (:data:`TAIL_BELOW`)."""
+    (start-to-noise ratio ``ratio``) down to their noise by the end of a ``record`` s record
+    starting ``pretrigger`` s before the impact: ``tau = T d / (ln(r) (d - T))`` with
+    ``T = record - pretrigger``, at least ``T / 10``; None when they have decayed by then."""
     T = record - pretrigger
-    if not ratio > 1 or not T > 0 or not below >= 1:
+    if not decay > T or not ratio > 1:
         return None
-    rate = np.log(ratio * below) - np.log(ratio) * T / decay  # e-folds the window must add
-    if not rate > 0:
-        return None
-    return float(max(T / rate, T / 10))
+    return float(max(T * decay / (np.log(ratio) * (decay - T)), T / 10))
 
 
 #: samples either side of a pulse searched for its ringing (:func:`ringing`)
@@ -727,9 +715,9 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
     -------
     ImpactDefaults
         See its attributes for how each is chosen. The exponential window is chosen so
-        that ``envelope(T) exp(-T / tau)`` is :data:`TAIL_BELOW` times under three noise
-        standard deviations at the record's end ``T`` (:func:`exponential_for`, for a decay
-        time ``d`` and a start-to-threshold ratio ``r``), at least ``T / 10``.
+        that ``envelope(T) exp(-T / tau)`` is down at three noise standard deviations at the
+        record's end ``T``: ``tau = T d / (ln(r) (d - T))`` for a decay time ``d`` and a
+        start-to-noise ratio ``r``, at least ``T / 10``.
 
     Raises
     ------
@@ -776,6 +764,5 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
     before, after = ringing(g, starts, sigma)
     return ImpactDefaults(level=base + level, noise=sigma, n_hits=int(starts.size),
                           spacing=spacing, pulse_width=width, decay=decay, record=float(record),
-                          exp_tau=exponential_for(record, pretrigger, decay, ratio, TAIL_BELOW),
-                          ratio=ratio,
+                          exp_tau=exponential_for(record, pretrigger, decay, ratio), ratio=ratio,
                           ring_before=before, ring_after=after)

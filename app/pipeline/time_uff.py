@@ -26,7 +26,6 @@ from processing.data import FRFSet, InputError
 from processing.excitation import burst_onsets, shaker_signal, steady_periods
 from processing.impact import (
     MIN_RECORD,
-    TAIL_BELOW,
     ImpactDefaults,
     ImpactResult,
     ImpactSettings,
@@ -330,13 +329,10 @@ def _resolve(runs: list[TimeRun], s: Settings,
     decay = float(np.median([x.decay for x in d]))
     ratio = float(np.median([x.ratio for x in d]))
     record = s.record if s.record is not None else _record(d, decay, pre)
-    tau = (s.exp_tau if s.exp_tau is not None
-           else exponential_for(record, pre, decay, ratio, TAIL_BELOW))
+    tau = s.exp_tau if s.exp_tau is not None else exponential_for(record, pre, decay, ratio)
     hits = f"hits {min(spacing):.2g} s apart at least" if spacing else "one hit a run"
     if s.record is None or s.exp_tau is None:
         window = (f"exponential window tau = {tau:.2g} s" if tau else "no exponential window")
-        window += (f", responses {TAIL_BELOW:g} x under their noise at the record's end"
-                   if s.exp_tau is None and tau else "")
         lines.append(RunReport(
             f"record {record:g} s ({hits}; responses decay in {decay:.2g} s): {window} "
             "(--record, --exp-tau to change)"))

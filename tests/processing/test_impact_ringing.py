@@ -7,13 +7,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_less
 
-from processing.impact import (
-    ImpactSettings,
-    exponential_for,
-    impact_defaults,
-    process_impacts,
-    ringing,
-)
+from processing.impact import ImpactSettings, impact_defaults, process_impacts, ringing
 
 FS = 256.0
 M, FN, ZETA = 100.0, 6.0, 0.1  # kg, Hz: one mount mode, decayed to 1e-4 in 2.5 s
@@ -98,19 +92,4 @@ def test_pretrigger_and_force_window_hold_the_ringing():
                   (0.8, 3.0))
     assert cut > 0.012
     assert_array_less(kept, 0.006)
-
-
-def test_exponential_for_below_the_noise():
-    """The window takes the envelope ``below`` times under the threshold at the record's end;
-    ``below`` = 1 is the former ``T d / (ln(r) (d - T))``; none when the responses are there
-    already."""
-    T, d, r = 1.9, 5.0, 300.0
-    assert exponential_for(2.0, 0.1, d, r) == pytest.approx(T * d / (np.log(r) * (d - T)))
-    for b in (1.0, 10.0, 30.0):
-        tau = exponential_for(2.0, 0.1, d, r, b)
-        assert tau is not None
-        assert r * np.exp(-np.log(r) * T / d - T / tau) == pytest.approx(1 / b)
-    assert exponential_for(2.0, 0.1, 1.0, r) is None
-    assert exponential_for(2.0, 0.1, 1.0, r, 10.0) is None  # 1.9 s > 1.4 s to 1/10
-    assert exponential_for(2.0, 0.1, 1.5, r, 10.0) is not None  # 1.9 s < 1.9 s to 1/10
 
