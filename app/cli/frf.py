@@ -75,9 +75,7 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
     p.add_argument("--record", type=float,
                    help="impact: record length, s (default: from the hit spacing and the "
                         "responses' decay)")
-    p.add_argument("--pretrigger", type=float,
-                   help="impact: pre-trigger, s (default: 4 x the samples the force rings "
-                        "above its noise before a pulse, at least 0.01 s)")
+    p.add_argument("--pretrigger", type=float, help="impact: pre-trigger, s (default 0.01)")
     p.add_argument("--force-ring", type=int, dest="ring", metavar="SAMPLES",
                    help="impact: samples the force window keeps after each pulse's end at "
                         "least, then a half-cosine as long (default: those the force rings "

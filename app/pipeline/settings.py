@@ -51,8 +51,7 @@ class Settings:
     level : impact: trigger level, N (None: from each run's force noise,
         :func:`processing.impact.impact_defaults`)
     record : impact: record length, s (None: from the hit spacing and the responses' decay)
-    pretrigger : impact: pre-trigger, s (None: four times the samples the force rings above its
-        noise before a pulse, at least 0.01 s)
+    pretrigger : impact: pre-trigger, s (None: 0.01 s)
     ring : impact: samples the automatic force window keeps after each pulse's end at least
         (None: those the force rings above its noise, read from the data)
     exp_tau : impact: exponential window time constant, s (None: chosen when the responses

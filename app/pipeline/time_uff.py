@@ -102,12 +102,8 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
     return welch_units(acc, np.vstack([r.force[None, :n], r.responses[:, :n]]))
 
 
-#: shortest default pre-trigger, s
+#: pre-trigger when none is given, s
 PRETRIGGER = 0.01
-#: the default pre-trigger holds this many times the samples the force rings above its noise
-#: before a pulse (the anti-alias filter's ringing, decaying as a power of the time; what is
-#: cut of it biases the force and response spectra alike, most at the lowest lines)
-RING_MARGIN = 4
 
 
 def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
@@ -310,15 +306,7 @@ def _resolve(runs: list[TimeRun], s: Settings,
         return dataclasses.replace(s, pretrigger=pre, record=s.record or 1.0,
                                    exp_tau=s.exp_tau or 0.0), levels, lines
     d = list(found.values())
-    fs = runs[0].fs
-    ring_before = int(np.median([x.ring_before for x in d]))
     ring = s.ring if s.ring is not None else int(np.median([x.ring_after for x in d]))
-    if s.pretrigger is None:
-        pre = max(PRETRIGGER, np.ceil(RING_MARGIN * ring_before) / fs)
-        lines.append(RunReport(
-            f"pre-trigger {pre:.3g} s ({round(pre * fs)} samples: {RING_MARGIN} x the "
-            f"{ring_before} samples the force rings above its noise before a pulse, at least "
-            f"{PRETRIGGER:g} s; --pretrigger to change)"))
     if s.level is None:
         lv = np.array(list(levels.values()))
         lines.append(RunReport(
