@@ -78,8 +78,8 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
     p.add_argument("--pretrigger", type=float, help="impact: pre-trigger, s (default 0.01)")
     p.add_argument("--force-ring", type=int, dest="ring", metavar="SAMPLES",
                    help="impact: samples the force window keeps after each pulse's end at "
-                        "least, then a half-cosine as long (default: those the force rings "
-                        "above its noise)")
+                        "least, then a half-cosine as long (default 0: one pulse width; the "
+                        "force's ringing read from the data is printed)")
     p.add_argument("--exp-tau", type=float,
                    help="impact: exponential window time constant, s (default: chosen when "
                         "the responses have not decayed by the end of the record; 0: none)")

@@ -53,7 +53,7 @@ class Settings:
     record : impact: record length, s (None: from the hit spacing and the responses' decay)
     pretrigger : impact: pre-trigger, s (None: 0.01 s)
     ring : impact: samples the automatic force window keeps after each pulse's end at least
-        (None: those the force rings above its noise, read from the data)
+        (None: 0, one pulse width)
     exp_tau : impact: exponential window time constant, s (None: chosen when the responses
         have not decayed by the end of the record; 0: no exponential window)
     coherence : coherence gate threshold of the checks reported

@@ -306,7 +306,8 @@ def _resolve(runs: list[TimeRun], s: Settings,
         return dataclasses.replace(s, pretrigger=pre, record=s.record or 1.0,
                                    exp_tau=s.exp_tau or 0.0), levels, lines
     d = list(found.values())
-    ring = s.ring if s.ring is not None else int(np.median([x.ring_after for x in d]))
+    ringing = int(np.median([x.ring_after for x in d]))
+    ring = s.ring or 0
     if s.level is None:
         lv = np.array(list(levels.values()))
         lines.append(RunReport(
@@ -324,12 +325,11 @@ def _resolve(runs: list[TimeRun], s: Settings,
         lines.append(RunReport(
             f"record {record:g} s ({hits}; responses decay in {decay:.2g} s): {window} "
             "(--record, --exp-tau to change)"))
+    width = f"{np.median([x.pulse_width for x in d]) * 1e3:.2g} ms"
     lines.append(RunReport(
-        f"force window: each pulse's end plus the larger of its width (pulses "
-        f"{np.median([x.pulse_width for x in d]) * 1e3:.2g} ms wide) and {ring} samples ("
-        + ("--force-ring" if s.ring is not None else "the force rings above its noise after "
-           "it; --force-ring to change") + "), then a half-cosine as long; the force's median "
-        "over each record taken off"))
+        f"force window: each pulse's end plus the larger of its width ({width}) and {ring} "
+        f"samples (--force-ring; the force rings above its noise {ringing} samples after a "
+        "pulse), then a half-cosine as long; the force's median over each record taken off"))
     return dataclasses.replace(s, pretrigger=pre, record=record, exp_tau=tau or 0.0,
                                ring=ring), levels, lines
 
