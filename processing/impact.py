@@ -70,7 +70,12 @@ class ImpactSettings:
         Exponential window time constant, s (None: no exponential window).
     force_window : float or None
         Force window length after the trigger, s; None sizes it from each pulse
-        (pulse end plus one pulse width, then a half-cosine of one pulse width).
+        (pulse end plus the larger of one pulse width and ``ring``, then a half-cosine
+        as long).
+    ring : int
+        Samples after a pulse's end the automatic force window keeps at least (the
+        acquisition's anti-alias filter rings after a short pulse; cutting that ringing
+        biases the force spectrum, :attr:`ImpactDefaults.ring`).
     double_hit_ratio : float
         A second rise above this fraction of the peak force is a double hit.
     clip_samples : int
@@ -85,6 +90,7 @@ class ImpactSettings:
     force_window: float | None = None
     double_hit_ratio: float = 0.1
     clip_samples: int = 3
+    ring: int = 0
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.level) or self.level == 0:
@@ -105,6 +111,8 @@ class ImpactSettings:
             raise InputError(f"double_hit_ratio must be in (0, 1), got {self.double_hit_ratio}")
         if self.clip_samples < 2:
             raise InputError(f"clip_samples must be >= 2, got {self.clip_samples}")
+        if self.ring < 0:
+            raise InputError(f"ring must be >= 0 samples, got {self.ring}")
 
 
 @dataclass(frozen=True)
@@ -292,13 +300,23 @@ def process_impacts(
         return ImpactResult(freq, None, None, tuple(verdicts), None, estimator, settings.exp_tau,
                             meta)
     windows = _windows(hits, accepted, fs, settings, force_channel, force_accept)
-    sp = record_spectra(hits.rec[accepted], fs, windows, references=(force_channel,))
+    rec = _without_force_offset(hits.rec[accepted], force_channel)
+    sp = record_spectra(rec, fs, windows, references=(force_channel,))
     H, coh = frf(sp, estimator)
     meta["n_averages"] = int(accepted.sum())
-    units = (record_units(hits.rec[accepted], fs, windows, force_channel) if keep_units
-             else None)
+    units = record_units(rec, fs, windows, force_channel) if keep_units else None
     return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta,
                         units)
+
+
+def _without_force_offset(rec: NDArray[np.float64], force_channel: int) -> NDArray[np.float64]:
+    """The records (n_hit, n_ch, L) with each force's baseline (its median over the record,
+    N: the pulse holds a few samples) taken off. The force window keeps the samples around the
+    pulse, and an offset there is a force the structure never felt: a 1 N offset under a
+    pulse of a few ms biases the force spectrum by about a percent."""
+    out = rec.copy()
+    out[:, force_channel] -= np.median(rec[:, force_channel], axis=-1, keepdims=True)
+    return out
 
 
 def _checked_input(data: ArrayLike, fs: float, force_channel: int,
@@ -430,7 +448,7 @@ def _windows(hits: _Hits, accepted: NDArray[np.bool_], fs: float, settings: Impa
         taper = np.zeros_like(stop)
     else:
         fall, first_above = hits.fall[accepted], hits.first_above[accepted]
-        width = np.maximum(fall - first_above, 1)
+        width = np.maximum(np.maximum(fall - first_above, 1), settings.ring)
         stop = fall + width
         taper = width
         if force_accept:  # an accepted double hit: the window spans the last impact too
@@ -577,6 +595,10 @@ class ImpactDefaults:
         the end of the record (it takes them down to their noise by then,
         :func:`exponential_for`); None otherwise
     ratio : the slowest channel's envelope just after the impact over its noise threshold
+    ring_before, ring_after : median over impacts of the samples the force stands above four
+        noise standard deviations (about its local baseline) before the pulse's first sample
+        above the trigger level and after its end: the acquisition's anti-alias filter
+        rings on both sides of a pulse a few samples long (:func:`ringing`)
     """
 
     level: float
@@ -588,6 +610,8 @@ class ImpactDefaults:
     record: float
     exp_tau: float | None
     ratio: float = float(np.exp(1.0))
+    ring_before: int = 0
+    ring_after: int = 0
 
 
 #: shortest default record, s (lines 0.5 Hz apart: a mount mode of a few Hz needs lines below it)
@@ -604,6 +628,35 @@ def exponential_for(record: float, pretrigger: float, decay: float, ratio: float
     if not decay > T or not ratio > 1:
         return None
     return float(max(T * decay / (np.log(ratio) * (decay - T)), T / 10))
+
+
+#: samples either side of a pulse searched for its ringing (:func:`ringing`)
+RING_SPAN = 64
+
+
+def ringing(g: NDArray[np.float64], starts: NDArray[np.int64], sigma: float,
+            ) -> tuple[int, int]:
+    """Samples the force ``g`` (N, baseline off) stands above ``4 sigma`` before each pulse's
+    first sample ``starts`` and after its end (back under 5 % of its peak), medians over the
+    pulses, each at most :data:`RING_SPAN`. The baseline is the median around each pulse
+    (a drifting force offset is not ringing)."""
+    n, R = g.size, RING_SPAN
+    idx = np.clip(starts[:, None] + np.arange(-2 * R, 2 * R), 0, n - 1)
+    seg = g[idx]
+    seg = seg - np.median(seg, axis=-1, keepdims=True)
+    c = 2 * R  # the pulse's first sample in each segment
+    peak = seg[:, c:c + R].max(axis=-1, keepdims=True)
+    after = np.arange(seg.shape[-1]) > c
+    below = (seg < 0.05 * peak) & after
+    fall = np.where(np.any(below, axis=-1), np.argmax(below, axis=-1), c + 1)
+    loud = np.abs(seg) > 4 * sigma
+    k = np.arange(seg.shape[-1])
+    pre = (k >= c - R) & (k < c)
+    first = np.where(np.any(loud & pre, axis=-1), np.argmax(loud & pre, axis=-1), c)
+    post = loud & (k[None] >= fall[:, None]) & (k[None] < fall[:, None] + R)
+    last = np.where(np.any(post, axis=-1), seg.shape[-1] - 1 - np.argmax(post[:, ::-1], axis=-1),
+                    fall - 1)
+    return int(np.median(c - first)), int(np.median(last + 1 - fall))
 
 
 def _impacts(g: NDArray[np.float64], level: float, fs: float) -> NDArray[np.int64]:
@@ -708,6 +761,8 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
     limit = (n - starts[-1]) / fs + pretrigger if spacing is None else 0.95 * spacing
     want = np.ceil(max(decay + pretrigger, MIN_RECORD) * 100) / 100
     record = max(min(want, np.floor(limit * 100) / 100), 8 / fs, 2 * pretrigger)
+    before, after = ringing(g, starts, sigma)
     return ImpactDefaults(level=base + level, noise=sigma, n_hits=int(starts.size),
                           spacing=spacing, pulse_width=width, decay=decay, record=float(record),
-                          exp_tau=exponential_for(record, pretrigger, decay, ratio), ratio=ratio)
+                          exp_tau=exponential_for(record, pretrigger, decay, ratio), ratio=ratio,
+                          ring_before=before, ring_after=after)

@@ -76,6 +76,10 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
                    help="impact: record length, s (default: from the hit spacing and the "
                         "responses' decay)")
     p.add_argument("--pretrigger", type=float, help="impact: pre-trigger, s (default 0.01)")
+    p.add_argument("--force-ring", type=int, dest="ring", metavar="SAMPLES",
+                   help="impact: samples the force window keeps after each pulse's end at "
+                        "least, then a half-cosine as long (default 0: one pulse width; the "
+                        "force's ringing read from the data is printed)")
     p.add_argument("--exp-tau", type=float,
                    help="impact: exponential window time constant, s (default: chosen when "
                         "the responses have not decayed by the end of the record; 0: none)")
@@ -95,7 +99,8 @@ def settings_from(args: argparse.Namespace, **kwargs: Any) -> Settings:
     return Settings(excitation=args.excitation, estimator=args.estimator, nperseg=args.nperseg,
                     overlap=args.overlap, window=args.window, averages=args.averages,
                     level=args.level, record=args.record, pretrigger=args.pretrigger,
-                    exp_tau=args.exp_tau, coherence=args.coherence, fmax=args.fmax, **kwargs)
+                    exp_tau=args.exp_tau, ring=args.ring, coherence=args.coherence,
+                    fmax=args.fmax, **kwargs)
 
 
 def open_and_show(args: argparse.Namespace, settings: Settings,

@@ -34,7 +34,7 @@ class Settings:
     ----------
     excitation : time records: ``"random"`` (shaker, Welch) or ``"impact"`` (hammer hits); None
         reads it from the data (an impulsive force is a hammer test; a hammer option given,
-        ``level``, ``record``, ``pretrigger`` or ``exp_tau``, means one)
+        ``level``, ``record``, ``pretrigger``, ``exp_tau`` or ``ring``, means one)
     estimator : FRF estimator (``"H1"``, ``"H2"``, ...: :data:`processing.spectral.ESTIMATORS`)
     nperseg : random: samples per segment (line spacing fs / nperseg); None: from the data
         (see ``records``), 2048 for Welch segments
@@ -52,6 +52,8 @@ class Settings:
         :func:`processing.impact.impact_defaults`)
     record : impact: record length, s (None: from the hit spacing and the responses' decay)
     pretrigger : impact: pre-trigger, s (None: 0.01 s)
+    ring : impact: samples the automatic force window keeps after each pulse's end at least
+        (None: 0, one pulse width)
     exp_tau : impact: exponential window time constant, s (None: chosen when the responses
         have not decayed by the end of the record; 0: no exponential window)
     coherence : coherence gate threshold of the checks reported
@@ -75,6 +77,7 @@ class Settings:
     record: float | None = None
     pretrigger: float | None = None
     exp_tau: float | None = None
+    ring: int | None = None
     coherence: float = 0.8
     fmax: float | None = None
     run_points: Literal["all", "usable"] = "all"
@@ -113,6 +116,9 @@ class Settings:
         if self.exp_tau is not None and not (math.isfinite(self.exp_tau) and self.exp_tau >= 0):
             raise InputError(f"--exp-tau must be a time constant in s (0: no exponential "
                              f"window), got {self.exp_tau:g}")
+        if self.ring is not None and not (isinstance(self.ring, int) and self.ring >= 0):
+            raise InputError(f"--force-ring must be a whole number of samples, at least 0, "
+                             f"got {self.ring}")
         if not (math.isfinite(self.coherence) and 0 <= self.coherence <= 1):
             raise InputError(f"--coherence must be from 0 to 1, got {self.coherence:g}")
         if self.fmax is not None:
@@ -139,7 +145,7 @@ class Settings:
     def hammer_given(self) -> bool:
         """A hammer option was given (trigger level, record, pre-trigger, exponential window)."""
         return any(v is not None for v in (self.level, self.record, self.pretrigger,
-                                           self.exp_tau))
+                                           self.exp_tau, self.ring))
 
 
 @dataclass(frozen=True)

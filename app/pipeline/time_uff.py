@@ -123,6 +123,7 @@ def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
         level=level, record_length=round(s.record * r.fs),
         pretrigger=round(s.pretrigger * r.fs),
         slope="rising" if level > 0 else "falling", exp_tau=s.exp_tau or None,
+        ring=s.ring or 0,
     )
     names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
     res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
@@ -305,6 +306,8 @@ def _resolve(runs: list[TimeRun], s: Settings,
         return dataclasses.replace(s, pretrigger=pre, record=s.record or 1.0,
                                    exp_tau=s.exp_tau or 0.0), levels, lines
     d = list(found.values())
+    ringing = int(np.median([x.ring_after for x in d]))
+    ring = s.ring or 0
     if s.level is None:
         lv = np.array(list(levels.values()))
         lines.append(RunReport(
@@ -322,11 +325,13 @@ def _resolve(runs: list[TimeRun], s: Settings,
         lines.append(RunReport(
             f"record {record:g} s ({hits}; responses decay in {decay:.2g} s): {window} "
             "(--record, --exp-tau to change)"))
+    width = f"{np.median([x.pulse_width for x in d]) * 1e3:.2g} ms"
     lines.append(RunReport(
-        f"force window: each pulse's end plus one pulse width (pulses "
-        f"{np.median([x.pulse_width for x in d]) * 1e3:.2g} ms wide)"))
-    return dataclasses.replace(s, pretrigger=pre, record=record, exp_tau=tau or 0.0), levels, \
-        lines
+        f"force window: each pulse's end plus the larger of its width ({width}) and {ring} "
+        f"samples (--force-ring; the force rings above its noise {ringing} samples after a "
+        "pulse), then a half-cosine as long; the force's median over each record taken off"))
+    return dataclasses.replace(s, pretrigger=pre, record=record, exp_tau=tau or 0.0,
+                               ring=ring), levels, lines
 
 
 def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:

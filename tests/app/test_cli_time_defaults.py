@@ -66,6 +66,27 @@ def test_identify_time_uff_directly_and_hammer_option_means_impact(
     assert "record " not in text.split("force window")[0].split("\n", 1)[1]  # both given
 
 
+def test_force_ring_printed_and_given(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The force's ringing after a pulse is read from the data and printed with the force
+    window; --force-ring keeps that many samples (and means a hammer test); a negative
+    --force-ring is one line, exit status 2."""
+    src = tmp_path / "time.uff"
+    write_uff(_hammer(2), src)
+    assert main(["frf", str(src), "--out", str(tmp_path / "a.uff")]) == 0
+    text = capsys.readouterr().out
+    fw = next(ln for ln in text.splitlines() if ln.startswith("force window: "))
+    assert "and 0 samples (--force-ring; the force rings above its noise " in fw
+    assert int(fw.split("its noise ")[1].split()[0]) >= 1
+    assert main(["frf", str(src), "--force-ring", "5", "--out", str(tmp_path / "b.uff")]) == 0
+    text = capsys.readouterr().out
+    assert "excitation impact (a hammer option is given" in text
+    assert "and 5 samples (--force-ring;" in text
+    assert main(["frf", str(src), "--force-ring", "-1", "--out", str(tmp_path / "c.uff")]) == 2
+    assert "--force-ring must be a whole number of samples, at least 0" in \
+        capsys.readouterr().err
+
+
 def test_shaker_data_is_processed_as_random(tmp_path: Path,
                                             capsys: pytest.CaptureFixture[str]) -> None:
     sc = build_scenario(ScenarioSpec(seed=2, n_forces=6, n_sensors=3, elastic_ratio=None))
