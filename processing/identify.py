@@ -809,19 +809,22 @@ def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]
     data's top; the same with the threshold raised to 3x the check's error floor (noise,
     location or sensor errors), used when the first leaves no mass line; and notes. When
     the lowest lines are above the threshold (accelerances, falling as the square of the
-    frequency under the rigid-body modes, under the noise) while most lines are within it
-    (the check's error floor, its lower quartile, at most twice the threshold), the band
-    starts at the first line under it when it holds at least three lines from there."""
+    frequency under the rigid-body modes, under the noise), the band starts at the first
+    line under it when it holds at least three lines from there and most lines from the
+    lowest one to its top are within it (their error floor, the lower quartile, within the
+    threshold: the lines above the band, where the body flexes, do not count)."""
     fmin = float(frf.freq[frf.freq > 0][0]) if np.any(frf.freq > 0) else 0.0
     try:
         rc = rigidity_check(frf, fmin=fmin)
     except GeometryError:
         return None, None, []  # under 3 response nodes: the elastic-mode detection bounds it
-    if rc.band is None and rc.error_floor(fmin) <= 2 * rc.threshold:
-        heard = (rc.freq >= fmin) & (rc.worst <= rc.threshold)
-        band = rc.band_at(rc.threshold, fmin=float(rc.freq[heard][0])) if np.any(heard) else None
-        if band is not None and np.count_nonzero((rc.freq >= band[0])
-                                                 & (rc.freq <= band[1])) >= 3:
+    heard = (rc.freq >= fmin) & (rc.worst <= rc.threshold)
+    if rc.band is None and np.any(heard):
+        band = rc.band_at(rc.threshold, fmin=float(rc.freq[heard][0]))
+        upto = (rc.freq >= fmin) & (rc.freq <= (band[1] if band is not None else fmin))
+        if (band is not None and np.count_nonzero((rc.freq >= band[0])
+                                                  & (rc.freq <= band[1])) >= 3
+                and np.percentile(rc.worst[upto], 25) <= rc.threshold):
             rc = dataclasses.replace(rc, band=band)  # a stretch, not a lone quiet line
     top = float(frf.freq[-1])
 

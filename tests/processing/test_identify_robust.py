@@ -131,6 +131,29 @@ def test_rigid_band_starts_past_noisy_lowest_lines() -> None:
     assert _rigid_band_tops(dataclasses.replace(frf, H=H))[0] is None
 
 
+def test_rigid_band_past_noisy_lowest_lines_on_a_flexible_body() -> None:
+    """A body that flexes over most of the data (the check's error floor over all lines is
+    above twice its threshold): the noisy lowest lines are still passed over, as the lines
+    from the lowest one to the band's top are mostly rigid."""
+    import dataclasses
+
+    from processing.identify import _rigid_band_tops
+    from processing.rigidity import rigidity_check
+
+    frf = get_bench("block-flexible").frfset()
+    clean_top = _rigid_band_tops(frf)[0]
+    fmin = float(frf.freq[frf.freq > 0][0])
+    assert clean_top is not None and rigidity_check(frf, fmin=fmin).error_floor(fmin) > 0.2
+    rng = np.random.default_rng(1)
+    H = frf.H.copy()
+    H[..., :4] *= 1 + 0.5 * (rng.standard_normal(H[..., :4].shape)
+                             + 1j * rng.standard_normal(H[..., :4].shape))
+    noisy = dataclasses.replace(frf, H=H)
+    assert rigidity_check(noisy, fmin=fmin).band is None
+    top, _, notes = _rigid_band_tops(noisy)
+    assert top == clean_top and not notes
+
+
 def test_stiffness_band_when_the_first_line_is_above_the_rigid_modes() -> None:
     """Lines given from above 1.5x the highest rigid-body mode (the lower ones left out):
     the stiffness band runs up to the mass line instead of being empty."""
