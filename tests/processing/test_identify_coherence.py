@@ -77,3 +77,23 @@ def test_equal_coherence_is_the_unweighted_fit(bench_frf) -> None:
     assert c["low_ranges_hz"] == [] and c["low_values"] == 0 and not c["checked"]
     same = identify(replace(frf, coherence=np.ones(frf.H.shape)), opt)
     np.testing.assert_allclose(same.theta, none.theta, rtol=1e-9)
+
+
+def _problem(frf, coherence: np.ndarray):
+    from processing.problem import prepare
+
+    return prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
+                   coherence=coherence, options=IdentifyOptions(), exponential_tau=None)
+
+
+def test_stiffness_band_starts_at_the_first_line_over_its_noise() -> None:
+    """Lines under their noise (coherence 0.3) at the bottom, then lines at 0.9 (signal over
+    noise): the automatic stiffness band starts at the first line at 0.9."""
+    from processing.identify import choose_bands
+
+    frf = get_bench("engine-rigid").frfset()
+    k0 = int(np.searchsorted(frf.freq, 0.0, side="right"))
+    g = np.full(frf.H.shape, float(_coherence_for(np.array(0.03))))
+    g[..., k0:k0 + 5] = 0.3
+    g[..., k0 + 5:k0 + 10] = 0.9
+    assert choose_bands(_problem(frf, g)).stiffness_band[0] == frf.freq[k0 + 5]
