@@ -124,9 +124,6 @@ def test_noisy_sensors_with_the_articles_bands(noisy_run: tuple[Path, Any, Any],
     _within_noisy_tolerances(r["mass"], r["cog"], r["inertia_cog"], r["stiffness"], model)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12 part 3: with sensor noise the automatic bands "
-                   "go wrong (mass line ~10-400 Hz, stiffness band ~0.7-8 Hz; mass 20 kg or "
-                   "9 kg for 110 kg) where the fixed bands above give 1.4 %")
 def test_noisy_sensors_default(noisy_run: tuple[Path, Any, Any]) -> None:
     _, result, model = noisy_run
     assert result is not None
