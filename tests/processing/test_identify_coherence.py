@@ -97,3 +97,17 @@ def test_stiffness_band_starts_at_the_first_line_over_its_noise() -> None:
     g[..., k0:k0 + 5] = 0.3
     g[..., k0 + 5:k0 + 10] = 0.9
     assert choose_bands(_problem(frf, g)).stiffness_band[0] == frf.freq[k0 + 5]
+
+
+def test_a_column_weaker_everywhere_leaves_the_lines_clean() -> None:
+    """One excitation column a hundred times noisier on every line (a far point, a lower
+    force) leaves the clean lines as they are; another column dropping out on 20 lines
+    (coherence 0.5: a shaker's force at a resonance) makes those lines unclean."""
+    frf = get_bench("engine-rigid").frfset()
+    k0 = int(np.searchsorted(frf.freq, 0.0, side="right"))
+    g = np.full(frf.H.shape, float(_coherence_for(np.array(0.01))))
+    g[:, 5, k0 + 100:k0 + 120] = 0.5
+    clean = _problem(frf, g).clean_lines
+    assert not np.any(clean[100:120]) and np.count_nonzero(clean) > frf.freq.size // 2
+    g[:, 3] = float(_coherence_for(np.array(0.1)))
+    np.testing.assert_array_equal(_problem(frf, g).clean_lines, clean)
