@@ -167,11 +167,16 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None,
     if opt.mass_band is None or opt.stiffness_band is None:
         clean = problem.clean_lines
         snr = problem.line_snr
+        # the stiffness band from the first line holding more signal than noise (the fit
+        # weighs each line by its coherence; lines left out of the clean ones still count)
+        heard = np.ones(problem.freq.size, bool) if snr is None else snr >= 1.0
         choice = choose_automatic_bands(problem.freq[clean], problem.X[..., clean], problem.T,
                                         peaks, elastic_margin=0.7 if leak else 0.5,
                                         line_weights=None if snr is None else snr[clean],
                                         rigid_band_top=rigid_band_top,
-                                        rigid_band_fallback=rigid_band_fallback)
+                                        rigid_band_fallback=rigid_band_fallback,
+                                        stiffness_low=float(problem.freq[heard][0])
+                                        if np.any(heard) else None)
     mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
     stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
     reason = "bands given" if choice is None else (
@@ -809,26 +814,32 @@ def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]
     data's top; the same with the threshold raised to 3x the check's error floor (noise,
     location or sensor errors), used when the first leaves no mass line; and notes. When
     the lowest lines are above the threshold (accelerances, falling as the square of the
-    frequency under the rigid-body modes, under the noise) while most lines are within it
-    (the check's error floor, its lower quartile, at most twice the threshold), the band
-    starts at the first line under it when it holds at least three lines from there."""
+    frequency under the rigid-body modes, under the noise), the band starts at the first
+    line under it when it holds at least three lines from there and most lines from the
+    lowest one to its top are within it (their error floor, the lower quartile, within the
+    threshold: the lines above the band, where the body flexes, do not count); the raised
+    threshold's band and error floor then start there too."""
     fmin = float(frf.freq[frf.freq > 0][0]) if np.any(frf.freq > 0) else 0.0
     try:
         rc = rigidity_check(frf, fmin=fmin)
     except GeometryError:
         return None, None, []  # under 3 response nodes: the elastic-mode detection bounds it
-    if rc.band is None and rc.error_floor(fmin) <= 2 * rc.threshold:
-        heard = (rc.freq >= fmin) & (rc.worst <= rc.threshold)
-        band = rc.band_at(rc.threshold, fmin=float(rc.freq[heard][0])) if np.any(heard) else None
-        if band is not None and np.count_nonzero((rc.freq >= band[0])
-                                                 & (rc.freq <= band[1])) >= 3:
+    heard = (rc.freq >= fmin) & (rc.worst <= rc.threshold)
+    start = fmin  # the lowest line of the band (and of the raised one)
+    if rc.band is None and np.any(heard):
+        band = rc.band_at(rc.threshold, fmin=float(rc.freq[heard][0]))
+        upto = (rc.freq >= fmin) & (rc.freq <= (band[1] if band is not None else fmin))
+        if (band is not None and np.count_nonzero((rc.freq >= band[0])
+                                                  & (rc.freq <= band[1])) >= 3
+                and np.percentile(rc.worst[upto], 25) <= rc.threshold):
             rc = dataclasses.replace(rc, band=band)  # a stretch, not a lone quiet line
+            start = band[0]
     top = float(frf.freq[-1])
 
     def below_top(band: tuple[float, float] | None) -> float | None:
         return band[1] if band is not None and band[1] < top else None
 
-    raised = rc.band_at(3 * rc.error_floor(fmin), fmin=fmin)
+    raised = rc.band_at(3 * rc.error_floor(start), fmin=start)
     notes = [] if rc.band is not None else [
         "rigidity check: no rigid band found (check sensor mounting and coordinates)"]
     return below_top(rc.band), below_top(raised) if raised != rc.band else None, notes

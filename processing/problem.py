@@ -135,9 +135,13 @@ class Problem:
 
     @property
     def clean_lines(self) -> NDArray[np.bool_]:
-        """(n_f,) lines where T is usable and no column weighs under a tenth of the median
-        (all lines if under 8)."""
-        clean = self.line_ok & np.all(self.col_weights >= 0.1, axis=0)
+        """(n_f,) lines where T is usable and no column weighs under a tenth of its median
+        over the lines (all lines if under 8): a column weaker everywhere (a point far from
+        the body's centre, a lower force) leaves the lines clean, a column dropping out on
+        some lines (shaker force drop-outs at resonances) does not."""
+        w = self.col_weights
+        own = np.median(w, axis=1, keepdims=True)
+        clean = self.line_ok & np.all(w >= 0.1 * own, axis=0)
         return clean if np.count_nonzero(clean) >= 8 else np.ones(self.freq.size, bool)
 
 

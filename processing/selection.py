@@ -241,6 +241,7 @@ def choose_bands(
     mass_low_factor: float = 2.0,
     elastic_margin: float = 0.7,
     line_weights: NDArray[np.float64] | None = None,
+    stiffness_low: float | None = None,
 ) -> BandChoice:
     """Automatic mass-line and stiffness bands, with the reason.
 
@@ -251,9 +252,14 @@ def choose_bands(
     check first, upset by noise or location errors, for ``rigid_band_fallback``,
     its limit at a threshold above its error floor; then the elastic margin,
     up to 0.9x the mode) and the reason says so: a band is always returned when
-    the data hold at least 8 lines. The stiffness band runs from the first line to
-    1.5 times the highest rigid-body mode (not into the mass line). ``line_weights``
-    (n_f,) weigh the lines in the rigid-body mode estimate (:func:`quick_rigid_modes`).
+    the data hold at least 8 lines. The rigid-body modes are read from the lines under
+    the first limit, or, when that puts the highest over twice the limit and the limit
+    is under the elastic margin, from the lines up to twice the limit (at least 8) when
+    these give a lower one (the lines under the limit were too few or too noisy). The
+    stiffness band runs from the first line (or ``stiffness_low``, Hz, when given: the
+    lines given may leave out noisy ones the stiffness fit weighs down itself) to 1.5
+    times the highest rigid-body mode (not into the mass line). ``line_weights`` (n_f,)
+    weigh the lines in the rigid-body mode estimate (:func:`quick_rigid_modes`).
     """
     f_end = float(freq[-1])
     f_el = min(p.frequency for p in elastic) if elastic else None
@@ -279,6 +285,15 @@ def choose_bands(
     if fr[-1] <= 0:  # still none: the strongest resonance of the rigid-body accelerances
         power = np.sum(np.abs(X[..., rig_lines]) ** 2, axis=(0, 1))
         fr = np.full(6, float(freq[rig_lines][np.argmax(power)]))
+    if fr[-1] > 2 * limits[0][0] and limits[0][0] < top:
+        # far above the first limit: the lines under it are too few or too noisy to read
+        # the modes from; read them again over the lines up to twice the limit
+        wide = (freq > 0) & (freq <= min(top, max(2 * limits[0][0],
+                                                  float(freq[min(7, freq.size - 1)]))))
+        fw = quick_rigid_modes(X[..., wide], T, 2 * np.pi * freq[wide],
+                               None if line_weights is None else line_weights[wide])
+        if 0 < fw[-1] < fr[-1]:
+            fr = fw
     f_rig = float(fr[-1])
     set_aside: list[str] = []
     for f_hi, name in limits:
@@ -296,7 +311,7 @@ def choose_bands(
         reason += ("; set aside, as it leaves no mass line above the rigid-body modes: "
                    + ", ".join(set_aside))
     s_hi = min(1.5 * f_rig, lo)
-    s_lo = float(freq[freq > 0][0])
+    s_lo = float(freq[freq > 0][0]) if stiffness_low is None else float(stiffness_low)
     if s_hi <= s_lo:  # the rigid-body modes lie under the first line given: up to the mass line
         above = freq[freq > s_lo]
         s_hi = max(lo, float(above[0])) if above.size else lo

@@ -77,3 +77,37 @@ def test_equal_coherence_is_the_unweighted_fit(bench_frf) -> None:
     assert c["low_ranges_hz"] == [] and c["low_values"] == 0 and not c["checked"]
     same = identify(replace(frf, coherence=np.ones(frf.H.shape)), opt)
     np.testing.assert_allclose(same.theta, none.theta, rtol=1e-9)
+
+
+def _problem(frf, coherence: np.ndarray):
+    from processing.problem import prepare
+
+    return prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
+                   coherence=coherence, options=IdentifyOptions(), exponential_tau=None)
+
+
+def test_stiffness_band_starts_at_the_first_line_over_its_noise() -> None:
+    """Lines under their noise (coherence 0.3) at the bottom, then lines at 0.9 (signal over
+    noise): the automatic stiffness band starts at the first line at 0.9."""
+    from processing.identify import choose_bands
+
+    frf = get_bench("engine-rigid").frfset()
+    k0 = int(np.searchsorted(frf.freq, 0.0, side="right"))
+    g = np.full(frf.H.shape, float(_coherence_for(np.array(0.03))))
+    g[..., k0:k0 + 5] = 0.3
+    g[..., k0 + 5:k0 + 10] = 0.9
+    assert choose_bands(_problem(frf, g)).stiffness_band[0] == frf.freq[k0 + 5]
+
+
+def test_a_column_weaker_everywhere_leaves_the_lines_clean() -> None:
+    """One excitation column a hundred times noisier on every line (a far point, a lower
+    force) leaves the clean lines as they are; another column dropping out on 20 lines
+    (coherence 0.5: a shaker's force at a resonance) makes those lines unclean."""
+    frf = get_bench("engine-rigid").frfset()
+    k0 = int(np.searchsorted(frf.freq, 0.0, side="right"))
+    g = np.full(frf.H.shape, float(_coherence_for(np.array(0.01))))
+    g[:, 5, k0 + 100:k0 + 120] = 0.5
+    clean = _problem(frf, g).clean_lines
+    assert not np.any(clean[100:120]) and np.count_nonzero(clean) > frf.freq.size // 2
+    g[:, 3] = float(_coherence_for(np.array(0.1)))
+    np.testing.assert_array_equal(_problem(frf, g).clean_lines, clean)

@@ -6,6 +6,7 @@ medians over draws (single draws scatter)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from hardware_mocks.benches import get_bench
 from processing.identify import IdentifyOptions, identify
@@ -131,6 +132,32 @@ def test_rigid_band_starts_past_noisy_lowest_lines() -> None:
     assert _rigid_band_tops(dataclasses.replace(frf, H=H))[0] is None
 
 
+def test_rigid_band_past_noisy_lowest_lines_on_a_flexible_body() -> None:
+    """A body that flexes over most of the data (the check's error floor over all lines is
+    above twice its threshold): the noisy lowest lines are still passed over, as the lines
+    from the lowest one to the band's top are mostly rigid."""
+    import dataclasses
+
+    from processing.identify import _rigid_band_tops
+    from processing.rigidity import rigidity_check
+
+    frf = get_bench("block-flexible").frfset()
+    clean_top, clean_raised, _ = _rigid_band_tops(frf)
+    fmin = float(frf.freq[frf.freq > 0][0])
+    assert clean_top is not None and rigidity_check(frf, fmin=fmin).error_floor(fmin) > 0.2
+    rng = np.random.default_rng(1)
+    H = frf.H.copy()
+    H[..., :4] *= 1 + 0.5 * (rng.standard_normal(H[..., :4].shape)
+                             + 1j * rng.standard_normal(H[..., :4].shape))
+    noisy = dataclasses.replace(frf, H=H)
+    assert rigidity_check(noisy, fmin=fmin).band is None
+    top, raised, notes = _rigid_band_tops(noisy)
+    assert top == clean_top and not notes
+    # the raised threshold's band starts past them too (its error floor read from there)
+    assert clean_raised is not None and raised is not None
+    assert abs(raised - clean_raised) <= 0.05 * clean_raised
+
+
 def test_stiffness_band_when_the_first_line_is_above_the_rigid_modes() -> None:
     """Lines given from above 1.5x the highest rigid-body mode (the lower ones left out):
     the stiffness band runs up to the mass line instead of being empty."""
@@ -145,3 +172,27 @@ def test_stiffness_band_when_the_first_line_is_above_the_rigid_modes() -> None:
     c = choose_bands(frf.freq[keep], X[..., keep], T, ())
     lo, hi = c.stiffness_band
     assert lo == frf.freq[keep][0] and hi > lo and hi >= c.mass_band[0]
+
+
+@pytest.mark.parametrize("f_elastic", [70.0, 90.0, 110.0])
+def test_rigid_modes_read_again_when_far_above_the_rigidity_limit(f_elastic: float) -> None:
+    """Two clean lines under the rigidity limit (the others noisy, left out): the rigid-body
+    modes are read over all lines, where an elastic mode the residual does not show bends
+    the estimate far above the limit (67-217 Hz for 29 Hz); they are read again over the
+    lines up to twice the limit."""
+    from processing.geometry import excitation_matrix, response_matrix
+    from processing.selection import ElasticPeak, choose_bands, mode_shape_basis
+
+    frf = get_bench("engine-rigid").frfset()
+    E = response_matrix(frf.resp_xyz, frf.resp_dirs)
+    T = excitation_matrix(frf.exc_xyz, frf.exc_dirs)
+    f = frf.freq
+    X = np.einsum("ir,ref->ief", np.linalg.pinv(E), frf.H)
+    keep = (f > 0) & ((f <= 0.25) | (f >= 21))
+    exact = choose_bands(f[keep], X[..., keep], T, ()).rigid_mode_max
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal(X.shape[:2]) * np.median(np.abs(X[..., f > 60]))
+    X = X + A[..., None] * mode_shape_basis(2 * np.pi * f, ElasticPeak(f_elastic, 0.02))
+    c = choose_bands(f[keep], X[..., keep], T, (), rigid_band_top=20.2)
+    assert c.rigid_mode_max == pytest.approx(exact, rel=0.02)
+    assert 1.3 * exact <= c.mass_band[0] <= 2.01 * exact
