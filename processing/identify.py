@@ -809,20 +809,22 @@ def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]
     data's top; the same with the threshold raised to 3x the check's error floor (noise,
     location or sensor errors), used when the first leaves no mass line; and notes. When
     the lowest lines are above the threshold (accelerances, falling as the square of the
-    frequency under the rigid-body modes, under the noise) while most lines are within it
-    (the check's error floor, its lower quartile, at most twice the threshold), the band
-    starts at the first line under it when it holds at least three lines from there."""
+    frequency under the rigid-body modes, under the noise), the band starts at the first
+    line under it when it holds at least three lines from there and at least as many as the
+    noisy lines below it (a stretch after a few noisy lines, not a quiet moment in noise)."""
     fmin = float(frf.freq[frf.freq > 0][0]) if np.any(frf.freq > 0) else 0.0
     try:
         rc = rigidity_check(frf, fmin=fmin)
     except GeometryError:
         return None, None, []  # under 3 response nodes: the elastic-mode detection bounds it
-    if rc.band is None and rc.error_floor(fmin) <= 2 * rc.threshold:
+    if rc.band is None:
         heard = (rc.freq >= fmin) & (rc.worst <= rc.threshold)
         band = rc.band_at(rc.threshold, fmin=float(rc.freq[heard][0])) if np.any(heard) else None
-        if band is not None and np.count_nonzero((rc.freq >= band[0])
-                                                 & (rc.freq <= band[1])) >= 3:
-            rc = dataclasses.replace(rc, band=band)  # a stretch, not a lone quiet line
+        if band is not None:
+            n_band = int(np.count_nonzero((rc.freq >= band[0]) & (rc.freq <= band[1])))
+            n_noisy = int(np.count_nonzero((rc.freq >= fmin) & (rc.freq < band[0])))
+            if n_band >= max(3, n_noisy):  # a stretch, not a quiet moment in the noise
+                rc = dataclasses.replace(rc, band=band)
     top = float(frf.freq[-1])
 
     def below_top(band: tuple[float, float] | None) -> float | None:
