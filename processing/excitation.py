@@ -16,7 +16,8 @@ How each is analysed (see ``docs/processing.md``):
   rectangular window is leakage-free.
 
 :func:`shaker_signal` tells them apart on a recorded force, and :func:`burst_onsets`,
-:func:`steady_periods` place the records of the last two.
+:func:`steady_periods` place the records of the last two; :func:`settled_records` finds the
+burst records at the start that still hold the sensors' settling.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import scipy.signal
 from numpy.typing import NDArray
 
 __all__ = ["ShakerSignal", "burst_onsets", "burst_random", "continuous_random", "periodic_chirp",
-           "shaker_signal", "steady_periods"]
+           "settled_records", "shaker_signal", "steady_periods"]
 
 
 def _check(fs: float, band: tuple[float, float] | None) -> None:
@@ -255,3 +256,32 @@ def steady_periods(responses: NDArray[np.float64], period: int) -> int:
     floor = float(np.median(d[d.size // 2:]))
     steady = np.flatnonzero(d <= 2 * floor)
     return int(max(1, steady[0] if steady.size else 1))
+
+
+#: a record's mean deviating from the others' by more than this many times their typical
+#: deviation holds a transient (the sensors settling)
+SETTLING_FACTOR = 3.0
+
+
+def settled_records(records: NDArray[np.float64]) -> int:
+    """Records to skip at the start of a burst test while the responses settle (an IEPE
+    sensor's decaying offset after power-up, a slow transient): zero-mean in steady state
+    (the body is at rest at each record's ends, so its mean acceleration is nil), a record's
+    mean is off when it holds such a transient.
+
+    ``records`` (n_rec, n_ch, n): the response channels of each record, in time order. Each
+    record's mean, per channel, less the median over the records, relative to the channel's
+    median record RMS; worst channel. The answer is the first record whose deviation is
+    within :data:`SETTLING_FACTOR` times the median of the later half's, at most half of the
+    records (0 under three records).
+    """
+    rec = np.asarray(records, dtype=float)
+    n_rec = rec.shape[0]
+    if rec.ndim != 3 or n_rec < 3:
+        return 0
+    mean = np.mean(rec, axis=-1)  # (n_rec, n_ch)
+    rms = np.median(np.sqrt(np.mean(rec**2, axis=-1)), axis=0)  # (n_ch,)
+    d = np.max(np.abs(mean - np.median(mean, axis=0)) / np.maximum(rms, 1e-300), axis=1)
+    floor = float(np.median(d[n_rec // 2:]))
+    steady = np.flatnonzero(d <= SETTLING_FACTOR * floor)
+    return int(min(steady[0] if steady.size else 0, n_rec // 2))

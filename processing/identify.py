@@ -815,10 +815,11 @@ def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]
     location or sensor errors), used when the first leaves no mass line; and notes. When
     the lowest lines are above the threshold (accelerances, falling as the square of the
     frequency under the rigid-body modes, under the noise), the band starts at the first
-    line under it when it holds at least three lines from there and most lines from the
-    lowest one to its top are within it (their error floor, the lower quartile, within the
-    threshold: the lines above the band, where the body flexes, do not count); the raised
-    threshold's band and error floor then start there too."""
+    line under it when it holds at least three lines from there, at least as many as the
+    noisy lines below it (a stretch after a few noisy lines, not a quiet moment in noise),
+    and most lines from the lowest one to its top are within it (their error floor, the
+    lower quartile, within the threshold: the lines above the band, where the body flexes,
+    do not count); the raised threshold's band and error floor then start there too."""
     fmin = float(frf.freq[frf.freq > 0][0]) if np.any(frf.freq > 0) else 0.0
     try:
         rc = rigidity_check(frf, fmin=fmin)
@@ -828,12 +829,14 @@ def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]
     start = fmin  # the lowest line of the band (and of the raised one)
     if rc.band is None and np.any(heard):
         band = rc.band_at(rc.threshold, fmin=float(rc.freq[heard][0]))
-        upto = (rc.freq >= fmin) & (rc.freq <= (band[1] if band is not None else fmin))
-        if (band is not None and np.count_nonzero((rc.freq >= band[0])
-                                                  & (rc.freq <= band[1])) >= 3
-                and np.percentile(rc.worst[upto], 25) <= rc.threshold):
-            rc = dataclasses.replace(rc, band=band)  # a stretch, not a lone quiet line
-            start = band[0]
+        if band is not None:
+            upto = (rc.freq >= fmin) & (rc.freq <= band[1])
+            n_band = int(np.count_nonzero((rc.freq >= band[0]) & (rc.freq <= band[1])))
+            n_noisy = int(np.count_nonzero((rc.freq >= fmin) & (rc.freq < band[0])))
+            if (n_band >= max(3, n_noisy)  # a stretch, not a quiet moment in the noise
+                    and np.percentile(rc.worst[upto], 25) <= rc.threshold):
+                rc = dataclasses.replace(rc, band=band)
+                start = band[0]
     top = float(frf.freq[-1])
 
     def below_top(band: tuple[float, float] | None) -> float | None:

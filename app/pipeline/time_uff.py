@@ -23,7 +23,7 @@ from app.io.uff_time import TimeRun
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
-from processing.excitation import burst_onsets, shaker_signal, steady_periods
+from processing.excitation import burst_onsets, settled_records, shaker_signal, steady_periods
 from processing.impact import (
     MIN_RECORD,
     ImpactDefaults,
@@ -57,14 +57,18 @@ def _apart(onsets: NDArray[np.int64], length: int) -> NDArray[np.int64]:
     return np.asarray(kept, dtype=np.int64)
 
 
-def _record_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra | None]:
+def _record_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra | None, str]:
     """Spectra of whole periods (``s.records == "periodic"``, the first ones skipped until
-    the responses repeat) or of one record from each burst's onset (``"burst"``),
-    ``s.nperseg`` samples each, rectangular window; and each record's spectra (the
-    bootstrap's units, None under :data:`processing.units.MIN_UNITS` records)."""
+    the responses repeat) or of one record from each burst's onset (``"burst"``, the first
+    ones skipped while the responses settle: :func:`processing.excitation.settled_records`),
+    ``s.nperseg`` samples each, rectangular window; each record's spectra (the bootstrap's
+    units, None under :data:`processing.units.MIN_UNITS` records); and a note on the records
+    skipped ("" when none)."""
     L = s.nperseg
     assert L is not None
     n = r.n_samples
+    data = np.vstack([r.force[None], r.responses])
+    note = ""
     if s.records == "periodic":
         skip = steady_periods(r.responses, L)
         starts = np.arange(skip * L, n - L + 1, L)
@@ -73,18 +77,22 @@ def _record_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
         starts = _apart(burst_onsets(r.force, r.fs), L)
         starts = starts[starts + L <= n]
         what = f"burst of {L} samples"
+        skip = settled_records(data[1:, starts[:, None] + np.arange(L)].transpose(1, 0, 2))
+        starts = starts[skip:]
+        if skip:
+            note = (f"the first {skip} burst record{'s' if skip > 1 else ''} left out "
+                    "(responses settling: record mean off the others')")
     if s.averages is not None:
         starts = starts[:s.averages]
     if starts.size == 0:
         raise InputError(f"load case {r.load_case}: no whole {what}: record longer or give "
                          "--nperseg")
-    data = np.vstack([r.force[None], r.responses])
     records = data[:, starts[:, None] + np.arange(L)].transpose(1, 0, 2)
     units = record_units(records, r.fs) if starts.size >= MIN_UNITS else None
-    return record_spectra(records, r.fs), units
+    return record_spectra(records, r.fs), units, note
 
 
-def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra | None]:
+def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra | None, str]:
     if s.records in ("periodic", "burst"):
         return _record_spectra(r, s)
     nperseg = s.nperseg
@@ -99,7 +107,7 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
     n = r.n_samples
     if s.averages is not None:  # the samples of the first N segments
         n = min(n, (s.averages - 1) * (nperseg - noverlap) + nperseg)
-    return welch_units(acc, np.vstack([r.force[None, :n], r.responses[:, :n]]))
+    return (*welch_units(acc, np.vstack([r.force[None, :n], r.responses[:, :n]])), "")
 
 
 #: pre-trigger when none is given, s
@@ -191,15 +199,17 @@ def _impact_column(key: DofKey, members: list[TimeRun], s: Settings,
 def _random_column(key: DofKey, members: list[TimeRun], s: Settings,
                    reports: list[RunReport], levels: dict[int, float]) -> Column | None:
     """The Welch average over one excitation DOF's runs (None when none is usable)."""
-    spectra, units = [], []
+    spectra, units, notes = [], [], []
     for r in members:
         try:
             if not np.any(r.force):
                 raise InputError(f"load case {r.load_case}: the force channel is zero "
                                  "throughout: check the shaker's force channel")
-            sp_r, units_r = _random_spectra(r, s)
+            sp_r, units_r, note = _random_spectra(r, s)
             spectra.append(sp_r)
             units.append(units_r)
+            if note:
+                notes.append(f"load case {r.load_case}: {note}")
         except InputError as err:
             reports.append(RunReport(str(err), skipped=True))
     if not spectra:
@@ -208,7 +218,8 @@ def _random_column(key: DofKey, members: list[TimeRun], s: Settings,
     for other in spectra[1:]:
         sp = combine(sp, other)
     H, coh = frf(sp, s.estimator)
-    reports.append(RunReport(f"excitation node {key[0]}: {sp.n_averages} averages"))
+    reports.append(RunReport(f"excitation node {key[0]}: {sp.n_averages} averages"
+                             + (f" ({'; '.join(notes)})" if notes else "")))
     joined = (UnitSpectra.concat([u for u in units if u is not None])
               if all(u is not None for u in units) else None)
     return H, coh, sp.freq, joined

@@ -11,6 +11,7 @@ from processing.excitation import (
     burst_random,
     continuous_random,
     periodic_chirp,
+    settled_records,
     shaker_signal,
     steady_periods,
 )
@@ -82,3 +83,20 @@ def test_steady_periods_skips_the_transient():
     assert 3 <= k <= 7
     d = np.abs(y_tr[:, k * 512:(k + 1) * 512] - y_tr[:, (k + 1) * 512:(k + 2) * 512]).max()
     assert d < 0.1
+
+
+def test_settled_records_skips_the_records_with_the_sensors_settling() -> None:
+    """Burst records (a burst, then the response dying out) of two channels; an IEPE-like
+    decaying offset from the start of the recording (10 % of the response's peak, 0.4 s) is in the
+    first record only: it is the one left out; without it none is."""
+    rng = np.random.default_rng(4)
+    n_rec, L = 10, 1024
+    t = np.arange(L) / FS
+    burst = rng.normal(size=(n_rec, 2, L)) * (t < 2.4)
+    decay = np.diff(np.exp(-t / 0.3) * np.sin(2 * np.pi * 7 * t), prepend=0.0)  # no DC
+    rec = np.array([[np.convolve(b, decay)[:L] for b in r] for r in burst])
+    assert settled_records(rec) == 0
+    peak = np.max(np.abs(rec))
+    settling = 0.1 * peak * np.exp(-np.arange(n_rec * L) / FS / 0.4).reshape(n_rec, 1, L)
+    assert settled_records(rec + settling) == 1
+    assert settled_records(rec[:2] + settling[:2]) == 0  # too few records to tell

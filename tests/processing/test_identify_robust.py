@@ -158,6 +158,37 @@ def test_rigid_band_past_noisy_lowest_lines_on_a_flexible_body() -> None:
     assert abs(raised - clean_raised) <= 0.05 * clean_raised
 
 
+def test_rigid_band_past_noisy_lowest_lines_on_a_short_rigid_band() -> None:
+    """A body whose rigid band is a small part of the spectrum (elastic above 30 Hz here: the
+    rigidity check's error floor far above its threshold) with noisy lowest lines: the band
+    still starts at the first rigid line and ends where the clean data's does (it used to be
+    left out, and a burst-random test's mass line fell among the elastic lines: 85 % mass
+    error); a quiet moment after more noisy lines than it holds is no rigid band."""
+    import dataclasses
+
+    from processing.identify import _rigid_band_tops
+
+    frf = get_bench("engine").frfset()
+    rng = np.random.default_rng(2)
+    elastic = frf.freq > 30.0
+
+    def noisy(H: np.ndarray, lines: np.ndarray, level: float) -> np.ndarray:
+        H = H.copy()
+        shape = H[..., lines].shape
+        H[..., lines] *= 1 + level * (rng.standard_normal(shape) + 1j * rng.standard_normal(shape))
+        return H
+
+    H = noisy(frf.H, elastic, 1.0)
+    clean_top = _rigid_band_tops(dataclasses.replace(frf, H=H))[0]
+    assert clean_top is not None and 29.0 < clean_top <= 30.0
+    low = np.zeros(frf.freq.size, bool)
+    low[:6] = True
+    top, _, notes = _rigid_band_tops(dataclasses.replace(frf, H=noisy(H, low, 0.5)))
+    assert top == clean_top and not notes
+    low[:150] = True  # noisy up to 18.8 Hz: more lines than the quiet ones after them
+    assert _rigid_band_tops(dataclasses.replace(frf, H=noisy(H, low, 0.5)))[0] is None
+
+
 def test_stiffness_band_when_the_first_line_is_above_the_rigid_modes() -> None:
     """Lines given from above 1.5x the highest rigid-body mode (the lower ones left out):
     the stiffness band runs up to the mass line instead of being empty."""
