@@ -191,8 +191,10 @@ def _checked_geometry(
     return geo, warnings
 
 
-#: noise floor of every FRF value, relative to the FRFs' median RMS over lines
-COHERENCE_NOISE_FLOOR = 1e-3
+#: error floor of every FRF value, relative to the FRFs' median RMS over lines: what the
+#: coherence does not see (the rigid-body model's own errors, body flexibility, sensor
+#: positions: a few %); with the coherence close to 1 the weights stay within its range
+COHERENCE_NOISE_FLOOR = 3e-2
 
 
 def _weighted_accelerances(
@@ -207,8 +209,9 @@ def _weighted_accelerances(
     the inverse variances of its responses (``E^+ H`` when they are equal), and the
     column's weight in the mass-line and stiffness fits is the inverse of X's variance
     (translations plus rotations times ``length^2``), relative to the median column.
-    A noise floor of :data:`COHERENCE_NOISE_FLOOR` times the FRFs' typical RMS is added
-    to every value's variance: with a coherence of 1 everywhere the weights are equal.
+    An error floor of :data:`COHERENCE_NOISE_FLOOR` times the FRFs' typical RMS is added
+    to every value's variance (the model's own errors, which the coherence does not show):
+    with a coherence of 1 everywhere the weights are equal.
     """
     g = np.clip(coherence, 1e-12, 1.0)
     floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(H) ** 2, axis=(0, 1))))
