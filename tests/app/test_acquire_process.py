@@ -48,10 +48,12 @@ def _stop(proc: subprocess.Popen[str]) -> tuple[str, str]:
         return proc.communicate()
 
 
-@pytest.fixture
-def mock_bench(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
+def running_bench(tmp_path: Path, *options: str
+                  ) -> Iterator[tuple[subprocess.Popen[str], Path]]:
+    """``insitu mock-bench OPTIONS --station FILE`` in its own process, until the caller is
+    done with it: the process and its station file (a test failure if it does not start)."""
     station = tmp_path / "bench.toml"
-    proc = subprocess.Popen(_insitu("mock-bench", "--bench", BENCH, "--station", str(station)),
+    proc = subprocess.Popen(_insitu("mock-bench", *options, "--station", str(station)),
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 30.0
@@ -63,6 +65,11 @@ def mock_bench(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
         yield proc, station
     finally:
         _stop(proc)
+
+
+@pytest.fixture
+def mock_bench(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
+    yield from running_bench(tmp_path, "--bench", BENCH)
 
 
 def test_acquire_in_another_process_identifies_the_bench(

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -26,7 +25,7 @@ from app.io.runfile import read_run
 from hardware_mocks.bench_process import MockBench
 from hardware_mocks.benches import get_bench
 from processing.inertia import inertia_properties
-from tests.app.test_acquire_process import _insitu, _stop
+from tests.app.test_acquire_process import _insitu, _stop, running_bench
 
 ROOT = Path(__file__).resolve().parents[2]
 PAIR = ROOT / "docs" / "shaker_pair_plan.toml"
@@ -36,21 +35,8 @@ BENCH = "engine-rigid"
 
 @pytest.fixture
 def pair_bench(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
-    station = tmp_path / "bench.toml"
     fs = load_plan(PAIR).record.fs  # the front end runs at the plan's rate
-    proc = subprocess.Popen(_insitu("mock-bench", "--shakers", "2", "--bench", BENCH,
-                                    "--fe-rate", f"{fs:g}", "--station", str(station)),
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 30.0
-        while not station.exists():
-            if proc.poll() is not None or time.monotonic() > deadline:
-                _, err = _stop(proc)
-                pytest.fail(f"mock-bench did not start (status {proc.returncode}): {err}")
-            time.sleep(0.05)
-        yield proc, station
-    finally:
-        _stop(proc)
+    yield from running_bench(tmp_path, "--shakers", "2", "--bench", BENCH, "--fe-rate", f"{fs:g}")
 
 
 def test_pair_plan_acquired_from_another_process_identifies_the_bench(
