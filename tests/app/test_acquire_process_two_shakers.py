@@ -17,14 +17,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
 
 from app.acquire import load_plan
 from app.cli.main import main
 from app.io.runfile import read_run
 from hardware_mocks.bench_process import MockBench
 from hardware_mocks.benches import get_bench
-from processing.inertia import inertia_properties
+from tests.app.bench_checks import assert_identifies
 from tests.app.test_acquire_process import _insitu, _stop, running_bench
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -69,14 +68,9 @@ def test_pair_plan_acquired_from_another_process_identifies_the_bench(
     assert main(["identify", str(out), "--out", str(result)]) == 0
     res = json.loads(result.read_text())
     model = get_bench(BENCH).model
-    truth = inertia_properties(model.theta)
     # measured: mass -0.005 %, CoG within 0.009 mm, inertia 0.009 % of the largest, K 0.03 %
     # of the largest; the tolerances are the in-process two-shaker test's
-    assert res["mass"] == pytest.approx(truth.mass, rel=0.005)
-    assert_allclose(res["cog"], truth.cog, atol=0.002)
-    assert_allclose(res["inertia_cog"], truth.inertia_cog,
-                    atol=0.01 * np.abs(truth.inertia_cog).max())
-    assert_allclose(res["stiffness"], model.K, atol=0.02 * np.abs(model.K).max())
+    assert_identifies(res, model)
 
     # the operator detached both shakers at the end
     from hardware_mocks.bench_control import BenchControl
