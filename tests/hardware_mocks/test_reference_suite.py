@@ -116,7 +116,10 @@ def test_mass_line_ends_where_the_estimate_is_stable(tmp_path: Path) -> None:
     r = _insitu(_uff(sc, tmp_path))
     assert r is not None
     assert r["bands"]["mass_line"][1] < 0.7 * sc.first_elastic_hz
-    assert "where the estimate is stable" in r["band_choice"]
+    # ended where the halves agree, or (since the rigid band passes over the noisy lowest
+    # lines) already at the rigidity check's limit, under the mode
+    assert ("where the estimate is stable" in r["band_choice"]
+            or "rigidity check's limit" in r["band_choice"]), r["band_choice"]
     e = _errors(sc, r)
     assert all(e[k] <= art[k] for k in art), (e, art)
     assert e["mass"] < 1.0 and e["stiffness"] < 10.0, e  # % (measured 0.04, 5.4)
