@@ -77,18 +77,19 @@ def _record_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
         starts = _apart(burst_onsets(r.force, r.fs), L)
         starts = starts[starts + L <= n]
         what = f"burst of {L} samples"
-        skip = settled_records(data[1:, starts[:, None] + np.arange(L)].transpose(1, 0, 2))
-        starts = starts[skip:]
+    records = data[:, starts[:, None] + np.arange(L)].transpose(1, 0, 2)
+    if s.records != "periodic":
+        skip = settled_records(records[:, 1:])  # the responses of each record
+        records = records[skip:]
         if skip:
             note = (f"the first {skip} burst record{'s' if skip > 1 else ''} left out "
                     "(responses settling: record mean off the others')")
     if s.averages is not None:
-        starts = starts[:s.averages]
-    if starts.size == 0:
+        records = records[:s.averages]
+    if records.shape[0] == 0:
         raise InputError(f"load case {r.load_case}: no whole {what}: record longer or give "
                          "--nperseg")
-    records = data[:, starts[:, None] + np.arange(L)].transpose(1, 0, 2)
-    units = record_units(records, r.fs) if starts.size >= MIN_UNITS else None
+    units = record_units(records, r.fs) if records.shape[0] >= MIN_UNITS else None
     return record_spectra(records, r.fs), units, note
 
 
