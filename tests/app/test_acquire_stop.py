@@ -31,6 +31,11 @@ def _insitu(*args: str) -> list[str]:
     return [sys.executable, "-m", "app.cli.main", *args]
 
 
+#: the acquisition's environment: faulthandler on, so that a hang can be shown (SIGABRT
+#: prints every thread's stack to stderr)
+ENV = {**os.environ, "PYTHONFAULTHANDLER": "1"}
+
+
 def _end(proc: subprocess.Popen[str]) -> None:
     if proc.poll() is None:
         proc.send_signal(signal.SIGTERM)
@@ -70,12 +75,6 @@ def plan(tmp_path: Path) -> Path:
     return out
 
 
-#: why the SIGINT tests are quarantined (they must pass again before issue 14's claims hold)
-QUARANTINE = ("in the whole suite on a fresh clone (2026-11-25, twice) insitu acquire did "
-              "not exit within 5 s of SIGINT (the soak: 120 s); alone, and after each test "
-              "file that runs before it, it passes: under investigation")
-
-
 def _records(path: Path) -> int:
     try:
         return len(read_run(path, with_data=False).records) if path.exists() else 0
@@ -86,15 +85,20 @@ def _records(path: Path) -> int:
 def _interrupt(proc: subprocess.Popen[str], when: float) -> tuple[float, str]:
     """SIGINT; returns the seconds to the exit (fails past BOUND) and stderr."""
     assert proc.poll() is None, proc.communicate()[1]
+    assert not _ignores_sigint(proc.pid), "the acquisition was started with SIGINT ignored"
     proc.send_signal(signal.SIGINT)
     t0 = time.monotonic()
     try:
         _, err = proc.communicate(timeout=BOUND)
     except subprocess.TimeoutExpired:
-        proc.kill()
-        _, err = proc.communicate()
+        proc.send_signal(signal.SIGABRT)  # faulthandler: every thread's stack on stderr
+        try:
+            _, err = proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _, err = proc.communicate()
         pytest.fail(f"insitu acquire did not exit within {BOUND:g} s of SIGINT "
-                    f"({when:.1f} s after it started): {err[-2000:]}")
+                    f"({when:.1f} s after it started); its threads then: {err[-6000:]}")
     return time.monotonic() - t0, err
 
 
@@ -111,14 +115,13 @@ def _check_stopped(path: Path, at_least: int, err: str) -> int:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason=QUARANTINE)
 def test_sigint_while_acquiring(bench: Path, plan: Path, tmp_path: Path) -> None:
     out = tmp_path / "run.h5"
     t_start = time.monotonic()
     proc = subprocess.Popen(_insitu("acquire", "--station", str(bench), "--plan", str(plan),
                                     "--out", str(out), "--mock-operator"),
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, env=ENV)
     try:
         deadline = time.monotonic() + 120.0
         while _records(out) < 3:
@@ -153,14 +156,13 @@ def _grow(path: Path, n: int) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason=QUARANTINE)
 def test_sigint_while_resuming_a_long_run(bench: Path, plan: Path, tmp_path: Path) -> None:
     """A resume reads every stored record back; Ctrl-C then must not wait for the end."""
     out = tmp_path / "run.h5"
     proc = subprocess.Popen(_insitu("acquire", "--station", str(bench), "--plan", str(plan),
                                     "--out", str(out), "--mock-operator"),
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, env=ENV)
     try:
         deadline = time.monotonic() + 120.0
         while _records(out) < 2:
@@ -178,7 +180,7 @@ def test_sigint_while_resuming_a_long_run(bench: Path, plan: Path, tmp_path: Pat
     proc = subprocess.Popen(_insitu("acquire", "--resume", str(out), "--station", str(bench),
                                     "--mock-operator"),
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, env=ENV)
     try:
         # the read-back keeps the run file open (other reads take milliseconds): once it
         # has been open for 0.5 s running, the process is reading the records back
@@ -195,6 +197,14 @@ def test_sigint_while_resuming_a_long_run(bench: Path, plan: Path, tmp_path: Pat
         _end(proc)
     assert _check_stopped(out, n0, err) >= n0
     assert took < BOUND
+
+
+def _ignores_sigint(pid: int) -> bool:
+    """True if process ``pid`` ignores SIGINT (its SigIgn mask in /proc)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigIgn:"):
+            return bool(int(line.split()[1], 16) >> (signal.SIGINT - 1) & 1)
+    return False
 
 
 def _holds(pid: int, path: Path) -> bool:

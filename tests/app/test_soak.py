@@ -9,13 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from tests.app.test_acquire_stop import QUARANTINE
-
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason=QUARANTINE)
 def test_two_minute_soak(tmp_path: Path) -> None:
     out = tmp_path / "soak.json"
     proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "soak.py"), "--minutes",
