@@ -244,6 +244,12 @@ class TestPlan:
         return tuple(tuple(range(i, i + k)) for i in range(0, n, k))
 
     @property
+    def stop_word(self) -> str:
+        """What one of :attr:`drives` is called to the operator: "point" (one force), or
+        "drive" (the points two or more shakers drive together)."""
+        return "point" if self.n_references == 1 else "drive"
+
+    @property
     def exc_nodes(self) -> NDArray[np.int64]:
         return np.array([e.node for e in self.excitations], dtype=np.int64)
 

@@ -59,7 +59,7 @@ class _Bars(Listener):
         self.progress = progress
         self.console = console
         # a stop of the run: a point, or the points two shakers drive together
-        self.points = progress.add_task("points" if plan.n_references == 1 else "drives",
+        self.points = progress.add_task(f"{plan.stop_word}s",
                                         total=len(plan.drives))
         self.hits = progress.add_task("hits at point", total=1)
         self.paused = ""

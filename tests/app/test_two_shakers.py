@@ -75,6 +75,10 @@ def _write_run(path: Path, plan: TestPlan) -> BenchPhysics:
 def test_the_plan_takes_the_excitations_two_at_a_time() -> None:
     plan = _plan()
     assert plan.n_references == 2 and plan.drives == ((0, 1), (2, 3), (4, 5), (6, 7), (8, 9))
+    assert plan.stop_word == "drive"
+    single = plan.to_dict()
+    single["shaker"]["shakers"] = 1
+    assert parse_plan(single).stop_word == "point"
     assert parse_plan(plan.to_dict()).shaker.shakers == 2
     data = plan.to_dict()
     data["excitation"] = data["excitation"][:9]

@@ -210,7 +210,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.hits = []
         self.hits_table.setRowCount(0)
         self.hits_table.setHorizontalHeaderLabels(
-            [self.word, "point" if plan.n_references == 1 else "drive", *_HIT_COLUMNS[2:]])
+            [self.word, plan.stop_word, *_HIT_COLUMNS[2:]])
         w = self.word.capitalize()
         self.accept_button.setText(f"Accept selected {self.word}")
         self.reject_button.setText(f"Reject selected {self.word}")
@@ -220,8 +220,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.clear_button.setToolTip(f"Back to the automatic verdict of the selected {self.word}")
         # the bar counts the run's stops: points, or the pairs two shakers drive together
         self.progress_bar.setRange(0, len(plan.drives))
-        stops = "points" if plan.n_references == 1 else "drives"
-        self.progress_bar.setFormat(f"%v of %m {stops}")
+        self.progress_bar.setFormat(f"%v of %m {plan.stop_word}s")
         self.progress_bar.setValue(0)
         self.progress_label.setText("")
         self.plots.start(self.word, plan.n_references)
@@ -334,7 +333,7 @@ class AcquisitionView(QtWidgets.QWidget):
         w = self.word
         done = "averaged" if w == "block" else "accepted"
         plan = self.plan_view.plan
-        stop = "point" if plan is None or plan.n_references == 1 else "drive"
+        stop = "point" if plan is None else plan.stop_word
         self.progress_label.setText(
             f"{stop} {p.point + 1}: {p.point_accepted} of {p.point_needed} {w}s {done}; "
             f"{p.hits} {w}s in all, {p.accepted} accepted; {p.bad_frames} bad frames; "
