@@ -38,7 +38,14 @@ from processing.identify import Bands, Fit, LineWeights, _iterate, _StiffnessSte
 from processing.inertia import MASS_BASIS, mass_matrix
 from processing.massline import MassLineProblem, stack_real
 from processing.physical import constrain_physical
-from processing.problem import COHERENCE_NOISE_FLOOR, IdentifyOptions, Problem, prepare
+from processing.problem import (
+    TIME_DATA_ERROR_FLOOR,
+    IdentifyOptions,
+    Problem,
+    h1_variances,
+    prepare,
+    typical_rms,
+)
 from processing.results import UNCERTAIN_KEYS
 from processing.spectral import CrossSpectra, frf
 from processing.stiffness import _BLOCKS, _DUP, line_operators
@@ -150,12 +157,10 @@ class Bootstrap:
 
 def _inverse_variances(problem: Problem, H: NDArray[np.complex128],
                        coherence: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Inverse variances (.., n_resp) of H1 values ``|H|^2 (1 - g) / g`` plus the noise floor
-    of :func:`processing.problem.prepare` (its ``_weighted_accelerances``)."""
-    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(problem.H) ** 2,
-                                                              axis=(0, 1))))
-    g = np.clip(coherence, 1e-12, 1.0)
-    return np.asarray(1.0 / (np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300)))
+    """Inverse variances (.., n_resp) of H1 values, with the floors of
+    :func:`processing.problem.prepare` (:func:`processing.problem.h1_variances`)."""
+    return np.asarray(1.0 / h1_variances(H, coherence,
+                                         problem.coherence_floor * typical_rms(problem.H)))
 
 
 def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[np.complex128],
@@ -168,7 +173,7 @@ def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[
     coherence-weighted least squares of :func:`processing.problem.prepare`, or ``E^+``),
     applied to the resample's FRFs; each column's weight on each line follows the
     resample's own coherence: the main fit's weight times the ratio of the summed inverse
-    H1 variances ``1 / (|H|^2 (1 - g) / g + floor^2)`` of its responses (resample over main
+    H1 variances (:func:`processing.problem.h1_variances`) of its responses (resample over main
     fit). Without coherence: ``E^+ H`` and the main fit's weights."""
     n_r, n = problem.E.shape[0], H.shape[-1]
     colw0 = problem.col_weights[:, used]  # (n_e, n_l)
@@ -508,7 +513,7 @@ def bootstrap_identify(frf: FRFSet, options: IdentifyOptions | None = None,
     problem = prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
                       coherence=frf.coherence, options=opt,
                       exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0
-                      else None)
+                      else None, coherence_floor=TIME_DATA_ERROR_FLOOR)
     bands = choose_bands(problem, *tops)
     weights = weigh_lines(problem, bands)
     fitted = fit(problem, bands, weights)

@@ -45,7 +45,13 @@ from processing.inertia import InertiaProperties, inertia_properties, mass_matri
 from processing.massline import MassLineFit, MassLineProblem, stack_real
 from processing.montecarlo import MonteCarloModel, build_model, simulate
 from processing.physical import constrain_physical
-from processing.problem import IdentifyOptions, Problem, prepare
+from processing.problem import (
+    COHERENCE_NOISE_FLOOR,
+    TIME_DATA_ERROR_FLOOR,
+    IdentifyOptions,
+    Problem,
+    prepare,
+)
 from processing.refine import point_offsets
 from processing.results import IdentificationResult, Method, Uncertainty
 from processing.rigidity import rigidity_check
@@ -625,6 +631,38 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
 # --- stage 4: checks -------------------------------------------------------------------------
 
 
+#: the identified mass may differ from the mass line's own reading by at most this factor
+MASS_READING_FACTOR = 3.0
+
+
+def mass_line_reading(problem: Problem, weights: LineWeights) -> float:
+    """The mass the mass line reads by itself, kg: the median over its lines of the mean
+    translational diagonal of the apparent mass ``Re(T X^+)`` (``M - K / w^2`` there)."""
+    sel = weights.mass_lines
+    B = line_operators(problem.X[..., sel], problem.T, problem.w[sel]).B
+    return float(np.median(np.trace(B.real[:, :3, :3], axis1=1, axis2=2) / 3))
+
+
+def refuse_implausible_mass(problem: Problem, bands: Bands, weights: LineWeights,
+                            fitted: Fit) -> None:
+    """Raise :class:`InputError` when the fitted mass cannot be an answer: not finite, not
+    positive, or more than :data:`MASS_READING_FACTOR` times off the mass line's own reading
+    (:func:`mass_line_reading`), as when the fit diverges on a mass line under the
+    rigid-body modes."""
+    mass = float(fitted.theta[0])
+    reading = mass_line_reading(problem, weights)
+    lo, hi = bands.mass_band
+    where = f"mass line {lo:.1f}-{hi:.1f} Hz"
+    if not np.isfinite(mass) or mass <= 0:
+        raise InputError(f"no usable mass: the fit gave {mass:.3g} kg on the {where}; give the "
+                         "bands (--mass-band, --stiffness-band) or check the data")
+    if not reading > 0 or not (1 / MASS_READING_FACTOR <= mass / reading
+                               <= MASS_READING_FACTOR):
+        raise InputError(f"no usable mass: the fit gave {mass:.3g} kg where the {where} reads "
+                         f"{reading:.3g} kg; give the bands (--mass-band, --stiffness-band) "
+                         "or check the data")
+
+
 @dataclass(frozen=True)
 class Checks:
     """What the fitted model says about itself: properties, rigid-body modes (Hz), the fit of
@@ -852,7 +890,8 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
     """Identify the ten inertia parameters and K, C at O from an :class:`FRFSet`.
 
     Uses what the FRF set carries besides H: its coherence (each FRF value weighed by
-    the noise it stands for), the rigidity check of its response nodes
+    the noise it stands for, with the error floor of FRFs estimated from time records when
+    ``meta["time_units"]`` says they were), the rigidity check of its response nodes
     (bounds the automatic mass-line band) and ``meta["exponential_tau"]`` (the
     damping an exponential window added is removed from C).
 
@@ -877,6 +916,8 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
         node_ids=(frf.resp_nodes, frf.exc_nodes),
         time_units=(units.aligned(frf.exc_nodes, frf.exc_dirs)
                     if isinstance(units, TimeUnits) else None),
+        coherence_floor=(TIME_DATA_ERROR_FLOOR if isinstance(units, TimeUnits)
+                         else COHERENCE_NOISE_FLOOR),
     )
     if notes:
         result = dataclasses.replace(result, warnings=(*result.warnings, *notes))
@@ -898,6 +939,7 @@ def identify_arrays(
     rigid_band_fallback: float | None = None,
     node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
     time_units: TimeUnits | None = None,
+    coherence_floor: float | None = None,
 ) -> IdentificationResult:
     """:func:`identify` on plain arrays (shapes as in :class:`FRFSet`).
 
@@ -907,18 +949,28 @@ def identify_arrays(
 
     ``rigid_band_top`` (Hz) bounds the automatic mass-line band, ``rigid_band_fallback``
     (Hz) when the first leaves no mass line; ``exponential_tau`` (s) is the time
-    constant of an exponential window applied to the records.
+    constant of an exponential window applied to the records. ``coherence_floor`` is the
+    floor of every FRF value's error under its coherence, relative to the FRFs' typical RMS
+    (:func:`processing.problem.prepare`); by default :data:`TIME_DATA_ERROR_FLOOR` with
+    ``time_units`` (FRFs estimated here from time records) and
+    :data:`COHERENCE_NOISE_FLOOR` without.
     """
     opt = options or IdentifyOptions()
+    if coherence_floor is None:
+        coherence_floor = (COHERENCE_NOISE_FLOOR if time_units is None
+                           else TIME_DATA_ERROR_FLOOR)
     if opt.refine_points > 0:
         return _refined(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs, coherence, opt,
-                        (rigid_band_top, rigid_band_fallback), exponential_tau)
+                        (rigid_band_top, rigid_band_fallback), exponential_tau,
+                        coherence_floor)
     problem = prepare(freq, H, resp_xyz, resp_dirs, exc_xyz, exc_dirs, coherence=coherence,
-                      options=opt, exponential_tau=exponential_tau)
+                      options=opt, exponential_tau=exponential_tau,
+                      coherence_floor=coherence_floor)
     bands = choose_bands(problem, rigid_band_top, rigid_band_fallback)
     weights = weigh_lines(problem, bands)
     bands, weights = settle_mass_band(problem, bands, weights)
     fitted = fit(problem, bands, weights)
+    refuse_implausible_mass(problem, bands, weights, fitted)
     checks = check(problem, bands, weights, fitted)
     uncertain = (uncertainty(problem, bands, weights, fitted, checks, node_ids, time_units)
                  if opt.uncertainty else None)
@@ -930,6 +982,7 @@ def _refined(
     resp_dirs: NDArray[np.float64], exc_xyz: NDArray[np.float64], exc_dirs: NDArray[np.float64],
     coherence: NDArray[np.float64] | None, opt: IdentifyOptions,
     rigid_tops: tuple[float | None, float | None], exponential_tau: float | None,
+    coherence_floor: float,
 ) -> IdentificationResult:
     """Identification alternated at most ``opt.refine_points`` times with response-point
     refinement on the mass-line lines (:mod:`processing.refine`).
@@ -945,7 +998,8 @@ def _refined(
         return identify_arrays(freq, H, xyz, resp_dirs, exc_xyz, exc_dirs, coherence=coherence,
                                options=once, rigid_band_top=rigid_tops[0],
                                rigid_band_fallback=rigid_tops[1],
-                               exponential_tau=exponential_tau)
+                               exponential_tau=exponential_tau,
+                               coherence_floor=coherence_floor)
 
     xyz0 = np.asarray(resp_xyz, dtype=float)
     result, xyz = identify_at(xyz0), xyz0.copy()

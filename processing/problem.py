@@ -34,6 +34,15 @@ from processing.selection import ElasticPeak, elastic_peaks, reconstruction_erro
 __all__ = ["IdentifyOptions", "Problem", "prepare"]
 
 
+#: noise floor of every FRF value, relative to the FRFs' median RMS over lines, for FRFs
+#: given with their coherence (an analyser's, a file's): the coherence stands for their noise
+COHERENCE_NOISE_FLOOR = 1e-3
+#: error floor of every FRF value, relative to the FRFs' median RMS over lines, for FRFs
+#: estimated here from time records (hits, blocks): their estimation errors (leakage, windows,
+#: responses settling) do not show in the coherence, which stays close to 1 at small values
+TIME_DATA_ERROR_FLOOR = 3e-2
+
+
 @dataclass(frozen=True)
 class IdentifyOptions:
     """Options of :func:`processing.identify.identify`. Bands in Hz; ``None`` chooses them."""
@@ -93,6 +102,8 @@ class Problem:
     row_scale : (6,) scale of the equation rows (1/L on moments, improved method) or None
     exponential_tau : time constant of an exponential window on the records, s, or None
     warnings : messages of the geometry checks
+    coherence_floor : floor of every FRF value's error under the coherence, relative to the
+        FRFs' typical RMS (see :func:`prepare`)
     """
 
     options: IdentifyOptions
@@ -116,6 +127,8 @@ class Problem:
     #: (n_resp, 3), (n_exc, 3) the points as given, m
     resp_xyz: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
     exc_xyz: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    #: floor of every FRF value's error under the coherence, relative to the FRFs' typical RMS
+    coherence_floor: float = COHERENCE_NOISE_FLOOR
 
     @property
     def improved(self) -> bool:
@@ -136,12 +149,15 @@ class Problem:
     @property
     def clean_lines(self) -> NDArray[np.bool_]:
         """(n_f,) lines where T is usable and no column weighs under a tenth of its median
-        over the lines (all lines if under 8): a column weaker everywhere (a point far from
-        the body's centre, a lower force) leaves the lines clean, a column dropping out on
-        some lines (shaker force drop-outs at resonances) does not."""
+        over the lines, nor under a tenth of the median column (all lines if under 8): a
+        column dropping out on some lines (shaker force drop-outs at resonances) makes them
+        unclean. For FRFs estimated here from time records (their error floor,
+        :data:`TIME_DATA_ERROR_FLOOR`) only the first counts: a column weaker everywhere (a
+        point far from the body's centre, a lower force) leaves the lines clean."""
         w = self.col_weights
         own = np.median(w, axis=1, keepdims=True)
-        clean = self.line_ok & np.all(w >= 0.1 * own, axis=0)
+        ref = own if self.coherence_floor >= TIME_DATA_ERROR_FLOOR else np.maximum(own, 1.0)
+        clean = self.line_ok & np.all(w >= 0.1 * ref, axis=0)
         return clean if np.count_nonzero(clean) >= 8 else np.ones(self.freq.size, bool)
 
 
@@ -191,15 +207,22 @@ def _checked_geometry(
     return geo, warnings
 
 
-#: error floor of every FRF value, relative to the FRFs' median RMS over lines: what the
-#: coherence does not see (the rigid-body model's own errors, body flexibility, sensor
-#: positions: a few %); with the coherence close to 1 the weights stay within its range
-COHERENCE_NOISE_FLOOR = 3e-2
+def h1_variances(H: NDArray[np.complex128], coherence: NDArray[np.float64],
+                 floor: float) -> NDArray[np.float64]:
+    """Variance of each H1 value, up to the common factor ``1 / (2 n)`` of ``n`` averages:
+    ``|H|^2 (1 - g) / g`` for coherence ``g``, plus ``floor^2`` (same units as H)."""
+    g = np.clip(coherence, 1e-12, 1.0)
+    return np.asarray(np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300))
+
+
+def typical_rms(H: NDArray[np.complex128]) -> float:
+    """The FRFs' median RMS over lines (same units as H)."""
+    return float(np.median(np.sqrt(np.mean(np.abs(H) ** 2, axis=(0, 1)))))
 
 
 def _weighted_accelerances(
     H: NDArray[np.complex128], E: NDArray[np.float64], coherence: NDArray[np.float64],
-    length: float,
+    length: float, floor: float,
 ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
     """Rigid-body accelerances weighted by each FRF value's noise, and each column's weight.
 
@@ -209,13 +232,10 @@ def _weighted_accelerances(
     the inverse variances of its responses (``E^+ H`` when they are equal), and the
     column's weight in the mass-line and stiffness fits is the inverse of X's variance
     (translations plus rotations times ``length^2``), relative to the median column.
-    An error floor of :data:`COHERENCE_NOISE_FLOOR` times the FRFs' typical RMS is added
-    to every value's variance (the model's own errors, which the coherence does not show):
-    with a coherence of 1 everywhere the weights are equal.
+    A floor of ``floor`` times the FRFs' typical RMS is added to every value's variance
+    (:func:`h1_variances`): with a coherence of 1 everywhere the weights are equal.
     """
-    g = np.clip(coherence, 1e-12, 1.0)
-    floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(H) ** 2, axis=(0, 1))))
-    var = np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300)
+    var = h1_variances(H, coherence, floor * typical_rms(H))
     W = 1.0 / var  # (n_r, n_e, n_f)
     W = W / np.max(W, axis=0, keepdims=True)  # per column: only the ratios matter
     A = np.einsum("ri,ref,rj->efij", E, W, E)  # (n_e, n_f, 6, 6)
@@ -264,8 +284,13 @@ def prepare(
     coherence: NDArray[np.float64] | None,
     options: IdentifyOptions,
     exponential_tau: float | None,
+    coherence_floor: float = COHERENCE_NOISE_FLOOR,
 ) -> Problem:
     """Check the input and build the :class:`Problem` (shapes as in :class:`FRFSet`).
+
+    ``coherence_floor`` is the floor of every FRF value's error under the coherence,
+    relative to the FRFs' typical RMS (:data:`COHERENCE_NOISE_FLOOR` for FRFs given,
+    :data:`TIME_DATA_ERROR_FLOOR` for FRFs estimated here from time records).
 
     Raises
     ------
@@ -284,7 +309,7 @@ def prepare(
     if coherence is None:
         X, colw = X0, np.ones((n_e, freq.size))
     else:
-        X, colw = _weighted_accelerances(H, E, coherence, geo.length)
+        X, colw = _weighted_accelerances(H, E, coherence, geo.length, coherence_floor)
     line_ok = _usable_lines(colw, T, options.max_cond_T, geo.length)
     snr = None if coherence is None else _line_snr(coherence)
     peaks = (elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep, line_snr=snr)
@@ -296,4 +321,5 @@ def prepare(
         row_scale=1.0 / scaling(geo.length) if options.method == "improved" else None,
         exponential_tau=exponential_tau, warnings=tuple(warnings),
         resp_xyz=np.asarray(resp_xyz, float), exc_xyz=np.asarray(exc_xyz, float),
+        coherence_floor=coherence_floor,
     )

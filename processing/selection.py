@@ -70,6 +70,10 @@ def select_lines(rel_err: NDArray[np.float64], in_band: NDArray[np.bool_], level
     return in_band & (rel_err <= level * mean + 1e-300)
 
 
+#: least damping ratio of an elastic-mode fit (its bound); a fit at it is no mode
+MIN_PEAK_DAMPING = 1e-4
+
+
 @dataclass(frozen=True)
 class ElasticPeak:
     """An elastic mode seen in the non-rigid residual: frequency (Hz), damping ratio."""
@@ -104,7 +108,8 @@ def _fit_peak(freq: NDArray[np.float64], R: NDArray[np.complex128], f0: float) -
     best = None
     for z0 in (0.005, 0.02, 0.06):
         sol = scipy.optimize.least_squares(
-            resid, x0=[f0, z0], bounds=([0.8 * f0, 1e-4], [1.2 * f0, 0.3]), x_scale=[f0, 0.01]
+            resid, x0=[f0, z0], bounds=([0.8 * f0, MIN_PEAK_DAMPING], [1.2 * f0, 0.3]),
+            x_scale=[f0, 0.01]
         )
         if best is None or sol.cost < best.cost:
             best = sol
@@ -159,8 +164,10 @@ def elastic_peaks(
     if R.shape[0] > 4:  # the leading left singular vectors, from the Hermitian R R^H
         _ev, U = np.linalg.eigh(R @ R.conj().T)
         R = U[:, ::-1][:, :4].conj().T @ R
+    # at either bound of the damping (0.3, or MIN_PEAK_DAMPING: narrower than the lines
+    # resolve) the residual has no mode's shape there: noise
     fitted = sorted((p for p in (_fit_peak(freq, R, float(freq[i])) for i in idx)
-                     if p.damping < 0.29), key=lambda p: p.frequency)  # 0.3: noise, no mode
+                     if 1.5 * MIN_PEAK_DAMPING < p.damping < 0.29), key=lambda p: p.frequency)
     # two residual peaks of one mode (a dip on its flank) fit to the same mode: keep it once
     unique: list[ElasticPeak] = []
     for p in fitted:

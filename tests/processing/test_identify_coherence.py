@@ -41,9 +41,7 @@ def test_a_noisy_sensor_is_weighted_down(bench_frf) -> None:
     err_plain = abs(plain.properties.mass / m - 1)
     err_weighted = abs(weighted.properties.mass / m - 1)
     # measured over seeds 0-3: 7.6-8.2 % unweighted (noise on X biases the fit), under
-    # 0.004 % weighted; CoG 11-13 mm against under 0.01 mm (0.18 mm on this seed since the
-    # error floor of every value is 3 % of the FRFs' RMS: the noisy channel still weighs
-    # about 400x less than the others)
+    # 0.004 % weighted; CoG 11-13 mm against under 0.01 mm
     assert err_weighted < 1e-3 and err_weighted < 0.01 * err_plain, (err_weighted, err_plain)
     cog = np.linalg.norm(weighted.properties.cog - b.model.cog)
     assert cog < 3e-4 and cog < np.linalg.norm(plain.properties.cog - b.model.cog) / 30
@@ -81,11 +79,12 @@ def test_equal_coherence_is_the_unweighted_fit(bench_frf) -> None:
     np.testing.assert_allclose(same.theta, none.theta, rtol=1e-9)
 
 
-def _problem(frf, coherence: np.ndarray):
-    from processing.problem import prepare
+def _problem(frf, coherence: np.ndarray, floor: float | None = None):
+    from processing.problem import COHERENCE_NOISE_FLOOR, prepare
 
     return prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
-                   coherence=coherence, options=IdentifyOptions(), exponential_tau=None)
+                   coherence=coherence, options=IdentifyOptions(), exponential_tau=None,
+                   coherence_floor=COHERENCE_NOISE_FLOOR if floor is None else floor)
 
 
 def test_stiffness_band_starts_at_the_first_line_over_its_noise() -> None:
@@ -101,20 +100,28 @@ def test_stiffness_band_starts_at_the_first_line_over_its_noise() -> None:
     assert choose_bands(_problem(frf, g)).stiffness_band[0] == frf.freq[k0 + 5]
 
 
-def test_a_column_weaker_everywhere_leaves_the_lines_clean() -> None:
-    """One excitation column a hundred times noisier on every line (a far point, a lower
-    force) leaves the clean lines as they are; another column dropping out on 20 lines
-    (coherence 0.5: a shaker's force at a resonance) makes those lines unclean."""
+def test_a_column_weaker_everywhere_leaves_time_data_lines_clean() -> None:
+    """FRFs estimated from time records (their error floor): one excitation column a
+    hundred times noisier on every line (a far point, a lower force) leaves the clean lines
+    as they are; another column dropping out on 20 lines (coherence 0.5: a shaker's force
+    at a resonance) makes those lines unclean. FRFs given with their coherence: the weak
+    column, under a tenth of the median column's weight, makes the lines unclean."""
+    from processing.problem import TIME_DATA_ERROR_FLOOR
+
     frf = get_bench("engine-rigid").frfset()
     k0 = int(np.searchsorted(frf.freq, 0.0, side="right"))
     g = np.full(frf.H.shape, float(_coherence_for(np.array(0.01))))
     g[:, 5, k0 + 100:k0 + 120] = 0.5
-    clean = _problem(frf, g).clean_lines
-    assert not np.any(clean[100:120]) and np.count_nonzero(clean) > frf.freq.size // 2
-    g[:, 3] = float(_coherence_for(np.array(0.1)))
-    # with the error floor of every value (3 % of the FRFs' RMS) the weak column's weight
-    # still dips at its own resonances: 28 of 1024 lines change (2.7 %); judged against the
-    # median column's weight it left no clean line below 42 Hz on a burst-random test
-    weak = _problem(frf, g).clean_lines
+    for floor in (None, TIME_DATA_ERROR_FLOOR):
+        clean = _problem(frf, g, floor).clean_lines
+        assert not np.any(clean[100:120]) and np.count_nonzero(clean) > frf.freq.size // 2
+    weak_g = g.copy()
+    weak_g[:, 3] = float(_coherence_for(np.array(0.1)))
+    # the weak column's weight still dips at its own resonances: 28 of 1024 lines change
+    # (2.7 %); judged against the median column's weight it left no clean line below 42 Hz
+    # on a burst-random time-data test
+    weak = _problem(frf, weak_g, TIME_DATA_ERROR_FLOOR).clean_lines
     assert np.count_nonzero(weak != clean) <= 0.05 * frf.freq.size
     assert not np.any(weak[100:120]) and np.count_nonzero(weak) > frf.freq.size // 2
+    given = _problem(frf, weak_g).clean_lines
+    assert np.count_nonzero(given) < np.count_nonzero(_problem(frf, g).clean_lines) // 2
