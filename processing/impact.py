@@ -43,6 +43,7 @@ __all__ = [
     "excitation_type",
     "exponential_for",
     "find_triggers",
+    "free_decay",
     "impact_defaults",
     "impact_frfset",
     "merge_results",
@@ -76,6 +77,11 @@ class ImpactSettings:
         Samples after a pulse's end the automatic force window keeps at least (the
         acquisition's anti-alias filter rings after a short pulse; cutting that ringing
         biases the force spectrum, :attr:`ImpactDefaults.ring`).
+    carryover : bool
+        Take the earlier hits' ringing off each record: the responses' free decay on the
+        stretch before the record (from :data:`SAME_HIT` after the previous trigger, at
+        most :data:`CARRY_STRETCH` s) is fitted as a sum of damped sinusoids
+        (:func:`free_decay`) and its continuation subtracted from the record's responses.
     double_hit_ratio : float
         A second rise above this fraction of the peak force is a double hit.
     clip_samples : int
@@ -91,6 +97,7 @@ class ImpactSettings:
     double_hit_ratio: float = 0.1
     clip_samples: int = 3
     ring: int = 0
+    carryover: bool = False
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.level) or self.level == 0:
@@ -288,6 +295,8 @@ def process_impacts(
     x, names, full_scale = _checked_input(data, fs, force_channel, channel_names, ranges,
                                           max_averages)
     hits = _Hits.find(x, fs, settings, force_channel, full_scale)
+    if settings.carryover:
+        _remove_carryover(x, hits, fs, settings, force_channel)
     verdicts, accepted = _verdicts(hits, names, fs, force_accept, max_averages)
     for v in verdicts:
         if v.reason:
@@ -307,6 +316,77 @@ def process_impacts(
     units = record_units(rec, fs, windows, force_channel) if keep_units else None
     return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta,
                         units)
+
+
+#: longest stretch before a record fitted by :func:`free_decay`, s
+CARRY_STRETCH = 1.5
+#: shortest such stretch, s (shorter: the record is used as it is)
+CARRY_MIN = 0.25
+#: order of the linear prediction of :func:`free_decay` (at most a quarter of the stretch)
+CARRY_ORDER = 60
+#: a singular value of the prediction's normalised data matrix counts as signal above this
+#: many times the square root of its rows (the singular values of unit white noise)
+CARRY_RANK = 2.0
+
+
+def free_decay(seg: NDArray[np.float64], n_out: int, sigma: NDArray[np.float64],
+               order: int = CARRY_ORDER) -> NDArray[np.float64]:
+    """The continuation over ``n_out`` samples of a free decay ``seg`` (n_ch, n_s).
+
+    The channels of a structure ringing freely share their poles: each channel, over its
+    noise ``sigma`` (n_ch,), is predicted from its previous ``order`` samples by one set of
+    coefficients for all channels (least squares, truncated to the singular values above
+    :data:`CARRY_RANK` times the unit noise's: Kumaresan-Tufts); the roots of the
+    prediction polynomial are the poles (those outside the unit circle brought onto it: a
+    free decay does not grow), each channel's complex amplitudes are fitted to its samples,
+    and the sum of damped sinusoids continued after ``seg``'s last sample. Zeros when
+    nothing stands out of the noise.
+
+    >>> t = np.arange(600) / 100.0
+    >>> x = np.exp(-0.3 * t) * np.cos(2 * np.pi * 3.0 * t)
+    >>> future = free_decay(x[None, :400], 200, np.array([1e-3]))
+    >>> bool(np.allclose(future[0], x[400:], atol=1e-6))
+    True
+    """
+    y = np.asarray(seg, dtype=float) / np.maximum(sigma, 1e-300)[:, None]
+    n_ch, n_s = y.shape
+    r = int(min(order, n_s // 4))
+    if r < 2:
+        return np.zeros((n_ch, n_out))
+    w = np.lib.stride_tricks.sliding_window_view(y, r + 1, axis=-1)
+    A = w[..., :r][..., ::-1].reshape(-1, r)  # column i: the sample i + 1 before
+    b = w[..., r].reshape(-1)
+    s2, V = np.linalg.eigh(A.T @ A)  # the squared singular values and right vectors of A
+    keep = s2 > CARRY_RANK**2 * A.shape[0]
+    if not keep.any():
+        return np.zeros((n_ch, n_out))
+    Vk = V[:, keep]
+    a = Vk @ ((Vk.T @ (A.T @ b)) / s2[keep])
+    z = np.roots(np.r_[1.0, -a])
+    z = np.where(np.abs(z) > 1, z / np.abs(z), z)
+    amp = np.linalg.lstsq(z[None, :] ** np.arange(n_s)[:, None], y.T.astype(complex),
+                          rcond=None)[0]
+    out = np.real((z[None, :] ** np.arange(n_s, n_s + n_out)[:, None]) @ amp).T
+    return np.asarray(out * np.maximum(sigma, 1e-300)[:, None], dtype=np.float64)
+
+
+def _remove_carryover(x: NDArray[Any], hits: _Hits, fs: float, settings: ImpactSettings,
+                      force_channel: int) -> None:
+    """Each complete record's responses (``hits.rec``, changed in place) less the
+    continuation of the free decay on the stretch before it (:attr:`ImpactSettings.carryover`);
+    a record with a stretch under :data:`CARRY_MIN` s is left as it is."""
+    resp = np.arange(x.shape[0]) != force_channel
+    sigma = noise_sigma(x[resp])
+    guard, longest = round(SAME_HIT * fs), round(CARRY_STRETCH * fs)
+    k = 0
+    for i in range(hits.triggers.size):  # few hits, one fit each
+        if not hits.complete[i]:
+            continue
+        b = int(hits.starts[i])
+        a = max(0, b - longest, int(hits.triggers[i - 1]) + guard if i else 0)
+        if b - a >= CARRY_MIN * fs:
+            hits.rec[k, resp] -= free_decay(x[resp, a:b], settings.record_length, sigma)
+        k += 1
 
 
 def _without_force_offset(rec: NDArray[np.float64], force_channel: int) -> NDArray[np.float64]:
@@ -599,6 +679,9 @@ class ImpactDefaults:
         noise standard deviations (about its local baseline) before the pulse's first sample
         above the trigger level and after its end: the acquisition's anti-alias filter
         rings on both sides of a pulse a few samples long (:func:`ringing`)
+    carryover : median over the impacts followed by another of the responses' ringing just
+        before the next impact (the last 50 ms block envelope, block mean removed, of the
+        channel that rings most) over that channel's noise standard deviation (0: one impact)
     """
 
     level: float
@@ -612,6 +695,7 @@ class ImpactDefaults:
     ratio: float = float(np.exp(1.0))
     ring_before: int = 0
     ring_after: int = 0
+    carryover: float = 0.0
 
 
 #: shortest default record, s (lines 0.5 Hz apart: a mount mode of a few Hz needs lines below it)
@@ -746,7 +830,7 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
     B = max(8, round(0.05 * fs))
     thr = 3 * np.maximum(noise_sigma(x), 1e-300)
     ends = np.r_[starts[1:] - round(SAME_HIT * fs), n]  # clear of the next impact's rise
-    decays, ratios = [], []
+    decays, ratios, carry = [], [], []
     for s0, s1 in zip(starts.tolist(), ends.tolist(), strict=True):  # few impacts
         nb = (s1 - s0) // B
         if nb < 4:
@@ -756,6 +840,8 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
         d, r = _decay_time(env, thr, B / fs)
         decays.append(d)
         ratios.append(r)
+        if s1 < n:  # another impact follows
+            carry.append(float(np.max(env[:, -1] / (thr / 3))))
     decay = float(np.median(decays)) if decays else (n - starts[-1]) / fs
     ratio = float(np.median(ratios)) if ratios else np.e
     limit = (n - starts[-1]) / fs + pretrigger if spacing is None else 0.95 * spacing
@@ -765,4 +851,5 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
     return ImpactDefaults(level=base + level, noise=sigma, n_hits=int(starts.size),
                           spacing=spacing, pulse_width=width, decay=decay, record=float(record),
                           exp_tau=exponential_for(record, pretrigger, decay, ratio), ratio=ratio,
-                          ring_before=before, ring_after=after)
+                          ring_before=before, ring_after=after,
+                          carryover=float(np.median(carry)) if carry else 0.0)

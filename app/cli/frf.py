@@ -83,6 +83,10 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
     p.add_argument("--exp-tau", type=float,
                    help="impact: exponential window time constant, s (default: chosen when "
                         "the responses have not decayed by the end of the record; 0: none)")
+    p.add_argument("--carryover", choices=("on", "off"),
+                   help="impact: take the earlier hits' ringing off each record (its free "
+                        "decay fitted before the record, continued and subtracted; default: "
+                        "on when the responses still ring above their noise at the next hit)")
     p.add_argument("--coherence", type=float, default=0.8, help="coherence gate threshold")
     p.add_argument("--fmax", type=float,
                    help="highest line kept, Hz (default fs / 2.56, the anti-alias filters' "
@@ -99,7 +103,9 @@ def settings_from(args: argparse.Namespace, **kwargs: Any) -> Settings:
     return Settings(excitation=args.excitation, estimator=args.estimator, nperseg=args.nperseg,
                     overlap=args.overlap, window=args.window, averages=args.averages,
                     level=args.level, record=args.record, pretrigger=args.pretrigger,
-                    exp_tau=args.exp_tau, ring=args.ring, coherence=args.coherence,
+                    exp_tau=args.exp_tau, ring=args.ring,
+                    carryover=None if args.carryover is None else args.carryover == "on",
+                    coherence=args.coherence,
                     fmax=args.fmax, **kwargs)
 
 

@@ -34,7 +34,8 @@ class Settings:
     ----------
     excitation : time records: ``"random"`` (shaker, Welch) or ``"impact"`` (hammer hits); None
         reads it from the data (an impulsive force is a hammer test; a hammer option given,
-        ``level``, ``record``, ``pretrigger``, ``exp_tau`` or ``ring``, means one)
+        ``level``, ``record``, ``pretrigger``, ``exp_tau``, ``ring`` or ``carryover``,
+        means one)
     estimator : FRF estimator (``"H1"``, ``"H2"``, ...: :data:`processing.spectral.ESTIMATORS`)
     nperseg : random: samples per segment (line spacing fs / nperseg); None: from the data
         (see ``records``), 2048 for Welch segments
@@ -56,6 +57,10 @@ class Settings:
         (None: 0, one pulse width)
     exp_tau : impact: exponential window time constant, s (None: chosen when the responses
         have not decayed by the end of the record; 0: no exponential window)
+    carryover : impact: take the earlier hits' free decay off each record
+        (:attr:`processing.impact.ImpactSettings.carryover`); None: when the responses still
+        ring above their noise when the next hit comes
+        (:data:`app.pipeline.time_uff.CARRY_GATE`)
     coherence : coherence gate threshold of the checks reported
     fmax : highest line kept, Hz, for FRFs computed from time data (None: fs / 2.56)
     run_points : run files: ``"all"`` (every point needs a used hit or block, else the file
@@ -78,6 +83,7 @@ class Settings:
     pretrigger: float | None = None
     exp_tau: float | None = None
     ring: int | None = None
+    carryover: bool | None = None
     coherence: float = 0.8
     fmax: float | None = None
     run_points: Literal["all", "usable"] = "all"
@@ -145,7 +151,7 @@ class Settings:
     def hammer_given(self) -> bool:
         """A hammer option was given (trigger level, record, pre-trigger, exponential window)."""
         return any(v is not None for v in (self.level, self.record, self.pretrigger,
-                                           self.exp_tau, self.ring))
+                                           self.exp_tau, self.ring, self.carryover))
 
 
 @dataclass(frozen=True)

@@ -111,6 +111,11 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
     return (*welch_units(acc, np.vstack([r.force[None, :n], r.responses[:, :n]])), "")
 
 
+#: the earlier hits' ringing is taken off each record by default when the responses ring at
+#: least this many times their noise just before the next hit (median over the runs of
+#: :attr:`processing.impact.ImpactDefaults.carryover`)
+CARRY_GATE = 3.0
+
 #: pre-trigger when none is given, s
 PRETRIGGER = 0.01
 
@@ -132,7 +137,7 @@ def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
         level=level, record_length=round(s.record * r.fs),
         pretrigger=round(s.pretrigger * r.fs),
         slope="rising" if level > 0 else "falling", exp_tau=s.exp_tau or None,
-        ring=s.ring or 0,
+        ring=s.ring or 0, carryover=bool(s.carryover),
     )
     names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
     res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
@@ -315,8 +320,9 @@ def _resolve(runs: list[TimeRun], s: Settings,
             continue  # reported by the run's processing
     levels = {lc: d.level for lc, d in found.items()}
     if not found:
-        return dataclasses.replace(s, pretrigger=pre, record=s.record or 1.0,
-                                   exp_tau=s.exp_tau or 0.0), levels, lines
+        return (dataclasses.replace(s, pretrigger=pre, record=s.record or 1.0,
+                                    exp_tau=s.exp_tau or 0.0, carryover=bool(s.carryover)),
+                levels, lines)
     d = list(found.values())
     ringing = int(np.median([x.ring_after for x in d]))
     ring = s.ring or 0
@@ -342,8 +348,17 @@ def _resolve(runs: list[TimeRun], s: Settings,
         f"force window: each pulse's end plus the larger of its width ({width}) and {ring} "
         f"samples (--force-ring; the force rings above its noise {ringing} samples after a "
         "pulse), then a half-cosine as long; the force's median over each record taken off"))
+    carry = float(np.median([x.carryover for x in d]))
+    carryover = s.carryover if s.carryover is not None else carry >= CARRY_GATE
+    if s.carryover is None:
+        lines.append(RunReport(
+            f"earlier hits' ringing: {carry:.2g} x the responses' noise just before the next "
+            + ("hit (median): each record's responses less the free decay fitted before it "
+               "(--carryover off to change)" if carryover else
+               f"hit (median, under {CARRY_GATE:g}): records used as they are (--carryover on "
+               "to change)")))
     return dataclasses.replace(s, pretrigger=pre, record=record, exp_tau=tau or 0.0,
-                               ring=ring), levels, lines
+                               ring=ring, carryover=carryover), levels, lines
 
 
 def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:

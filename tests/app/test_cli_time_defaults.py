@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from app.cli.main import main
+from app.io.uff import read_frf_uff
 from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
 from hardware_mocks.reference.timedata import (
     HammerSpec,
@@ -85,6 +86,38 @@ def test_force_ring_printed_and_given(
     assert main(["frf", str(src), "--force-ring", "-1", "--out", str(tmp_path / "c.uff")]) == 2
     assert "--force-ring must be a whole number of samples, at least 0" in \
         capsys.readouterr().err
+
+
+@cache
+def _light_hammer() -> TimeTest:
+    """Mounts damped 0.2x: each hit still rings when the next comes, 3 s later."""
+    sc = build_scenario(ScenarioSpec(seed=2, n_forces=9, n_sensors=4, elastic_ratio=None))
+    return hammer_test(sc, HammerSpec(seed=2, hits=4, spacing=3.0, damping=0.2))
+
+
+def test_carryover_read_from_the_data_and_given(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The earlier hits' ringing at the next hit is printed; a light damping turns the
+    correction on by default, a well-damped test leaves the records as they are;
+    --carryover on/off overrides (and means a hammer test)."""
+    src, light = tmp_path / "time.uff", tmp_path / "light.uff"
+    write_uff(_hammer(2), src)
+    write_uff(_light_hammer(), light)
+    assert main(["frf", str(src), "--out", str(tmp_path / "a.uff")]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines()
+                if ln.startswith("earlier hits' ringing: "))
+    assert "records used as they are (--carryover on to change)" in line
+    assert main(["frf", str(light), "--out", str(tmp_path / "b.uff")]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines()
+                if ln.startswith("earlier hits' ringing: "))
+    assert float(line.split()[3]) >= 3
+    assert "less the free decay fitted before it (--carryover off to change)" in line
+    assert main(["frf", str(light), "--carryover", "off", "--out", str(tmp_path / "c.uff")]) == 0
+    text = capsys.readouterr().out
+    assert "excitation impact (a hammer option is given" in text
+    assert "earlier hits' ringing" not in text
+    on, off = (read_frf_uff(tmp_path / f) for f in ("b.uff", "c.uff"))
+    assert not np.allclose(on.H, off.H)
 
 
 def test_shaker_data_is_processed_as_random(tmp_path: Path,
