@@ -201,27 +201,35 @@ def _weighted_accelerances(
     H: NDArray[np.complex128], E: NDArray[np.float64], coherence: NDArray[np.float64],
     length: float,
 ) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
-    """Rigid-body accelerances ``X = E^+ H`` and each column's weight from its noise.
+    """Rigid-body accelerances weighted by each FRF value's noise, and each column's weight.
 
     An H1 estimate's variance is ``|H|^2 (1 - g) / (2 n g)`` for coherence ``g`` over
     ``n`` averages (Bendat & Piersol); ``n`` is common to all values and drops out of
-    the weights. Per excitation column and line, the column's weight in the mass-line and
-    stiffness fits is the inverse of X's variance (translations plus rotations times
-    ``length^2``), relative to the median column. An error floor of
-    :data:`COHERENCE_NOISE_FLOOR` times the FRFs' typical RMS is added to every value's
-    variance (the model's own errors, which the coherence does not show): with a coherence
-    of 1 everywhere the weights are equal. The responses of a column are not weighted
-    against each other: the FRFs hold more than the rigid-body model (body flexibility,
-    sensor positions), and a projection weighted by the coherence moves X by that model
-    error, line by line as the coherence varies (on hammer tests, CoG and stiffness several
-    times further off than with the plain projection the exact FRFs get).
+    the weights. Per excitation column and line, ``X = (E' W E)^-1 E' W H`` with ``W``
+    the inverse variances of its responses (``E^+ H`` when they are equal), and the
+    column's weight in the mass-line and stiffness fits is the inverse of X's variance
+    (translations plus rotations times ``length^2``), relative to the median column.
+    An error floor of :data:`COHERENCE_NOISE_FLOOR` times the FRFs' typical RMS is added
+    to every value's variance (the model's own errors, which the coherence does not show):
+    with a coherence of 1 everywhere the weights are equal. Each FRF's noise variance is its
+    median over the lines: a coherence over a few averages (a hammer test's five hits)
+    scatters from line to line by more than the noise does, and weights that follow it
+    move X line by line by the FRFs' departure from the rigid-body model (body
+    flexibility, sensor positions); a channel noisy throughout still weighs less.
     """
     g = np.clip(coherence, 1e-12, 1.0)
     floor = COHERENCE_NOISE_FLOOR * np.median(np.sqrt(np.mean(np.abs(H) ** 2, axis=(0, 1))))
-    var = np.abs(H) ** 2 * (1.0 - g) / g + max(float(floor) ** 2, 1e-300)
-    Ep = np.linalg.pinv(E)
-    X = np.einsum("ir,ref->ief", Ep, H)
-    dvar = np.einsum("ir,ref->efi", Ep**2, var)  # variance of X, responses independent
+    noise = np.median(np.abs(H) ** 2 * (1.0 - g) / g, axis=-1, keepdims=True)
+    var = np.broadcast_to(noise + max(float(floor) ** 2, 1e-300), H.shape)
+    W = 1.0 / var  # (n_r, n_e, n_f)
+    W = W / np.max(W, axis=0, keepdims=True)  # per column: only the ratios matter
+    A = np.einsum("ri,ref,rj->efij", E, W, E)  # (n_e, n_f, 6, 6)
+    b = np.einsum("ri,ref->efi", E, W * H)  # (n_e, n_f, 6) complex
+    Ainv = np.linalg.inv(A)
+    X = np.einsum("efij,efj->ief", Ainv, b)
+    # variance of X (up to the common factor): diag of (E' V^-1 E)^-1 in absolute units
+    scale = np.max(1.0 / var, axis=0)  # undo the per-column normalisation of W
+    dvar = np.diagonal(Ainv, axis1=-2, axis2=-1) / scale[..., None]  # (n_e, n_f, 6)
     v = dvar[..., :3].sum(-1) + length**2 * dvar[..., 3:].sum(-1)
     return X, np.median(v) / v
 
