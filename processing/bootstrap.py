@@ -170,7 +170,8 @@ def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[
     resamples' FRFs ``H`` and coherence (n_e, n_l, n_resp, n) on the lines ``used``.
 
     X is the main fit's map from each column's responses to its accelerances at O (the
-    coherence-weighted least squares of :func:`processing.problem.prepare`, or ``E^+``),
+    least squares of :func:`processing.problem.prepare` weighted by each FRF's median
+    variance over the lines, or ``E^+``),
     applied to the resample's FRFs; each column's weight on each line follows the
     resample's own coherence: the main fit's weight times the ratio of the summed inverse
     H1 variances (:func:`processing.problem.h1_variances`) of its responses (resample over main
@@ -183,7 +184,11 @@ def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[
     else:
         H0 = np.moveaxis(problem.H[..., used], 0, -1)  # (n_e, n_l, n_r)
         W0 = _inverse_variances(problem, H0, np.moveaxis(problem.coherence[..., used], 0, -1))
-        Wn = W0 / np.max(W0, axis=-1, keepdims=True)
+        # the main fit's responses weighed by each FRF's median variance over all lines
+        Wm = 1.0 / np.median(1.0 / _inverse_variances(problem, problem.H, problem.coherence),
+                             axis=-1).T  # (n_e, n_r)
+        Wn = np.broadcast_to((Wm / np.max(Wm, axis=-1, keepdims=True))[:, None, :],
+                             W0.shape)
         A = np.einsum("ri,elr,rj->elij", problem.E, Wn, problem.E)
         op = np.linalg.solve(A, np.einsum("ri,elr->elir", problem.E, Wn))  # (e, l, 6, r)
         Wb = _inverse_variances(problem, H, coherence).sum(axis=2)  # (e, l, n)

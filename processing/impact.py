@@ -47,6 +47,7 @@ __all__ = [
     "impact_defaults",
     "impact_frfset",
     "merge_results",
+    "pretrigger_for",
     "process_impacts",
 ]
 
@@ -669,8 +670,8 @@ class ImpactDefaults:
     pulse_width : median pulse width (first above 10 % of the peak to back below 5 %), s
     decay : median over impacts of the time their slowest response channel takes to fall
         under three times its noise (extrapolated exponentially past the next impact), s
-    record : record length, s: the decay plus the pre-trigger (at least :data:`MIN_RECORD`),
-        at most 95 % of the spacing (one impact: what follows it)
+    record : record length, s: :data:`TAIL_FACTOR` times the decay plus the pre-trigger (at
+        least :data:`MIN_RECORD`), at most 95 % of the spacing (one impact: what follows it)
     exp_tau : exponential window time constant, s, when the responses have not decayed by
         the end of the record (it takes them down to their noise by then,
         :func:`exponential_for`); None otherwise
@@ -700,6 +701,12 @@ class ImpactDefaults:
 
 #: shortest default record, s (lines 0.5 Hz apart: a mount mode of a few Hz needs lines below it)
 MIN_RECORD = 2.0
+#: the default record holds this many times the responses' decay to three noise standard
+#: deviations: a mount mode's tail under the broadband noise still stands out of the noise on
+#: its own lines (a tail cut there biases the lowest lines by tens of %), so it is followed
+#: as far again (as far under the noise as the response started above it, for a
+#: start-to-noise ratio of about 10)
+TAIL_FACTOR = 2.0
 
 
 def exponential_for(record: float, pretrigger: float, decay: float, ratio: float,
@@ -741,6 +748,31 @@ def ringing(g: NDArray[np.float64], starts: NDArray[np.int64], sigma: float,
     last = np.where(np.any(post, axis=-1), seg.shape[-1] - 1 - np.argmax(post[:, ::-1], axis=-1),
                     fall - 1)
     return int(np.median(c - first)), int(np.median(last + 1 - fall))
+
+
+#: shortest default pre-trigger, s
+MIN_PRETRIGGER = 0.01
+#: the default pre-trigger holds this many times the samples the force rings above its
+#: noise before a pulse (the filter's ringing goes on under the noise)
+PRE_RING_FACTOR = 2
+
+
+def pretrigger_for(ring_before: int, fs: float) -> float:
+    """Pre-trigger, s, that holds the anti-alias filter's ringing before a pulse: twice the
+    samples ``ring_before`` the force stands above its noise before the pulse
+    (:func:`ringing`; the ringing goes on under the noise), at least
+    :data:`MIN_PRETRIGGER`. A record that starts inside that ringing cuts it from the force
+    and the responses alike, and H1 is biased wherever the accelerance is small.
+
+    >>> pretrigger_for(7, 256.0)
+    0.0546875
+    >>> pretrigger_for(1, 256.0)
+    0.01
+    """
+    if not fs > 0 or ring_before < 0:
+        raise InputError(f"pretrigger_for needs fs > 0 and ring_before >= 0, got {fs}, "
+                         f"{ring_before}")
+    return float(max(MIN_PRETRIGGER, PRE_RING_FACTOR * ring_before / fs))
 
 
 def _impacts(g: NDArray[np.float64], level: float, fs: float) -> NDArray[np.int64]:
@@ -845,7 +877,7 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
     decay = float(np.median(decays)) if decays else (n - starts[-1]) / fs
     ratio = float(np.median(ratios)) if ratios else np.e
     limit = (n - starts[-1]) / fs + pretrigger if spacing is None else 0.95 * spacing
-    want = np.ceil(max(decay + pretrigger, MIN_RECORD) * 100) / 100
+    want = np.ceil(max(TAIL_FACTOR * decay + pretrigger, MIN_RECORD) * 100) / 100
     record = max(min(want, np.floor(limit * 100) / 100), 8 / fs, 2 * pretrigger)
     before, after = ringing(g, starts, sigma)
     return ImpactDefaults(level=base + level, noise=sigma, n_hits=int(starts.size),

@@ -228,23 +228,27 @@ def _weighted_accelerances(
 
     An H1 estimate's variance is ``|H|^2 (1 - g) / (2 n g)`` for coherence ``g`` over
     ``n`` averages (Bendat & Piersol); ``n`` is common to all values and drops out of
-    the weights. Per excitation column and line, ``X = (E' W E)^-1 E' W H`` with ``W``
-    the inverse variances of its responses (``E^+ H`` when they are equal), and the
+    the weights. Per excitation column, ``X = (E' W E)^-1 E' W H`` with ``W`` the inverse
+    variances of its responses (``E^+ H`` when they are equal), and the
     column's weight in the mass-line and stiffness fits is the inverse of X's variance
     (translations plus rotations times ``length^2``), relative to the median column.
-    A floor of ``floor`` times the FRFs' typical RMS is added to every value's variance
-    (:func:`h1_variances`): with a coherence of 1 everywhere the weights are equal.
+    An error floor of ``floor`` times the FRFs' typical RMS is added to every value's
+    variance (:func:`h1_variances`; the model's own errors, which the coherence does not
+    show): with a coherence of 1 everywhere the weights are equal. The responses of a column
+    are weighed against each other by each FRF's median variance over the lines, the same on
+    every line: a coherence over a few averages (a hammer test's five hits) scatters from
+    line to line by more than the noise does, and a projection that follows it moves X line
+    by line by the FRFs' departure from the rigid-body model (body flexibility, sensor
+    positions); a channel noisy throughout still weighs less. The column weights follow
+    each line's variance (a force dropping out at a resonance).
     """
     var = h1_variances(H, coherence, floor * typical_rms(H))
-    W = 1.0 / var  # (n_r, n_e, n_f)
+    W = 1.0 / np.median(var, axis=-1)  # (n_r, n_e): each FRF's typical variance
     W = W / np.max(W, axis=0, keepdims=True)  # per column: only the ratios matter
-    A = np.einsum("ri,ref,rj->efij", E, W, E)  # (n_e, n_f, 6, 6)
-    b = np.einsum("ri,ref->efi", E, W * H)  # (n_e, n_f, 6) complex
-    Ainv = np.linalg.inv(A)
-    X = np.einsum("efij,efj->ief", Ainv, b)
-    # variance of X (up to the common factor): diag of (E' V^-1 E)^-1 in absolute units
-    scale = np.max(1.0 / var, axis=0)  # undo the per-column normalisation of W
-    dvar = np.diagonal(Ainv, axis1=-2, axis2=-1) / scale[..., None]  # (n_e, n_f, 6)
+    A = np.einsum("ri,re,rj->eij", E, W, E)  # (n_e, 6, 6)
+    P = np.einsum("eij,rj,re->eir", np.linalg.inv(A), E, W)  # (n_e, 6, n_r): X = P H
+    X = np.einsum("eir,ref->ief", P, H)
+    dvar = np.einsum("eir,ref->efi", P**2, var)  # X's variance on each line, (n_e, n_f, 6)
     v = dvar[..., :3].sum(-1) + length**2 * dvar[..., 3:].sum(-1)
     return X, np.median(v) / v
 

@@ -25,7 +25,9 @@ from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
 from processing.excitation import burst_onsets, settled_records, shaker_signal, steady_periods
 from processing.impact import (
+    MIN_PRETRIGGER,
     MIN_RECORD,
+    TAIL_FACTOR,
     ImpactDefaults,
     ImpactResult,
     ImpactSettings,
@@ -33,6 +35,7 @@ from processing.impact import (
     exponential_for,
     impact_defaults,
     merge_results,
+    pretrigger_for,
     process_impacts,
 )
 from processing.spectral import CrossSpectra, SpectralAccumulator, combine, frf, record_spectra
@@ -116,8 +119,8 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
 #: :attr:`processing.impact.ImpactDefaults.carryover`)
 CARRY_GATE = 3.0
 
-#: pre-trigger when none is given, s
-PRETRIGGER = 0.01
+#: shortest pre-trigger when none is given, s (:func:`processing.impact.pretrigger_for`)
+PRETRIGGER = MIN_PRETRIGGER
 
 
 def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
@@ -294,13 +297,27 @@ def _shaker(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]
 
 
 def _record(d: list[ImpactDefaults], decay: float, pre: float) -> float:
-    """Record length, s, for every run: the runs' median decay plus the pre-trigger (at least
+    """Record length, s, for every run: twice the runs' median decay
+    (:data:`processing.impact.TAIL_FACTOR`) plus the pre-trigger (at least
     :data:`processing.impact.MIN_RECORD`), as far as the closest hits of any run allow (95 %
     of their spacing), and never shorter than the shortest run's own choice."""
-    want = np.ceil(max(decay + pre, MIN_RECORD) * 100) / 100
+    want = np.ceil(max(TAIL_FACTOR * decay + pre, MIN_RECORD) * 100) / 100
     limit = min(x.record if x.spacing is None else np.floor(0.95 * x.spacing * 100) / 100
                 for x in d)
     return float(max(min(want, limit), min(x.record for x in d)))
+
+
+def _impact_defaults(runs: list[TimeRun], pre: float) -> dict[int, ImpactDefaults]:
+    """Each run's defaults read from its data (:func:`processing.impact.impact_defaults`) for
+    a pre-trigger of ``pre`` s, by load case; a run without an impact is left out (its
+    processing reports it)."""
+    found: dict[int, ImpactDefaults] = {}
+    for r in runs:
+        try:
+            found[r.load_case] = impact_defaults(r.force, r.responses, r.fs, pre)
+        except InputError:
+            continue
+    return found
 
 
 def _resolve(runs: list[TimeRun], s: Settings,
@@ -312,12 +329,15 @@ def _resolve(runs: list[TimeRun], s: Settings,
         s, more = _shaker(runs, s)
         return s, {}, lines + more
     pre = s.pretrigger if s.pretrigger is not None else PRETRIGGER
-    found: dict[int, ImpactDefaults] = {}
-    for r in runs:
-        try:
-            found[r.load_case] = impact_defaults(r.force, r.responses, r.fs, pre)
-        except InputError:
-            continue  # reported by the run's processing
+    found = _impact_defaults(runs, pre)
+    if s.pretrigger is None and found:  # hold the force's ringing before a pulse
+        before = max(x.ring_before for x in found.values())
+        chosen = pretrigger_for(before, runs[0].fs)
+        if chosen != pre:
+            pre, found = chosen, _impact_defaults(runs, chosen)
+        lines.append(RunReport(
+            f"pre-trigger {pre:.3g} s (the force rings above its noise up to {before} samples "
+            f"before a pulse: twice that, at least {PRETRIGGER:g} s; --pretrigger to change)"))
     levels = {lc: d.level for lc, d in found.items()}
     if not found:
         return (dataclasses.replace(s, pretrigger=pre, record=s.record or 1.0,
