@@ -184,11 +184,16 @@ def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[
     else:
         H0 = np.moveaxis(problem.H[..., used], 0, -1)  # (n_e, n_l, n_r)
         W0 = _inverse_variances(problem, H0, np.moveaxis(problem.coherence[..., used], 0, -1))
-        # the main fit's responses weighed by each FRF's median variance over all lines
-        Wm = 1.0 / np.median(1.0 / _inverse_variances(problem, problem.H, problem.coherence),
-                             axis=-1).T  # (n_e, n_r)
-        Wn = np.broadcast_to((Wm / np.max(Wm, axis=-1, keepdims=True))[:, None, :],
-                             W0.shape)
+        if problem.coherence_floor >= TIME_DATA_ERROR_FLOOR:
+            # time-data FRFs: the main fit's responses weighed by each FRF's median
+            # variance over all lines
+            Wm = 1.0 / np.median(
+                1.0 / _inverse_variances(problem, problem.H, problem.coherence),
+                axis=-1).T  # (n_e, n_r)
+            Wn = np.broadcast_to((Wm / np.max(Wm, axis=-1, keepdims=True))[:, None, :],
+                                 W0.shape)
+        else:  # FRFs given: line by line
+            Wn = W0 / np.max(W0, axis=-1, keepdims=True)
         A = np.einsum("ri,elr,rj->elij", problem.E, Wn, problem.E)
         op = np.linalg.solve(A, np.einsum("ri,elr->elir", problem.E, Wn))  # (e, l, 6, r)
         Wb = _inverse_variances(problem, H, coherence).sum(axis=2)  # (e, l, n)

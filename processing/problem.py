@@ -234,21 +234,24 @@ def _weighted_accelerances(
     (translations plus rotations times ``length^2``), relative to the median column.
     An error floor of ``floor`` times the FRFs' typical RMS is added to every value's
     variance (:func:`h1_variances`; the model's own errors, which the coherence does not
-    show): with a coherence of 1 everywhere the weights are equal. The responses of a column
-    are weighed against each other by each FRF's median variance over the lines, the same on
+    show): with a coherence of 1 everywhere the weights are equal. FRFs estimated here from
+    time records (``floor`` at least :data:`TIME_DATA_ERROR_FLOOR`) have their responses
+    weighed against each other by each FRF's median variance over the lines, the same on
     every line: a coherence over a few averages (a hammer test's five hits) scatters from
     line to line by more than the noise does, and a projection that follows it moves X line
     by line by the FRFs' departure from the rigid-body model (body flexibility, sensor
-    positions); a channel noisy throughout still weighs less. The column weights follow
-    each line's variance (a force dropping out at a resonance).
+    positions); a channel noisy throughout still weighs less. FRFs given with their
+    coherence are weighed line by line (their coherence stands for their noise). The column
+    weights follow each line's variance (a force dropping out at a resonance).
     """
-    var = h1_variances(H, coherence, floor * typical_rms(H))
-    W = 1.0 / np.median(var, axis=-1)  # (n_r, n_e): each FRF's typical variance
+    var = h1_variances(H, coherence, floor * typical_rms(H))  # (n_r, n_e, n_f)
+    typical = np.median(var, axis=-1, keepdims=True) if floor >= TIME_DATA_ERROR_FLOOR else var
+    W = np.broadcast_to(1.0 / typical, var.shape)
     W = W / np.max(W, axis=0, keepdims=True)  # per column: only the ratios matter
-    A = np.einsum("ri,re,rj->eij", E, W, E)  # (n_e, 6, 6)
-    P = np.einsum("eij,rj,re->eir", np.linalg.inv(A), E, W)  # (n_e, 6, n_r): X = P H
-    X = np.einsum("eir,ref->ief", P, H)
-    dvar = np.einsum("eir,ref->efi", P**2, var)  # X's variance on each line, (n_e, n_f, 6)
+    A = np.einsum("ri,ref,rj->efij", E, W, E)  # (n_e, n_f, 6, 6)
+    P = np.einsum("efij,rj,ref->efir", np.linalg.inv(A), E, W)  # X = P H, (n_e, n_f, 6, n_r)
+    X = np.einsum("efir,ref->ief", P, H)
+    dvar = np.einsum("efir,ref->efi", P**2, var)  # X's variance on each line, (n_e, n_f, 6)
     v = dvar[..., :3].sum(-1) + length**2 * dvar[..., 3:].sum(-1)
     return X, np.median(v) / v
 
