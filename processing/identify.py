@@ -886,12 +886,25 @@ def _rigid_band_tops(frf: FRFSet) -> tuple[float | None, float | None, list[str]
     return below_top(rc.band), below_top(raised) if raised != rc.band else None, notes
 
 
+#: ``FRFSet.meta`` key: True on FRFs estimated here from time records (a run's hits or
+#: blocks, a time UFF), kept where the FRFs are stored with their meta (run and FRF files)
+FROM_TIME_RECORDS = "from_time_records"
+
+
+def estimated_here(frf: FRFSet) -> bool:
+    """True if ``frf`` was estimated here from time records (``meta["time_units"]`` or
+    :data:`FROM_TIME_RECORDS`): its coherence comes from a few averages, and the
+    estimation's own errors (leakage, windows, settling) are not in it."""
+    meta = frf.meta or {}
+    return isinstance(meta.get("time_units"), TimeUnits) or bool(meta.get(FROM_TIME_RECORDS))
+
+
 def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
     """Identify the ten inertia parameters and K, C at O from an :class:`FRFSet`.
 
     Uses what the FRF set carries besides H: its coherence (each FRF value weighed by
     the noise it stands for, with the error floor of FRFs estimated from time records when
-    ``meta["time_units"]`` says they were), the rigidity check of its response nodes
+    :func:`estimated_here` says they were), the rigidity check of its response nodes
     (bounds the automatic mass-line band) and ``meta["exponential_tau"]`` (the
     damping an exponential window added is removed from C).
 
@@ -916,8 +929,7 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
         node_ids=(frf.resp_nodes, frf.exc_nodes),
         time_units=(units.aligned(frf.exc_nodes, frf.exc_dirs)
                     if isinstance(units, TimeUnits) else None),
-        coherence_floor=(TIME_DATA_ERROR_FLOOR if isinstance(units, TimeUnits)
-                         else COHERENCE_NOISE_FLOOR),
+        coherence_floor=(TIME_DATA_ERROR_FLOOR if estimated_here(frf) else COHERENCE_NOISE_FLOOR),
     )
     if notes:
         result = dataclasses.replace(result, warnings=(*result.warnings, *notes))

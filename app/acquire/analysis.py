@@ -18,7 +18,7 @@ from app.acquire.blocks import BlockAnalysis, RecordLoader, shaker_frfset
 from app.acquire.plan import RecordSettings, TestPlan
 from app.io.runfile import RunData
 from processing.data import FRFSet, Geometry, InputError
-from processing.identify import IdentificationResult, IdentifyOptions, identify
+from processing.identify import FROM_TIME_RECORDS, IdentificationResult, IdentifyOptions, identify
 from processing.impact import (
     ImpactResult,
     ImpactSettings,
@@ -76,7 +76,9 @@ def frfset(plan: TestPlan, points: Sequence[ImpactResult], geometry: Geometry,
 def identify_frfs(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
     """The identification of a run's FRFs, on the lines above 0 Hz and up to fs / 2.56
     (above it the front ends' anti-alias filters shape the data)."""
-    return identify(frf.select_lines(frf.anti_alias_fmax()), options or IdentifyOptions())
+    lines = frf.select_lines(frf.anti_alias_fmax())
+    lines.meta[FROM_TIME_RECORDS] = True  # a run's hits or blocks
+    return identify(lines, options or IdentifyOptions())
 
 
 class PointColumn(Protocol):

@@ -16,6 +16,7 @@ from app.io.runfile import RunData, read_run
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings
 from processing.data import FRFSet
+from processing.identify import FROM_TIME_RECORDS
 from processing.impact import ImpactResult, impact_frfset
 
 __all__ = ["open_run_file"]
@@ -44,7 +45,8 @@ def open_run_file(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
         whole, ana = run_frfs(run)
         whole.meta["time_units"] = run_units(ana)  # per hit or block: the bootstrap
     out = whole.select_lines(whole.anti_alias_fmax())
-    out.meta.update({"file": Path(path).name, "run_state": run.state})
+    out.meta.update({"file": Path(path).name, "run_state": run.state,
+                     FROM_TIME_RECORDS: True})
     if run.mounts is not None:
         out.meta["mounts"] = run.mounts
     return out, []

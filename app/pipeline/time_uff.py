@@ -24,6 +24,7 @@ from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
 from processing.excitation import burst_onsets, settled_records, shaker_signal, steady_periods
+from processing.identify import FROM_TIME_RECORDS
 from processing.impact import (
     MIN_PRETRIGGER,
     MIN_RECORD,
@@ -422,6 +423,7 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
                    first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),
                    np.array([k[1] for k in keys]), geometry, meta,
                    s.fmax if s.fmax is not None else first.fs / 2.56, reports)
+    out.meta[FROM_TIME_RECORDS] = True  # kept in FRF files (the per-unit spectra are not)
     if all(cols[k][3] is not None for k in keys):  # per-unit spectra: the bootstrap
         out.meta["time_units"] = TimeUnits(
             "hit" if s.excitation == "impact" else "block",
