@@ -49,6 +49,7 @@ __all__ = [
     "merge_results",
     "pretrigger_for",
     "process_impacts",
+    "wanted_record",
 ]
 
 log = logging.getLogger(__name__)
@@ -709,6 +710,13 @@ MIN_RECORD = 2.0
 TAIL_FACTOR = 2.0
 
 
+def wanted_record(decay: float, pretrigger: float) -> float:
+    """The record a decay of ``decay`` s asks for, s: :data:`TAIL_FACTOR` times it plus the
+    pre-trigger, at least :data:`MIN_RECORD`, up to the next 10 ms (before any cap by the
+    hit spacing)."""
+    return float(np.ceil(max(TAIL_FACTOR * decay + pretrigger, MIN_RECORD) * 100) / 100)
+
+
 def exponential_for(record: float, pretrigger: float, decay: float, ratio: float,
                     ) -> float | None:
     """Exponential window time constant (s) that brings responses decaying in ``decay`` s
@@ -877,7 +885,7 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
     decay = float(np.median(decays)) if decays else (n - starts[-1]) / fs
     ratio = float(np.median(ratios)) if ratios else np.e
     limit = (n - starts[-1]) / fs + pretrigger if spacing is None else 0.95 * spacing
-    want = np.ceil(max(TAIL_FACTOR * decay + pretrigger, MIN_RECORD) * 100) / 100
+    want = wanted_record(decay, pretrigger)
     record = max(min(want, np.floor(limit * 100) / 100), 8 / fs, 2 * pretrigger)
     before, after = ringing(g, starts, sigma)
     return ImpactDefaults(level=base + level, noise=sigma, n_hits=int(starts.size),

@@ -27,8 +27,6 @@ from processing.excitation import burst_onsets, settled_records, shaker_signal, 
 from processing.identify import FROM_TIME_RECORDS
 from processing.impact import (
     MIN_PRETRIGGER,
-    MIN_RECORD,
-    TAIL_FACTOR,
     ImpactDefaults,
     ImpactResult,
     ImpactSettings,
@@ -38,6 +36,7 @@ from processing.impact import (
     merge_results,
     pretrigger_for,
     process_impacts,
+    wanted_record,
 )
 from processing.spectral import CrossSpectra, SpectralAccumulator, combine, frf, record_spectra
 from processing.units import MIN_UNITS, TimeUnits, UnitSpectra, record_units, welch_units
@@ -302,7 +301,7 @@ def _record(d: list[ImpactDefaults], decay: float, pre: float) -> float:
     (:data:`processing.impact.TAIL_FACTOR`) plus the pre-trigger (at least
     :data:`processing.impact.MIN_RECORD`), as far as the closest hits of any run allow (95 %
     of their spacing), and never shorter than the shortest run's own choice."""
-    want = np.ceil(max(TAIL_FACTOR * decay + pre, MIN_RECORD) * 100) / 100
+    want = wanted_record(decay, pre)
     limit = min(x.record if x.spacing is None else np.floor(0.95 * x.spacing * 100) / 100
                 for x in d)
     return float(max(min(want, limit), min(x.record for x in d)))
