@@ -287,7 +287,7 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
     a, T, opt = problem.window_decay, problem.T, problem.options
     MB = MASS_BASIS[None]  # (1, 10, 6, 6), symmetric
     zero, zl = np.zeros((n, 6, 6)), np.zeros((n, 10, 6, 6))
-    if a or not problem.improved:
+    if not problem.improved:
         B = _line_inverses(Xs, T)
         if a:  # P_j = -s_j^2 (M - B_j); C: least squares of Im P = w C; K = mean Re P - a C
             sq = (1j * w + a) ** 2
@@ -303,16 +303,19 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
         K0 = -np.mean((w**2)[:, None, None] * B.real, axis=1)
         C0 = -np.mean(w[:, None, None] * B.imag, axis=1)
         return (K0, C0, zero), (np.broadcast_to(np.mean(w**2) * MB, zl.shape), zl, zl)
-    # improved: the direct fit from 6x6 moments (processing.stiffness.fit_stiffness)
+    # improved: the direct fit from 6x6 moments (processing.stiffness.fit_stiffness, with
+    # an exponential window's decay a: K + a C for K and -s^2 for w^2 on the right)
     # moments sum wt w^p conj(x) x^T (and t^T) as sums over lines of per-line 6x6 sums
     Cw = np.conj(Xs) * ws_.transpose(0, 2, 1)[:, :, None, :]
     Z = Cw @ np.swapaxes(Xs, -1, -2)  # (n, n_l, 6, 6)
     R = Cw @ T.T  # (n, n_l, 6, 6)
     powers = np.stack([w**p for p in range(4)], axis=1) + 0j  # (n_l, 4)
     Gs = (Z.reshape(n, -1, 36).transpose(0, 2, 1) @ powers).reshape(n, 6, 6, 4)
-    Qs = (R.reshape(n, -1, 36).transpose(0, 2, 1) @ powers[:, 2:]).reshape(n, 6, 6, 2)
+    Qs = (R.reshape(n, -1, 36).transpose(0, 2, 1) @ powers).reshape(n, 6, 6, 4)
     G = [Gs[..., p] for p in range(4)]
-    Q2, Q3 = Qs[..., 0], Qs[..., 1]
+    # sum wt w^q conj(x) (-s^2) x^T and .. t^T, q = 0, 1 (-s^2 = w^2 without a window)
+    A0, A1 = (G[q + 2] - a**2 * G[q] - 2j * a * G[q + 1] for q in (0, 1))
+    Q2, Q3 = (Qs[..., q + 2] - a**2 * Qs[..., q] - 2j * a * Qs[..., q + 1] for q in (0, 1))
     s2 = (np.ones(6) if problem.row_scale is None
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
     G0r, G0i, G1r, G1i = G[0].real, G[0].imag, G[1].real, G[1].imag
@@ -334,7 +337,7 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
 
     # the value at M = 0 and the change per parameter: eleven right-hand sides at once
     r = np.concatenate([rhs(-Q2, -Q3)[:, None],
-                        rhs(G[2][:, None] @ (MB + 0j), G[3][:, None] @ (MB + 0j))], axis=1)
+                        rhs(A0[:, None] @ (MB + 0j), A1[:, None] @ (MB + 0j))], axis=1)
     if opt.symmetric:
         dup = np.kron(np.eye(k), _DUP)
         v = np.linalg.solve(dup.T @ Nfull @ dup, dup.T @ np.swapaxes(r, 1, 2))
@@ -346,7 +349,9 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
     for j, b in enumerate(blocks):
         const[b] = v0[:, 36 * j:36 * (j + 1)].reshape(n, 6, 6)
         lin[b] = vl[..., 36 * j:36 * (j + 1)].reshape(n, 10, 6, 6)
-    return (const[0], const[1], const[2]), (lin[0], lin[1], lin[2])
+    # the fit's K is K + a C with a window
+    return ((const[0] - a * const[1], const[1], const[2]),
+            (lin[0] - a * lin[1], lin[1], lin[2]))
 
 
 def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,

@@ -325,6 +325,10 @@ class _StiffnessStep:
         """K, C, D (6, 6) for mass matrix M on the (leakage-cleaned) stiffness lines Xs."""
         p, opt, w = self.problem, self.problem.options, self.w
         a = p.window_decay
+        if a and p.improved:  # moments reused while the same Xs is passed
+            sf = fit_stiffness(self.moments(Xs), p.T, w, M, row_scale=p.row_scale,
+                               symmetric=opt.symmetric, decay=a)
+            return sf.K, sf.C, sf.D
         if a:
             s = 1j * w + a
             P = -(s**2 / w**2)[:, None, None] * dynamic_stiffness(Xs, p.T, w, M)

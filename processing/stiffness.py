@@ -157,6 +157,8 @@ class StiffnessMoments:
     G1: NDArray[np.complex128]
     G2: NDArray[np.complex128]
     G3: NDArray[np.complex128]
+    Q0: NDArray[np.complexfloating]
+    Q1: NDArray[np.complexfloating]
     Q2: NDArray[np.complexfloating]
     Q3: NDArray[np.complexfloating]
     n_equations: int
@@ -200,14 +202,13 @@ def stiffness_moments(
     Xf = X.reshape(6, -1)
     wl = np.broadcast_to(w, (n_e, n_l)).ravel()
     Tf = np.broadcast_to(T[:, :, None], X.shape).reshape(6, -1)
-    Xw = np.conj(Xf) * wt.ravel()
-    G = []
+    Xw = np.conj(Xf) * wt.ravel() + 0j
+    G, Q = [], []
     for _ in range(4):  # powers 0..3 of w
         G.append(Xw @ Xf.T)
+        Q.append(Xw @ Tf.T)
         Xw = Xw * wl
-    Xw2 = np.conj(Xf) * (wt.ravel() * wl**2) + 0j
-    return StiffnessMoments(G[0], G[1], G[2], G[3], Xw2 @ Tf.T, (Xw2 * wl) @ Tf.T,
-                            2 * 6 * n_e * n_l)
+    return StiffnessMoments(G[0], G[1], G[2], G[3], Q[0], Q[1], Q[2], Q[3], 2 * 6 * n_e * n_l)
 
 
 def fit_stiffness(
@@ -220,8 +221,15 @@ def fit_stiffness(
     row_scale: NDArray[np.float64] | None = None,
     symmetric: bool = True,
     model: DampingModel = "viscous",
+    decay: float = 0.0,
 ) -> StiffnessFit:
     """Real K, C (, D) with ``(K + j w C + j D) X_j = w_j^2 (M X_j - T)`` over the lines given.
+
+    With an exponential window of decay rate ``a`` (``decay``, 1/s) on the records, X is
+    the accelerance at ``s = j w + a`` and the equations are ``(K + a C + j w C) X_j =
+    -s_j^2 (M X_j - T)``: the same least squares with ``K + a C`` for K and the right-hand
+    side's factor ``-s^2 = w^2 - a^2 - 2 j a w`` for ``w^2`` (viscous model only; the
+    window's correction holds for damping analytic in s).
 
     Parameters
     ----------
@@ -235,10 +243,17 @@ def fit_stiffness(
     symmetric : fit symmetric K and C (21 + 21 unknowns) instead of general 36 + 36
     model : the damping terms fitted (:data:`DAMPING_MODELS`): viscous C (default),
         structural D, or both; the absent one is returned as zeros
+    decay : decay rate of an exponential window on the records, 1/s (0: none)
     """
+    if decay and model != "viscous":
+        raise ValueError(f"an exponential window's correction needs viscous damping, not {model}")
     mom = X if isinstance(X, StiffnessMoments) else stiffness_moments(X, T, w, weights)
-    R0 = mom.G2 @ M.T - mom.Q2  # (a, i)
-    R1 = mom.G3 @ M.T - mom.Q3
+    a = decay
+    # sum wt w^q conj(x) (-s^2) (M x - t)^T with -s^2 = w^2 - a^2 - 2 j a w (q = 0, 1)
+    G = (mom.G0, mom.G1, mom.G2, mom.G3)
+    Q = (mom.Q0, mom.Q1, mom.Q2, mom.Q3)
+    R0, R1 = ((G[q + 2] - a**2 * G[q] - 2j * a * G[q + 1]) @ M.T
+              - (Q[q + 2] - a**2 * Q[q] - 2j * a * Q[q + 1]) for q in (0, 1))
     s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
     rhs = (R0.real, R1.imag, R0.imag)  # right-hand sides of K, C, D: Re of conj(regressor) y
     r = np.concatenate([(rhs[b] * s2[None, :]).T.ravel() for b in _BLOCKS[model]])
@@ -246,7 +261,8 @@ def fit_stiffness(
     parts = [np.zeros((6, 6))] * 3
     for k, b in enumerate(_BLOCKS[model]):
         parts[b] = v[36 * k:36 * (k + 1)].reshape(6, 6)
-    return StiffnessFit(parts[0], parts[1], mom.n_equations, parts[2], model)
+    K = parts[0] - a * parts[1]  # the fit's K is K + a C with a window
+    return StiffnessFit(K, parts[1], mom.n_equations, parts[2], model)
 
 
 def stiffness_residual(
