@@ -184,7 +184,7 @@ def weighted_accelerances(problem: Problem, used: NDArray[np.bool_], H: NDArray[
     else:
         H0 = np.moveaxis(problem.H[..., used], 0, -1)  # (n_e, n_l, n_r)
         W0 = _inverse_variances(problem, H0, np.moveaxis(problem.coherence[..., used], 0, -1))
-        if problem.coherence_floor >= TIME_DATA_ERROR_FLOOR:
+        if problem.from_time_records:
             # time-data FRFs: the main fit's responses weighed by each FRF's median
             # variance over all lines
             Wm = 1.0 / np.median(

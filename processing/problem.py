@@ -136,6 +136,11 @@ class Problem:
         return self.options.method == "improved"
 
     @property
+    def from_time_records(self) -> bool:
+        """True for FRFs estimated here from time records (:func:`time_records_floor`)."""
+        return time_records_floor(self.coherence_floor)
+
+    @property
     def window_decay(self) -> float:
         """Decay rate ``a = 1 / tau`` of the exponential window, 1/s (0 without one)."""
         return 1.0 / self.exponential_tau if self.exponential_tau else 0.0
@@ -156,9 +161,16 @@ class Problem:
         point far from the body's centre, a lower force) leaves the lines clean."""
         w = self.col_weights
         own = np.median(w, axis=1, keepdims=True)
-        ref = own if self.coherence_floor >= TIME_DATA_ERROR_FLOOR else np.maximum(own, 1.0)
+        ref = own if self.from_time_records else np.maximum(own, 1.0)
         clean = self.line_ok & np.all(w >= 0.1 * ref, axis=0)
         return clean if np.count_nonzero(clean) >= 8 else np.ones(self.freq.size, bool)
+
+
+def time_records_floor(floor: float) -> bool:
+    """True when a coherence error floor is that of FRFs estimated here from time records
+    (at least :data:`TIME_DATA_ERROR_FLOOR`): they are weighed by each FRF's median
+    variance and their clean lines follow each column's own median only."""
+    return floor >= TIME_DATA_ERROR_FLOOR
 
 
 def _line_snr(coherence: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -245,7 +257,7 @@ def _weighted_accelerances(
     weights follow each line's variance (a force dropping out at a resonance).
     """
     var = h1_variances(H, coherence, floor * typical_rms(H))  # (n_r, n_e, n_f)
-    typical = np.median(var, axis=-1, keepdims=True) if floor >= TIME_DATA_ERROR_FLOOR else var
+    typical = np.median(var, axis=-1, keepdims=True) if time_records_floor(floor) else var
     W = np.broadcast_to(1.0 / typical, var.shape)
     W = W / np.max(W, axis=0, keepdims=True)  # per column: only the ratios matter
     A = np.einsum("ri,ref,rj->efij", E, W, E)  # (n_e, n_f, 6, 6)
