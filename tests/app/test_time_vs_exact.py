@@ -3,8 +3,10 @@ scenario (a fast subset of ``benchmarks/timedata.py``): a hammer test and a peri
 shaker test of the reference model, each identified from its UFF time records by
 ``insitu identify`` and from its exact accelerances on the same lines.
 
-Measured: hammer case 7 (time / exact) mass 0.22 / 0.32 %, CoG 1.42 / 1.03 mm, inertia
-1.89 / 2.02 %, K 3.6 / 3.8 %; shaker case 2 (periodic chirp) mass 4.0 / 1.7 %, CoG 24.6 /
+Measured: hammer case 7 (time / exact) mass 0.33 / 0.31 %, CoG 1.17 / 0.99 mm, inertia
+1.73 / 1.92 %, K 3.5 / 3.7 %; hammer case 15 (lightly damped: an exponential window,
+tau 2.2 s) mass 0.094 / 0.13 %, CoG 0.40 / 0.28 mm, inertia 0.63 / 0.82 %, K 2.7 / 2.9 %
+(K 6.6 % while the windowed stiffness step was eq. 14's line-by-line mean); shaker case 2 (periodic chirp) mass 4.0 / 1.7 %, CoG 24.6 /
 19.3 mm, inertia 14.7 / 10.8 %, K 10.5 / 7.7 % (its mass over the 1.5x: a strict xfail
 while issue 13 is open; 1.55 % before this session's band and weighting changes). Before
 the defaults read the shaker's records from the force and the rigid band could start past
@@ -24,6 +26,7 @@ SLACK = {"mass": 0.1, "cog": 0.5, "inertia": 0.5, "stiffness": 1.0}
 
 @pytest.mark.parametrize(("case", "kind"), [
     (7, "hammer"),
+    (15, "hammer"),
     pytest.param(2, "shaker", marks=pytest.mark.xfail(
         strict=True, reason="periodic chirp case 2: mass 4.0 % against 1.7 % from the exact "
         "FRFs (2.4x; the suite's shaker median is 1.0x, p95 1.15x)")),
