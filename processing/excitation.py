@@ -29,8 +29,11 @@ import numpy as np
 import scipy.signal
 from numpy.typing import NDArray
 
-__all__ = ["ShakerSignal", "burst_onsets", "burst_random", "continuous_random", "periodic_chirp",
-           "settled_records", "shaker_signal", "steady_periods"]
+from processing.decay import CARRY_MIN, CARRY_STRETCH, free_decay, noise_sigma
+
+__all__ = ["ShakerSignal", "burst_onsets", "burst_random", "burst_records", "burst_ringing",
+           "continuous_random", "periodic_chirp", "settled_records", "shaker_signal",
+           "steady_periods"]
 
 
 def _check(fs: float, band: tuple[float, float] | None) -> None:
@@ -155,6 +158,8 @@ MIN_PERIOD = 0.05
 QUIET_FRACTION = 0.1
 #: burst onsets this close to their median spacing (relative) make a regular burst train
 BURST_REGULARITY = 0.05
+#: the loud blocks of a burst train repeat: their autocorrelation reaches this at the period
+BURST_CORRELATION = 0.5
 
 
 @dataclass(frozen=True)
@@ -189,15 +194,92 @@ def _blocks(x: NDArray[np.float64], fs: float) -> tuple[int, NDArray[np.bool_]]:
     return b, np.asarray(filled)
 
 
-def burst_onsets(force: NDArray[np.float64], fs: float) -> NDArray[np.int64]:
-    """First sample of each burst of a burst-random force (N), in order: the start of each
-    loud stretch (10 ms blocks) that follows a quiet one."""
-    x = np.asarray(force, dtype=float).ravel()
-    b, loud = _blocks(x - np.median(x), fs)
+def _rises(x: NDArray[np.float64], fs: float) -> tuple[int, NDArray[np.bool_],
+                                                    NDArray[np.int64]]:
+    """Block length, loud blocks (:func:`_blocks`) and the first block of each loud stretch
+    that follows a quiet one (block 0 when the recording starts loud)."""
+    b, loud = _blocks(x, fs)
     rise = np.flatnonzero(loud[1:] & ~loud[:-1]) + 1
     if loud.size and loud[0]:
         rise = np.r_[0, rise]
-    return np.asarray(rise * b, dtype=np.int64)
+    return b, loud, np.asarray(rise, dtype=np.int64)
+
+
+def _burst_period(loud: NDArray[np.bool_]) -> int | None:
+    """Blocks from one burst to the next: the shortest lag within 20 % of the highest peak
+    of the loud blocks' autocorrelation (about their mean, unbiased), from 2 blocks to a
+    third of the recording (three bursts at least); None when it shows no repetition (a
+    peak under :data:`BURST_CORRELATION`)."""
+    m = loud.astype(float) - loud.mean()
+    n = m.size
+    hi = n // 3
+    if hi < 4 or not np.any(m):
+        return None
+    r = np.fft.irfft(np.abs(np.fft.rfft(m, 2 * n)) ** 2, 2 * n)[:hi] / (n - np.arange(hi))
+    rho = r / r[0]
+    peak = np.flatnonzero((rho[2:-1] >= rho[1:-2]) & (rho[2:-1] >= rho[3:])) + 2
+    if peak.size == 0 or rho[peak].max() < BURST_CORRELATION:
+        return None
+    # every multiple of the period peaks as high, give or take the estimate's scatter
+    return int(peak[rho[peak] >= 0.8 * rho[peak].max()][0])
+
+
+def _burst_train(x: NDArray[np.float64], fs: float
+                 ) -> tuple[NDArray[np.int64], int, int] | None:
+    """The bursts' onsets (samples) on one regular grid, how many loud stretches start on
+    it and how many grid points lie within the recording; None when the loud blocks do not
+    repeat (:func:`_burst_period`) or fewer than three stretches start on any grid.
+
+    The grid is the one through the most stretch starts (within :data:`BURST_REGULARITY`
+    of the period), fitted to them by least squares (the period need not be a whole
+    number of blocks); a burst whose start the ringing before it hides is still on it."""
+    b, loud, rise = _rises(x, fs)
+    period = _burst_period(loud)
+    if period is None or rise.size < 3:
+        return None
+    r = rise * b
+    P0 = float(period * b)
+    u = (r[None, :] - r[:, None]) / P0  # periods from each start to every other
+    near = np.abs(u - np.round(u)) <= BURST_REGULARITY
+    best = int(np.argmax(near.sum(axis=1)))
+    on_grid = near[best]
+    if on_grid.sum() < 3:
+        return None
+    k = np.round(u[best, on_grid])
+    period_s, first = np.polyfit(k, r[on_grid], 1)
+    # the earliest grid point in the data (one a few blocks before its start: at 0)
+    first -= np.floor((first + BURST_REGULARITY * period_s) / period_s) * period_s
+    onsets = np.round(first + period_s * np.arange(int((x.size - first) // period_s) + 1))
+    onsets = np.clip(onsets[onsets < x.size], 0, None).astype(np.int64)
+    # a burst is loud soon after its onset (none after the recording's last one)
+    span = int(np.ceil(2 * BURST_REGULARITY * period_s / b)) + 1
+    blk = onsets // b
+    onsets = onsets[[bool(loud[i:i + span].any()) for i in blk.tolist()]]
+    return onsets, int(on_grid.sum()), int(onsets.size)
+
+
+def burst_onsets(force: NDArray[np.float64], fs: float) -> NDArray[np.int64]:
+    """First sample of each burst of a burst-random force (N), in order.
+
+    A burst starts a loud stretch (10 ms blocks) that follows a quiet one. The structure's
+    ringing after a burst, felt through the shaker's armature at a lightly damped
+    resonance, can rise above the quiet level for a while too, and hide the quiet before
+    the next burst: the onsets are the regular grid through most stretch starts
+    (:func:`_burst_train`), or every stretch start when the loud blocks do not repeat.
+
+    >>> x = np.zeros(4096)
+    >>> for k in range(8):
+    ...     x[k * 512 + 100: k * 512 + 400] = np.random.default_rng(k).normal(size=300)
+    >>> burst_onsets(x, 256.0)[:3]
+    array([  92,  604, 1116])
+    """
+    x = np.asarray(force, dtype=float).ravel()
+    x = x - np.median(x)
+    train = _burst_train(x, fs)
+    if train is None:
+        b, _, rise = _rises(x, fs)
+        return np.asarray(rise * b, dtype=np.int64)
+    return train[0]
 
 
 def shaker_signal(force: NDArray[np.float64], fs: float) -> ShakerSignal:
@@ -206,9 +288,9 @@ def shaker_signal(force: NDArray[np.float64], fs: float) -> ShakerSignal:
     Periodic: the autocorrelation (about the median, unbiased, normalised) reaches
     :data:`PERIODIC_CORRELATION` at some lag from :data:`MIN_PERIOD` s to half the
     recording; the period is the shortest lag within 2 % of the highest peak. Burst: quiet
-    stretches (:func:`burst_onsets`), at least three bursts whose onsets are evenly spaced
-    within :data:`BURST_REGULARITY`; the period is the shortest spacing. Anything else is
-    continuous.
+    stretches, and at least three loud stretches, most of the bursts, starting on one
+    regular grid within :data:`BURST_REGULARITY` (:func:`burst_onsets`); the period is the
+    grid's spacing (samples, rounded down). Anything else is continuous.
 
     >>> fs = 256.0
     >>> t = np.arange(8192) / fs
@@ -233,12 +315,9 @@ def shaker_signal(force: NDArray[np.float64], fs: float) -> ShakerSignal:
         peak = (rho[1:-1] >= rho[:-2]) & (rho[1:-1] >= rho[2:]) & (rho[1:-1] >= 0.98 * best)
         k = int(np.flatnonzero(peak)[0]) + 1 if peak.any() else int(np.argmax(rho))
         return ShakerSignal("periodic", lo + k, float(rho[k]), duty)
-    on = burst_onsets(x, fs)
-    if on.size >= 3 and duty < 0.95:
-        gaps = np.diff(on)
-        med = float(np.median(gaps))
-        if np.all(np.abs(gaps - med) <= BURST_REGULARITY * med + b):
-            return ShakerSignal("burst", int(gaps.min()), best, duty)
+    train = _burst_train(x, fs) if duty < 0.95 else None
+    if train is not None and 2 * train[1] >= train[2]:  # most bursts start on the grid
+        return ShakerSignal("burst", int(np.diff(train[0]).min()), best, duty)
     return ShakerSignal("continuous", None, best, duty)
 
 
@@ -285,3 +364,112 @@ def settled_records(records: NDArray[np.float64]) -> int:
     floor = float(np.median(d[n_rec // 2:]))
     steady = np.flatnonzero(d <= SETTLING_FACTOR * floor)
     return int(min(steady[0] if steady.size else 0, n_rec // 2))
+
+
+# ---- burst records: the structure still ringing when the record ends ----
+
+#: the free decay after a burst is fitted from this long after its last loud block, s
+BURST_GUARD = 0.05
+#: the ringing at a record's end is read over its last this many seconds
+RING_SPAN = 0.05
+
+
+def _quiet_from(force: NDArray[np.float64], fs: float, starts: NDArray[np.int64],
+                length: int) -> NDArray[np.int64]:
+    """Per record, the first sample (from its start) after its burst: the end of the loud
+    stretch its onset opens (:func:`_blocks`) plus :data:`BURST_GUARD`; ``length`` when the
+    burst fills the record."""
+    x = np.asarray(force, dtype=float).ravel()
+    b, loud = _blocks(x - np.median(x), fs)
+    guard = round(BURST_GUARD * fs)
+    out = np.full(starts.size, length, dtype=np.int64)
+    for k, s in enumerate(starts.tolist()):  # a few dozen records
+        blk = loud[s // b: (s + length) // b]
+        off = np.flatnonzero(~blk[1:] & blk[:-1]) if blk.size > 1 else np.empty(0, int)
+        if off.size:
+            out[k] = min(length, (s // b + int(off[0]) + 1) * b - s + guard)
+    return out
+
+
+def burst_ringing(data: NDArray[np.float64], fs: float, starts: NDArray[np.int64],
+                  length: int, force_rows: int = 1) -> float:
+    """How much the responses still ring when a burst record ends: per record, the largest
+    over the response channels of the RMS of its last :data:`RING_SPAN` s (mean removed)
+    over the channel's noise (:func:`processing.decay.noise_sigma` on the quiet stretches
+    after the bursts); the median over the records. ``data`` (n_ch, n): the forces (the
+    first ``force_rows`` rows, N) then the responses; ``starts`` the records' first samples.
+
+    >>> fs, t = 256.0, np.arange(4096) / 256.0
+    >>> drive = np.random.default_rng(1).normal(size=t.size) * (t % 4 < 2)
+    >>> ring = np.convolve(drive, np.exp(-t / 2) * np.sin(2 * np.pi * 5 * t))
+    >>> y = np.vstack([drive, ring[:t.size]]) + 1e-3 * np.random.default_rng(2).normal(
+    ...     size=(2, t.size))
+    >>> bool(burst_ringing(y, fs, np.array([0, 1024, 2048]), 1024) > 10)
+    True
+    """
+    rec, quiet, sigma = _records(data, fs, starts, length, force_rows)
+    n = max(2, round(RING_SPAN * fs))
+    tail = rec[:, force_rows:, -n:]
+    rms = np.std(tail, axis=-1) / np.maximum(sigma[force_rows:], 1e-300)
+    return float(np.median(np.max(rms, axis=-1))) if rms.size else 0.0
+
+
+def _records(data: NDArray[np.float64], fs: float, starts: NDArray[np.int64], length: int,
+             force_rows: int) -> tuple[NDArray[np.float64], NDArray[np.int64],
+                                       NDArray[np.float64]]:
+    """The records (n_rec, n_ch, length), where each one's burst ends
+    (:func:`_quiet_from`) and each channel's noise read on those quiet stretches."""
+    x = np.asarray(data, dtype=float)
+    rec = x[:, starts[:, None] + np.arange(length)].transpose(1, 0, 2)
+    quiet = _quiet_from(np.sum(x[:force_rows], axis=0), fs, starts, length)
+    still = [rec[k, :, q:] for k, q in enumerate(quiet.tolist()) if length - q >= 4]
+    sigma = (noise_sigma(np.concatenate(still, axis=-1)) if still
+             else noise_sigma(x))
+    return rec, quiet, sigma
+
+
+def burst_records(data: NDArray[np.float64], fs: float, starts: NDArray[np.int64],
+                  length: int, force_rows: int = 1, complete: bool = True,
+                  ) -> NDArray[np.float64]:
+    """Burst records (n_rec, n_ch, length) from ``starts``; with ``complete``, each one as if
+    the structure had been at rest when it began and the record had been long enough for it
+    to come to rest again, i.e. leakage-free under the rectangular window.
+
+    A burst record holds the end of the earlier bursts' ringing and cuts off the end of its
+    own: both are free decays of the structure (forces, through the shaker's armature,
+    included), fitted as damped sinusoids (:func:`processing.decay.free_decay`). The first
+    is fitted on the quiet stretch before the record (after the previous burst, at most
+    :data:`processing.decay.CARRY_STRETCH` s) and its continuation subtracted; the second on
+    the record's own quiet stretch after its burst, continued past the record's end and
+    folded onto the record (the record then holds the periodic response to its burst, whose
+    spectrum is the FRF times the force's at every line). A stretch under
+    :data:`processing.decay.CARRY_MIN` s leaves that side as it is.
+
+    Parameters
+    ----------
+    data : (n_ch, n)
+        The forces (the first ``force_rows`` rows, N) then the responses, one recording.
+    fs : float
+        Sample rate, Hz.
+    starts : (n_rec,) int
+        First sample of each record (each burst's onset, :func:`burst_onsets`); each record
+        must lie within ``data``.
+    length : int
+        Samples a record.
+    """
+    x = np.asarray(data, dtype=float)
+    rec, quiet, sigma = _records(x, fs, starts, length, force_rows)
+    if not complete:
+        return rec
+    rec = rec.copy()
+    shortest, longest = round(CARRY_MIN * fs), round(CARRY_STRETCH * fs)
+    ends = np.r_[0, starts[:-1] + quiet[:-1]] if starts.size else starts
+    for k, s in enumerate(starts.tolist()):  # a few dozen records, two fits each
+        a = max(int(ends[k]), s - longest)
+        if s - a >= shortest:  # the earlier bursts' ringing
+            rec[k] -= free_decay(x[:, a:s], length, sigma)
+        q = int(quiet[k])
+        if length - q >= shortest:  # its own tail, past the record's end
+            rec[k] += free_decay(rec[k, :, max(q, length - longest):], length, sigma, fold=True)
+    return rec
+

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.data import FRFSet, Geometry, InputError
+from processing.decay import CARRY_MIN, CARRY_STRETCH, free_decay, noise_sigma
 from processing.spectral import CrossSpectra, combine, frf, record_spectra
 from processing.units import UnitSpectra, record_units
 from processing.windows import exponential_window, force_window
@@ -43,7 +44,6 @@ __all__ = [
     "excitation_type",
     "exponential_for",
     "find_triggers",
-    "free_decay",
     "impact_defaults",
     "impact_frfset",
     "merge_results",
@@ -83,7 +83,14 @@ class ImpactSettings:
         Take the earlier hits' ringing off each record: the responses' free decay on the
         stretch before the record (from :data:`SAME_HIT` after the previous trigger, at
         most :data:`CARRY_STRETCH` s) is fitted as a sum of damped sinusoids
-        (:func:`free_decay`) and its continuation subtracted from the record's responses.
+        (:func:`processing.decay.free_decay`) and its continuation subtracted from the
+        record's responses.
+    complete : bool
+        Put each record's own cut-off tail back: the responses' free decay after the
+        pulse (from :data:`SAME_HIT` after its end to the record's end, at most
+        :data:`CARRY_STRETCH` s) is continued past the record's end and folded onto it, so
+        the record holds the periodic response to its hit and the rectangular window leaks
+        nothing (the responses need not die out within the record). Not with ``exp_tau``.
     double_hit_ratio : float
         A second rise above this fraction of the peak force is a double hit.
     clip_samples : int
@@ -100,6 +107,7 @@ class ImpactSettings:
     clip_samples: int = 3
     ring: int = 0
     carryover: bool = False
+    complete: bool = False
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.level) or self.level == 0:
@@ -122,6 +130,9 @@ class ImpactSettings:
             raise InputError(f"clip_samples must be >= 2, got {self.clip_samples}")
         if self.ring < 0:
             raise InputError(f"ring must be >= 0 samples, got {self.ring}")
+        if self.complete and self.exp_tau is not None:
+            raise InputError("a record completed with its own tail takes no exponential "
+                             "window: give one or the other")
 
 
 @dataclass(frozen=True)
@@ -299,6 +310,8 @@ def process_impacts(
     hits = _Hits.find(x, fs, settings, force_channel, full_scale)
     if settings.carryover:
         _remove_carryover(x, hits, fs, settings, force_channel)
+    if settings.complete:
+        _complete_tails(x, hits, fs, force_channel)
     verdicts, accepted = _verdicts(hits, names, fs, force_accept, max_averages)
     for v in verdicts:
         if v.reason:
@@ -320,58 +333,6 @@ def process_impacts(
                         units)
 
 
-#: longest stretch before a record fitted by :func:`free_decay`, s
-CARRY_STRETCH = 1.5
-#: shortest such stretch, s (shorter: the record is used as it is)
-CARRY_MIN = 0.25
-#: order of the linear prediction of :func:`free_decay` (at most a quarter of the stretch)
-CARRY_ORDER = 60
-#: a singular value of the prediction's normalised data matrix counts as signal above this
-#: many times the square root of its rows (the singular values of unit white noise)
-CARRY_RANK = 2.0
-
-
-def free_decay(seg: NDArray[np.float64], n_out: int, sigma: NDArray[np.float64],
-               order: int = CARRY_ORDER) -> NDArray[np.float64]:
-    """The continuation over ``n_out`` samples of a free decay ``seg`` (n_ch, n_s).
-
-    The channels of a structure ringing freely share their poles: each channel, over its
-    noise ``sigma`` (n_ch,), is predicted from its previous ``order`` samples by one set of
-    coefficients for all channels (least squares, truncated to the singular values above
-    :data:`CARRY_RANK` times the unit noise's: Kumaresan-Tufts); the roots of the
-    prediction polynomial are the poles (those outside the unit circle brought onto it: a
-    free decay does not grow), each channel's complex amplitudes are fitted to its samples,
-    and the sum of damped sinusoids continued after ``seg``'s last sample. Zeros when
-    nothing stands out of the noise.
-
-    >>> t = np.arange(600) / 100.0
-    >>> x = np.exp(-0.3 * t) * np.cos(2 * np.pi * 3.0 * t)
-    >>> future = free_decay(x[None, :400], 200, np.array([1e-3]))
-    >>> bool(np.allclose(future[0], x[400:], atol=1e-6))
-    True
-    """
-    y = np.asarray(seg, dtype=float) / np.maximum(sigma, 1e-300)[:, None]
-    n_ch, n_s = y.shape
-    r = int(min(order, n_s // 4))
-    if r < 2:
-        return np.zeros((n_ch, n_out))
-    w = np.lib.stride_tricks.sliding_window_view(y, r + 1, axis=-1)
-    A = w[..., :r][..., ::-1].reshape(-1, r)  # column i: the sample i + 1 before
-    b = w[..., r].reshape(-1)
-    s2, V = np.linalg.eigh(A.T @ A)  # the squared singular values and right vectors of A
-    keep = s2 > CARRY_RANK**2 * A.shape[0]
-    if not keep.any():
-        return np.zeros((n_ch, n_out))
-    Vk = V[:, keep]
-    a = Vk @ ((Vk.T @ (A.T @ b)) / s2[keep])
-    z = np.roots(np.r_[1.0, -a])
-    z = np.where(np.abs(z) > 1, z / np.abs(z), z)
-    amp = np.linalg.lstsq(z[None, :] ** np.arange(n_s)[:, None], y.T.astype(complex),
-                          rcond=None)[0]
-    out = np.real((z[None, :] ** np.arange(n_s, n_s + n_out)[:, None]) @ amp).T
-    return np.asarray(out * np.maximum(sigma, 1e-300)[:, None], dtype=np.float64)
-
-
 def _remove_carryover(x: NDArray[Any], hits: _Hits, fs: float, settings: ImpactSettings,
                       force_channel: int) -> None:
     """Each complete record's responses (``hits.rec``, changed in place) less the
@@ -389,6 +350,20 @@ def _remove_carryover(x: NDArray[Any], hits: _Hits, fs: float, settings: ImpactS
         if b - a >= CARRY_MIN * fs:
             hits.rec[k, resp] -= free_decay(x[resp, a:b], settings.record_length, sigma)
         k += 1
+
+
+def _complete_tails(x: NDArray[Any], hits: _Hits, fs: float, force_channel: int) -> None:
+    """Each complete record's responses (``hits.rec``, changed in place) plus their own free
+    decay past the record's end, folded onto it (:attr:`ImpactSettings.complete`); a record
+    with under :data:`CARRY_MIN` s after its pulse is left as it is."""
+    resp = np.arange(x.shape[0]) != force_channel
+    sigma = noise_sigma(x[resp])
+    L = hits.rec.shape[-1]
+    guard, longest = round(SAME_HIT * fs), round(CARRY_STRETCH * fs)
+    for k in range(hits.rec.shape[0]):  # few hits, one fit each
+        a = max(int(hits.fall[k]) + guard, L - longest)
+        if L - a >= CARRY_MIN * fs:
+            hits.rec[k, resp] += free_decay(hits.rec[k, resp, a:], L, sigma, fold=True)
 
 
 def _without_force_offset(rec: NDArray[np.float64], force_channel: int) -> NDArray[np.float64]:
@@ -647,14 +622,6 @@ def excitation_type(force: ArrayLike) -> ExcitationGuess:
     k = float(np.mean(x**4) / m2**2)
     crest = float(np.max(np.abs(x)) / np.sqrt(m2))
     return ExcitationGuess("impact" if k > IMPULSIVE_KURTOSIS else "random", k, crest)
-
-
-def noise_sigma(x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Standard deviation of each row's white noise, from the second differences (robust:
-    the median absolute deviation; slow signals, offsets and drifts barely contribute)."""
-    d2 = np.diff(np.asarray(x, dtype=float), 2, axis=-1)
-    mad = np.median(np.abs(d2 - np.median(d2, axis=-1, keepdims=True)), axis=-1)
-    return np.asarray(1.4826 * mad / np.sqrt(6.0), dtype=np.float64)
 
 
 @dataclass(frozen=True)

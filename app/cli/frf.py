@@ -84,9 +84,11 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
                    help="impact: exponential window time constant, s (default: chosen when "
                         "the responses have not decayed by the end of the record; 0: none)")
     p.add_argument("--carryover", choices=("on", "off"),
-                   help="impact: take the earlier hits' ringing off each record (its free "
-                        "decay fitted before the record, continued and subtracted; default: "
-                        "on when the responses still ring above their noise at the next hit)")
+                   help="impact and burst random: take the earlier hits' or bursts' ringing "
+                        "off each record (its free decay fitted before the record, continued "
+                        "and subtracted; a burst record also gets its own cut-off tail back); "
+                        "default: on when the responses still ring above their noise at the "
+                        "next hit or the record's end")
     p.add_argument("--coherence", type=float, default=0.8, help="coherence gate threshold")
     p.add_argument("--fmax", type=float,
                    help="highest line kept, Hz (default fs / 2.56, the anti-alias filters' "

@@ -34,8 +34,7 @@ class Settings:
     ----------
     excitation : time records: ``"random"`` (shaker, Welch) or ``"impact"`` (hammer hits); None
         reads it from the data (an impulsive force is a hammer test; a hammer option given,
-        ``level``, ``record``, ``pretrigger``, ``exp_tau``, ``ring`` or ``carryover``,
-        means one)
+        ``level``, ``record``, ``pretrigger``, ``exp_tau`` or ``ring``, means one)
     estimator : FRF estimator (``"H1"``, ``"H2"``, ...: :data:`processing.spectral.ESTIMATORS`)
     nperseg : random: samples per segment (line spacing fs / nperseg); None: from the data
         (see ``records``), 2048 for Welch segments
@@ -58,8 +57,10 @@ class Settings:
     exp_tau : impact: exponential window time constant, s (None: chosen when the responses
         have not decayed by the end of the record; 0: no exponential window)
     carryover : impact: take the earlier hits' free decay off each record
-        (:attr:`processing.impact.ImpactSettings.carryover`); None: when the responses still
-        ring above their noise when the next hit comes
+        (:attr:`processing.impact.ImpactSettings.carryover`); burst records: take the earlier
+        bursts' free decay off each record and put its own cut-off tail back
+        (:func:`processing.excitation.burst_records`); None: when the responses still ring
+        above their noise when the next hit comes or the burst record ends
         (:data:`app.pipeline.time_uff.CARRY_GATE`)
     coherence : coherence gate threshold of the checks reported
     fmax : highest line kept, Hz, for FRFs computed from time data (None: fs / 2.56)
@@ -149,9 +150,10 @@ class Settings:
 
     @property
     def hammer_given(self) -> bool:
-        """A hammer option was given (trigger level, record, pre-trigger, exponential window)."""
+        """A hammer option was given (trigger level, record, pre-trigger, exponential window,
+        force ring); ``carryover`` serves burst records too."""
         return any(v is not None for v in (self.level, self.record, self.pretrigger,
-                                           self.exp_tau, self.ring, self.carryover))
+                                           self.exp_tau, self.ring))
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,14 @@ from app.io.uff_time import TimeRun
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
-from processing.excitation import burst_onsets, settled_records, shaker_signal, steady_periods
+from processing.excitation import (
+    burst_onsets,
+    burst_records,
+    burst_ringing,
+    settled_records,
+    shaker_signal,
+    steady_periods,
+)
 from processing.identify import FROM_TIME_RECORDS
 from processing.impact import (
     MIN_PRETRIGGER,
@@ -60,28 +67,38 @@ def _apart(onsets: NDArray[np.int64], length: int) -> NDArray[np.int64]:
     return np.asarray(kept, dtype=np.int64)
 
 
+def _burst_starts(r: TimeRun, length: int) -> NDArray[np.int64]:
+    """First sample of each burst record of ``length`` samples that lies within the run."""
+    starts = _apart(burst_onsets(r.force, r.fs), length)
+    return starts[starts + length <= r.n_samples]
+
+
+def _stacked(r: TimeRun) -> NDArray[np.float64]:
+    """The run's force then its responses, (1 + n_resp, n)."""
+    return np.vstack([r.force[None], r.responses])
+
+
 def _record_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra | None, str]:
     """Spectra of whole periods (``s.records == "periodic"``, the first ones skipped until
-    the responses repeat) or of one record from each burst's onset (``"burst"``, the first
-    ones skipped while the responses settle: :func:`processing.excitation.settled_records`),
+    the responses repeat) or of one record from each burst's onset (``"burst"``, completed
+    when ``s.carryover``: :func:`processing.excitation.burst_records`; the first ones
+    skipped while the responses settle: :func:`processing.excitation.settled_records`),
     ``s.nperseg`` samples each, rectangular window; each record's spectra (the bootstrap's
     units, None under :data:`processing.units.MIN_UNITS` records); and a note on the records
     skipped ("" when none)."""
     L = s.nperseg
     assert L is not None
-    n = r.n_samples
-    data = np.vstack([r.force[None], r.responses])
+    data = _stacked(r)
     note = ""
     if s.records == "periodic":
         skip = steady_periods(r.responses, L)
-        starts = np.arange(skip * L, n - L + 1, L)
+        starts = np.arange(skip * L, r.n_samples - L + 1, L)
         what = f"period of {L} samples after the first {skip}"
+        records = data[:, starts[:, None] + np.arange(L)].transpose(1, 0, 2)
     else:
-        starts = _apart(burst_onsets(r.force, r.fs), L)
-        starts = starts[starts + L <= n]
+        starts = _burst_starts(r, L)
         what = f"burst of {L} samples"
-    records = data[:, starts[:, None] + np.arange(L)].transpose(1, 0, 2)
-    if s.records != "periodic":
+        records = burst_records(data, r.fs, starts, L, complete=bool(s.carryover))
         skip = settled_records(records[:, 1:])  # the responses of each record
         records = records[skip:]
         if skip:
@@ -114,9 +131,10 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
     return (*welch_units(acc, np.vstack([r.force[None, :n], r.responses[:, :n]])), "")
 
 
-#: the earlier hits' ringing is taken off each record by default when the responses ring at
-#: least this many times their noise just before the next hit (median over the runs of
-#: :attr:`processing.impact.ImpactDefaults.carryover`)
+#: the earlier hits' (bursts') ringing is taken off each record by default when the
+#: responses ring at least this many times their noise just before the next hit (at the end
+#: of a burst record), median over the runs (:attr:`processing.impact.ImpactDefaults.carryover`,
+#: :func:`processing.excitation.burst_ringing`)
 CARRY_GATE = 3.0
 
 #: shortest pre-trigger when none is given, s (:func:`processing.impact.pretrigger_for`)
@@ -142,6 +160,11 @@ def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
         slope="rising" if level > 0 else "falling", exp_tau=s.exp_tau or None,
         ring=s.ring or 0, carryover=bool(s.carryover),
     )
+    _mode = os.environ.get("INSITU_COMPLETE", "0")  # EXPERIMENT
+    if _mode == "1" and settings.exp_tau is None:
+        settings = dataclasses.replace(settings, complete=True)
+    elif _mode == "2":
+        settings = dataclasses.replace(settings, complete=True, exp_tau=None)
     names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
     res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
                           channel_names=names, estimator=s.estimator,
@@ -296,6 +319,29 @@ def _shaker(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]
                   f"{ov * 100:.0f} % overlap (--nperseg, --overlap, --window to change)")]
 
 
+def _burst_carryover(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]]:
+    """``s`` with ``carryover`` resolved for random excitation: for burst records, on when
+    the responses still ring at the records' ends (:data:`CARRY_GATE`, median over the
+    runs) unless given, and the line saying so; a ``--carryover`` given for other records
+    is said to be unused."""
+    if s.records != "burst":
+        return s, [RunReport(f"--carryover is for hammer hits and burst records, not "
+                             f"{s.records} records: not used")] if s.carryover else []
+    L = s.nperseg
+    if s.carryover is not None or L is None:
+        return s, []
+    rings = [burst_ringing(_stacked(r), r.fs, st, L) for r in runs
+             if (st := _burst_starts(r, L)).size]
+    ring = float(np.median(rings)) if rings else 0.0
+    on = ring >= CARRY_GATE
+    return dataclasses.replace(s, carryover=on), [RunReport(
+        f"earlier bursts' ringing: {ring:.2g} x the responses' noise at the end of the records "
+        + ("(median): each record less the earlier bursts' free decay, its own continued past "
+           "its end and put back at its start (--carryover off to change)" if on else
+           f"(median, under {CARRY_GATE:g}): records used as they are (--carryover on to "
+           "change)"))]
+
+
 def _record(d: list[ImpactDefaults], decay: float, pre: float) -> float:
     """Record length, s, for every run: twice the runs' median decay
     (:data:`processing.impact.TAIL_FACTOR`) plus the pre-trigger (at least
@@ -327,7 +373,8 @@ def _resolve(runs: list[TimeRun], s: Settings,
     s, lines = _excitation(runs, s)
     if s.excitation != "impact":
         s, more = _shaker(runs, s)
-        return s, {}, lines + more
+        s, carry = _burst_carryover(runs, s)
+        return s, {}, lines + more + carry
     pre = s.pretrigger if s.pretrigger is not None else PRETRIGGER
     found = _impact_defaults(runs, pre)
     if s.pretrigger is None and found:  # hold the force's ringing before a pulse
@@ -416,7 +463,7 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
     geometry, _ = read_geometry_uff(path)
     keys = list(cols)
     meta: dict[str, object] = {"estimator": s.estimator, "excitation": s.excitation,
-                               "exponential_tau": s.exp_tau or None if s.excitation == "impact"
+                               "exponential_tau": s.exp_tau or None if s.excitation == "impact" and os.environ.get("INSITU_COMPLETE", "0") != "2"
                                else None}
     out = assemble(cols[keys[0]][2], [cols[k][0] for k in keys], [cols[k][1] for k in keys],
                    first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),

@@ -102,7 +102,7 @@ def test_carryover_read_from_the_data_and_given(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The earlier hits' ringing at the next hit is printed; a light damping turns the
     correction on by default, a well-damped test leaves the records as they are;
-    --carryover on/off overrides (and means a hammer test)."""
+    --carryover on/off overrides (the force still says it is a hammer test)."""
     src, light = tmp_path / "time.uff", tmp_path / "light.uff"
     write_uff(_hammer(2), src)
     write_uff(_light_hammer(), light)
@@ -117,7 +117,7 @@ def test_carryover_read_from_the_data_and_given(
     assert "less the free decay fitted before it (--carryover off to change)" in line
     assert main(["frf", str(light), "--carryover", "off", "--out", str(tmp_path / "c.uff")]) == 0
     text = capsys.readouterr().out
-    assert "excitation impact (a hammer option is given" in text
+    assert "excitation impact (force impulsive in 9 of 9 runs" in text
     assert "earlier hits' ringing" not in text
     on, off = (read_frf_uff(tmp_path / f) for f in ("b.uff", "c.uff"))
     assert not np.allclose(on.H, off.H)

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.testing import assert_allclose
 
-from processing.impact import ImpactSettings, free_decay, impact_defaults, process_impacts
+from processing.decay import free_decay
+from processing.impact import ImpactSettings, impact_defaults, process_impacts
 
 FS = 256.0
 TAU = 0.4  # exponential window, s
