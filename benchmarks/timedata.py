@@ -144,7 +144,7 @@ def evaluate(i: int, kind: str) -> dict[str, Any]:
         row["detected"] = m.group(1) if m else "?"
         row["defaults"] = [ln for ln in out.splitlines()
                            if ln.startswith(("excitation ", "record ", "trigger level",
-                                             "shaker force", "earlier "))]
+                                             "shaker force", "earlier ", "record tails"))]
         row["time"] = {"refused": why} if res is None else {"errors": _errs(t, res)}
         if kind == "hammer":
             row["hits"] = _hit_counts(t, out)

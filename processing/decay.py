@@ -9,6 +9,8 @@ record cuts off can be put back (:mod:`processing.impact`, :mod:`processing.exci
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -72,7 +74,8 @@ def free_decay(seg: NDArray[np.float64], n_out: int, sigma: NDArray[np.float64],
     a = Vk @ ((Vk.T @ (A.T @ b)) / s2[keep])
     z = np.roots(np.r_[1.0, -a])
     z = np.where(np.abs(z) > 1, z / np.abs(z), z)
-    amp = np.linalg.lstsq(_powers(z, 0, n_s), y.T.astype(complex), rcond=None)[0]
+    amp = np.linalg.lstsq(_powers(z, 0, n_s), y.T.astype(complex),
+                          rcond=None)[0]
     zn = _powers(z, n_s, n_out)
     if fold:  # the geometric sum over the periods, at most FOLD_WRAPS (an undamped pole)
         zL = z**n_out
@@ -82,7 +85,7 @@ def free_decay(seg: NDArray[np.float64], n_out: int, sigma: NDArray[np.float64],
     return np.asarray(out * np.maximum(sigma, 1e-300)[:, None], dtype=np.float64)
 
 
-def _powers(z: NDArray[np.complex128], first: int, n: int) -> NDArray[np.complex128]:
+def _powers(z: NDArray[Any], first: int, n: int) -> NDArray[np.complex128]:
     """``z ** k`` for k = first .. first + n - 1 (rows) and every pole (columns), as
     exp(k log z): a third of the time of complex powers."""
     logz = np.log(np.where(z == 0, 1e-300, z))

@@ -309,7 +309,7 @@ def shaker_signal(force: NDArray[np.float64], fs: float) -> ShakerSignal:
         return ShakerSignal("continuous", None, 0.0, 1.0)
     rho = r[lo:hi] / r[0]
     best = float(rho.max())
-    b, loud = _blocks(x, fs)
+    _, loud = _blocks(x, fs)
     duty = float(np.mean(loud)) if loud.size else 1.0
     if best >= PERIODIC_CORRELATION:
         peak = (rho[1:-1] >= rho[:-2]) & (rho[1:-1] >= rho[2:]) & (rho[1:-1] >= 0.98 * best)
@@ -407,7 +407,7 @@ def burst_ringing(data: NDArray[np.float64], fs: float, starts: NDArray[np.int64
     >>> bool(burst_ringing(y, fs, np.array([0, 1024, 2048]), 1024) > 10)
     True
     """
-    rec, quiet, sigma = _records(data, fs, starts, length, force_rows)
+    rec, _, sigma = _records(data, fs, starts, length, force_rows)
     n = max(2, round(RING_SPAN * fs))
     tail = rec[:, force_rows:, -n:]
     rms = np.std(tail, axis=-1) / np.maximum(sigma[force_rows:], 1e-300)

@@ -89,6 +89,11 @@ def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
                         "and subtracted; a burst record also gets its own cut-off tail back); "
                         "default: on when the responses still ring above their noise at the "
                         "next hit or the record's end")
+    p.add_argument("--tail", choices=("on", "off"),
+                   help="impact: put each record's own tail back (the responses' free decay "
+                        "after the hit continued past the record's end and folded onto it: "
+                        "no leakage without an exponential window); default: on when no "
+                        "exponential window is used")
     p.add_argument("--coherence", type=float, default=0.8, help="coherence gate threshold")
     p.add_argument("--fmax", type=float,
                    help="highest line kept, Hz (default fs / 2.56, the anti-alias filters' "
@@ -107,6 +112,7 @@ def settings_from(args: argparse.Namespace, **kwargs: Any) -> Settings:
                     level=args.level, record=args.record, pretrigger=args.pretrigger,
                     exp_tau=args.exp_tau, ring=args.ring,
                     carryover=None if args.carryover is None else args.carryover == "on",
+                    tail=None if args.tail is None else args.tail == "on",
                     coherence=args.coherence,
                     fmax=args.fmax, **kwargs)
 

@@ -34,7 +34,7 @@ class Settings:
     ----------
     excitation : time records: ``"random"`` (shaker, Welch) or ``"impact"`` (hammer hits); None
         reads it from the data (an impulsive force is a hammer test; a hammer option given,
-        ``level``, ``record``, ``pretrigger``, ``exp_tau`` or ``ring``, means one)
+        ``level``, ``record``, ``pretrigger``, ``exp_tau``, ``ring`` or ``tail``, means one)
     estimator : FRF estimator (``"H1"``, ``"H2"``, ...: :data:`processing.spectral.ESTIMATORS`)
     nperseg : random: samples per segment (line spacing fs / nperseg); None: from the data
         (see ``records``), 2048 for Welch segments
@@ -62,6 +62,11 @@ class Settings:
         (:func:`processing.excitation.burst_records`); None: when the responses still ring
         above their noise when the next hit comes or the burst record ends
         (:data:`app.pipeline.time_uff.CARRY_GATE`)
+    tail : impact: put each record's own cut-off tail back (its responses' free decay after
+        the hit continued past the record's end and folded onto it:
+        :attr:`processing.impact.ImpactSettings.complete`), so the rectangular window leaks
+        nothing; None: on when no exponential window is used (an exponential window given
+        excludes it)
     coherence : coherence gate threshold of the checks reported
     fmax : highest line kept, Hz, for FRFs computed from time data (None: fs / 2.56)
     run_points : run files: ``"all"`` (every point needs a used hit or block, else the file
@@ -85,6 +90,7 @@ class Settings:
     exp_tau: float | None = None
     ring: int | None = None
     carryover: bool | None = None
+    tail: bool | None = None
     coherence: float = 0.8
     fmax: float | None = None
     run_points: Literal["all", "usable"] = "all"
@@ -123,6 +129,10 @@ class Settings:
         if self.exp_tau is not None and not (math.isfinite(self.exp_tau) and self.exp_tau >= 0):
             raise InputError(f"--exp-tau must be a time constant in s (0: no exponential "
                              f"window), got {self.exp_tau:g}")
+        if self.tail and self.exp_tau:
+            raise InputError("--tail on puts each record's own tail back, which an exponential "
+                             f"window would weigh down: give --exp-tau 0 or --tail off, not "
+                             f"--exp-tau {self.exp_tau:g}")
         if self.ring is not None and not (isinstance(self.ring, int) and self.ring >= 0):
             raise InputError(f"--force-ring must be a whole number of samples, at least 0, "
                              f"got {self.ring}")
@@ -151,9 +161,9 @@ class Settings:
     @property
     def hammer_given(self) -> bool:
         """A hammer option was given (trigger level, record, pre-trigger, exponential window,
-        force ring); ``carryover`` serves burst records too."""
+        force ring, record tails); ``carryover`` serves burst records too."""
         return any(v is not None for v in (self.level, self.record, self.pretrigger,
-                                           self.exp_tau, self.ring))
+                                           self.exp_tau, self.ring, self.tail))
 
 
 @dataclass(frozen=True)

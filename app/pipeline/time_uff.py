@@ -137,6 +137,9 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
 #: :func:`processing.excitation.burst_ringing`)
 CARRY_GATE = 3.0
 
+#: EXPERIMENT: no exponential window by default, every record's tail put back
+TAILS_ONLY = os.environ.get("INSITU_TAILS_ONLY") == "1"
+
 #: shortest pre-trigger when none is given, s (:func:`processing.impact.pretrigger_for`)
 PRETRIGGER = MIN_PRETRIGGER
 
@@ -158,13 +161,8 @@ def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
         level=level, record_length=round(s.record * r.fs),
         pretrigger=round(s.pretrigger * r.fs),
         slope="rising" if level > 0 else "falling", exp_tau=s.exp_tau or None,
-        ring=s.ring or 0, carryover=bool(s.carryover),
+        ring=s.ring or 0, carryover=bool(s.carryover), complete=bool(s.tail),
     )
-    _mode = os.environ.get("INSITU_COMPLETE", "0")  # EXPERIMENT
-    if _mode == "1" and settings.exp_tau is None:
-        settings = dataclasses.replace(settings, complete=True)
-    elif _mode == "2":
-        settings = dataclasses.replace(settings, complete=True, exp_tau=None)
     names = ["force", *(f"response {i + 1}" for i in range(r.responses.shape[0]))]
     res = process_impacts(np.vstack([r.force[None], r.responses]), r.fs, settings,
                           channel_names=names, estimator=s.estimator,
@@ -373,8 +371,8 @@ def _resolve(runs: list[TimeRun], s: Settings,
     s, lines = _excitation(runs, s)
     if s.excitation != "impact":
         s, more = _shaker(runs, s)
-        s, carry = _burst_carryover(runs, s)
-        return s, {}, lines + more + carry
+        s, bursts = _burst_carryover(runs, s)
+        return s, {}, lines + more + bursts
     pre = s.pretrigger if s.pretrigger is not None else PRETRIGGER
     found = _impact_defaults(runs, pre)
     if s.pretrigger is None and found:  # hold the force's ringing before a pulse
@@ -403,7 +401,9 @@ def _resolve(runs: list[TimeRun], s: Settings,
     decay = float(np.median([x.decay for x in d]))
     ratio = float(np.median([x.ratio for x in d]))
     record = s.record if s.record is not None else _record(d, decay, pre)
-    tau = s.exp_tau if s.exp_tau is not None else exponential_for(record, pre, decay, ratio)
+    tau = (s.exp_tau if s.exp_tau is not None else 0.0 if s.tail or TAILS_ONLY
+           else exponential_for(record, pre, decay, ratio))
+    tail = s.tail if s.tail is not None else not tau
     hits = f"hits {min(spacing):.2g} s apart at least" if spacing else "one hit a run"
     if s.record is None or s.exp_tau is None:
         window = (f"exponential window tau = {tau:.2g} s" if tau else "no exponential window")
@@ -424,8 +424,15 @@ def _resolve(runs: list[TimeRun], s: Settings,
                "(--carryover off to change)" if carryover else
                f"hit (median, under {CARRY_GATE:g}): records used as they are (--carryover on "
                "to change)")))
+    if s.tail is None:
+        lines.append(RunReport(
+            "record tails: " + ("each record's responses continued past its end by their free "
+                                "decay after the hit, folded back onto it: no leakage "
+                                "(--tail off to change)" if tail else
+                                "none put back (an exponential window; --tail on with "
+                                "--exp-tau 0 to change)")))
     return dataclasses.replace(s, pretrigger=pre, record=record, exp_tau=tau or 0.0,
-                               ring=ring, carryover=carryover), levels, lines
+                               ring=ring, carryover=carryover, tail=tail), levels, lines
 
 
 def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
@@ -463,7 +470,7 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
     geometry, _ = read_geometry_uff(path)
     keys = list(cols)
     meta: dict[str, object] = {"estimator": s.estimator, "excitation": s.excitation,
-                               "exponential_tau": s.exp_tau or None if s.excitation == "impact" and os.environ.get("INSITU_COMPLETE", "0") != "2"
+                               "exponential_tau": s.exp_tau or None if s.excitation == "impact"
                                else None}
     out = assemble(cols[keys[0]][2], [cols[k][0] for k in keys], [cols[k][1] for k in keys],
                    first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),
