@@ -230,29 +230,40 @@ def _burst_train(x: NDArray[np.float64], fs: float
     it and how many grid points lie within the recording; None when the loud blocks do not
     repeat (:func:`_burst_period`) or fewer than three stretches start on any grid.
 
-    The grid is the one through the most stretch starts (within :data:`BURST_REGULARITY`
-    of the period), fitted to them by least squares (the period need not be a whole
-    number of blocks); a burst whose start the ringing before it hides is still on it."""
+    The bursts' phase is the start of the longest run of phases loud in most periods (the
+    loud blocks folded on the period); the grid is fitted by least squares to the stretch
+    starts within twice :data:`BURST_REGULARITY` of the period from that phase (the period
+    need not be a whole number of blocks); a burst whose start the ringing before it hides
+    is still on it."""
     b, loud, rise = _rises(x, fs)
     period = _burst_period(loud)
     if period is None or rise.size < 3:
         return None
+    # the bursts' phase: the longest run of phases loud in most periods (the ringing after
+    # a burst is loud in some periods, at some phases)
+    n_per = loud.size // period
+    folded = loud[:n_per * period].reshape(n_per, period).mean(axis=0) > 0.5
+    if folded.all() or not folded.any():
+        return None
+    off = int(np.argmin(folded))  # a quiet phase: no run wraps past it
+    ring = np.roll(folded, -off)
+    edges = np.diff(np.r_[0, ring.astype(int), 0])
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    phase = (starts[np.argmax(ends - starts)] + off) % period
     r = rise * b
     P0 = float(period * b)
-    u = (r[None, :] - r[:, None]) / P0  # periods from each start to every other
-    near = np.abs(u - np.round(u)) <= BURST_REGULARITY
-    best = int(np.argmax(near.sum(axis=1)))
-    on_grid = near[best]
+    u = (r - phase * b) / P0
+    on_grid = np.abs(u - np.round(u)) <= 2 * BURST_REGULARITY
     if on_grid.sum() < 3:
         return None
-    k = np.round(u[best, on_grid])
+    k = np.round(u[on_grid])
     period_s, first = np.polyfit(k, r[on_grid], 1)
-    # the earliest grid point in the data (one a few blocks before its start: at 0)
-    first -= np.floor((first + BURST_REGULARITY * period_s) / period_s) * period_s
+    # two blocks earlier still: the anti-alias filter rings before a burst's sharp start
+    first -= 2 * b + np.floor((first - 2 * b) / period_s) * period_s
     onsets = np.round(first + period_s * np.arange(int((x.size - first) // period_s) + 1))
-    onsets = np.clip(onsets[onsets < x.size], 0, None).astype(np.int64)
+    onsets = onsets[(onsets >= 0) & (onsets < x.size)].astype(np.int64)
     # a burst is loud soon after its onset (none after the recording's last one)
-    span = int(np.ceil(2 * BURST_REGULARITY * period_s / b)) + 1
+    span = int(np.ceil(2 * BURST_REGULARITY * period_s / b)) + 3
     blk = onsets // b
     onsets = onsets[[bool(loud[i:i + span].any()) for i in blk.tolist()]]
     return onsets, int(on_grid.sum()), int(onsets.size)
@@ -271,7 +282,7 @@ def burst_onsets(force: NDArray[np.float64], fs: float) -> NDArray[np.int64]:
     >>> for k in range(8):
     ...     x[k * 512 + 100: k * 512 + 400] = np.random.default_rng(k).normal(size=300)
     >>> burst_onsets(x, 256.0)[:3]
-    array([  92,  604, 1116])
+    array([  84,  596, 1108])
     """
     x = np.asarray(force, dtype=float).ravel()
     x = x - np.median(x)
