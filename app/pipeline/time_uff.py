@@ -137,9 +137,6 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
 #: :func:`processing.excitation.burst_ringing`)
 CARRY_GATE = 3.0
 
-#: EXPERIMENT: no exponential window by default, every record's tail put back
-TAILS_ONLY = os.environ.get("INSITU_TAILS_ONLY") == "1"
-
 #: shortest pre-trigger when none is given, s (:func:`processing.impact.pretrigger_for`)
 PRETRIGGER = MIN_PRETRIGGER
 
@@ -401,7 +398,7 @@ def _resolve(runs: list[TimeRun], s: Settings,
     decay = float(np.median([x.decay for x in d]))
     ratio = float(np.median([x.ratio for x in d]))
     record = s.record if s.record is not None else _record(d, decay, pre)
-    tau = (s.exp_tau if s.exp_tau is not None else 0.0 if s.tail or TAILS_ONLY
+    tau = (s.exp_tau if s.exp_tau is not None else 0.0 if s.tail
            else exponential_for(record, pre, decay, ratio))
     tail = s.tail if s.tail is not None else not tau
     hits = f"hits {min(spacing):.2g} s apart at least" if spacing else "one hit a run"
