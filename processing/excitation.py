@@ -387,18 +387,19 @@ RING_SPAN = 0.05
 
 def _quiet_from(force: NDArray[np.float64], fs: float, starts: NDArray[np.int64],
                 length: int) -> NDArray[np.int64]:
-    """Per record, the first sample (from its start) after its burst: the end of the loud
-    stretch its onset opens (:func:`_blocks`) plus :data:`BURST_GUARD`; ``length`` when the
-    burst fills the record."""
+    """Per record, the first sample (from its start) after its burst: the end of its longest
+    loud stretch (:func:`_blocks`; the ringing after a burst can be loud for a while too,
+    never as long) plus :data:`BURST_GUARD`; ``length`` when the burst fills the record."""
     x = np.asarray(force, dtype=float).ravel()
     b, loud = _blocks(x - np.median(x), fs)
     guard = round(BURST_GUARD * fs)
     out = np.full(starts.size, length, dtype=np.int64)
     for k, s in enumerate(starts.tolist()):  # a few dozen records
-        blk = loud[s // b: (s + length) // b]
-        off = np.flatnonzero(~blk[1:] & blk[:-1]) if blk.size > 1 else np.empty(0, int)
-        if off.size:
-            out[k] = min(length, (s // b + int(off[0]) + 1) * b - s + guard)
+        edges = np.diff(np.r_[0, loud[s // b: (s + length) // b].astype(int), 0])
+        on, off = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        if on.size:
+            end = int(off[np.argmax(off - on)])
+            out[k] = min(length, (s // b + end) * b - s + guard)
     return out
 
 
