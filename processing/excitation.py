@@ -261,6 +261,7 @@ def _burst_train(x: NDArray[np.float64], fs: float
     # two blocks earlier still: the anti-alias filter rings before a burst's sharp start
     first -= 2 * b + np.floor((first - 2 * b) / period_s) * period_s
     onsets = np.round(first + period_s * np.arange(int((x.size - first) // period_s) + 1))
+    # (a burst starting with the recording has no onset in it: its record is not cut)
     onsets = onsets[(onsets >= 0) & (onsets < x.size)].astype(np.int64)
     # a burst is loud soon after its onset (none after the recording's last one)
     span = int(np.ceil(2 * BURST_REGULARITY * period_s / b)) + 3

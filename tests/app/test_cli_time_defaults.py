@@ -172,7 +172,8 @@ def test_burst_records_completed_by_default_when_they_ring(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The ringing at the burst records' ends is printed and turns the completion on
     (--carryover off leaves the records as cut, a shaker test still); the completed FRFs
-    are closer to the exact accelerances (measured: 0.5 % against 3.1 % at 2-20 Hz)."""
+    are closer to the exact accelerances (median relative error at 2-20 Hz, measured: 3.9 %
+    against 5.7 %; the rest is the noise of 9 averages)."""
     t = _light_bursts()
     src = tmp_path / "time.uff"
     write_uff(t, src)
@@ -194,8 +195,8 @@ def test_burst_records_completed_by_default_when_they_ring(
                 for n, d in zip(f.exc_nodes, f.exc_dirs, strict=True)]
         band = (f.freq > 2) & (f.freq < 20)
         ref = t.exact_frf(f.freq[band])[:, cols]
-        errs.append(float(np.linalg.norm(f.H[..., band] - ref) / np.linalg.norm(ref)))
-    assert errs[0] < 0.6 * errs[1]
+        errs.append(float(np.median(np.abs(f.H[..., band] - ref) / np.abs(ref))))
+    assert errs[0] < 0.8 * errs[1]
 
 
 def test_record_tails_printed_and_given(tmp_path: Path,

@@ -2,10 +2,14 @@
 reference model (``hardware_mocks/reference/timedata.py``, independent of ``processing/``).
 
 The generator's responses carry an IEPE sensor's settling (a decaying offset, 10 % of the
-responses at most, 0.2-0.6 s) from the start of each recording: the first burst record holds
-it, and with a rectangular window it swamped the lowest lines (error 1.2-12x the FRF at
-1-2 Hz, measured on seeds 1-3 below). Left out, the lowest lines are within 0.6x, most
-within 0.1x."""
+responses at most, 0.2-0.6 s) from the start of each recording: the first burst holds it,
+and with a rectangular window it swamped the lowest lines (error 1.2-12x the FRF at 1-2 Hz,
+measured on seeds 1-3 below). That burst starts with the recording, with no room before
+it for its onset's margin: its record is not cut (a record that starts later with the
+settling is left out, ``settled_records``). Measured on seeds 1 and 2: the lowest line
+(0.25 Hz) within 0.68x and 0.54x, the median of 0.25-2 Hz 0.09x and 0.07x; with the
+records completed (``--carryover on``; the ringing at their ends is 2.9x the noise here,
+under the default's gate) 0.38x and 0.50x."""
 
 from __future__ import annotations
 
@@ -28,7 +32,7 @@ def test_burst_records_leave_out_the_sensors_settling(seed: int, tmp_path: Path)
     frf, reports = open_frfs(src, Settings(coherence=0.0))
     text = "\n".join(r.message for r in reports)
     assert "shaker force in bursts" in text
-    assert "burst record left out (responses settling" in text
+    assert "4 averages" in text  # the bursts at 4, 8, 12 and 16 s
     fc = sc.forces
     cols = [int(np.flatnonzero((fc.ids == n) & np.all(np.isclose(fc.reported_dirs, d),
                                                        axis=1))[0])
@@ -37,4 +41,8 @@ def test_burst_records_leave_out_the_sensors_settling(seed: int, tmp_path: Path)
     low = slice(1, 9)  # 0.5-4 Hz: accelerances falling as f^2, the settling's band
     err = (np.linalg.norm(frf.H[..., low] - exact[..., low], axis=(0, 1))
            / np.linalg.norm(exact[..., low], axis=(0, 1)))
-    assert np.max(err) < 0.6 and np.median(err) < 0.2, err  # were 2-12 and 0.5-1.2
+    assert np.max(err) < 0.7 and np.median(err) < 0.2, err  # were 2-12 and 0.5-1.2
+    done, _ = open_frfs(src, Settings(coherence=0.0, carryover=True))
+    err = (np.linalg.norm(done.H[..., low] - exact[..., low], axis=(0, 1))
+           / np.linalg.norm(exact[..., low], axis=(0, 1)))
+    assert np.max(err) < 0.55 and np.median(err) < 0.15, err

@@ -107,7 +107,7 @@ def _burst_test(zeta: float, ringing_blips: bool = False) -> tuple[np.ndarray, n
 
 def test_burst_records_completed_are_leakage_free() -> None:
     """Bursts 4 s apart, modes damped 1 %: the responses still ring when the next burst
-    starts. Measured: records as cut 39 % off the exact FRF at 2-15 Hz, completed 0.025 %."""
+    starts. Measured: records as cut 39 % off the exact FRF at 2-15 Hz, completed 0.021 %."""
     data, _ = _burst_test(0.01)
     ref = _exact(_ir(10 * 1024, 0.01), 1016)  # the records' lines
     starts = burst_onsets(data[0], FS)
