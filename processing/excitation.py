@@ -205,6 +205,17 @@ def _rises(x: NDArray[np.float64], fs: float) -> tuple[int, NDArray[np.bool_],
     return b, loud, np.asarray(rise, dtype=np.int64)
 
 
+def _longest_run(mask: NDArray[np.bool_]) -> tuple[int, int] | None:
+    """First index and end (exclusive) of the longest run of True in ``mask`` (the first
+    such run on a tie); None when there is none."""
+    edges = np.diff(np.r_[0, mask.astype(int), 0])
+    on, off = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    if on.size == 0:
+        return None
+    k = int(np.argmax(off - on))
+    return int(on[k]), int(off[k])
+
+
 def _burst_period(loud: NDArray[np.bool_]) -> int | None:
     """Blocks from one burst to the next: the shortest lag within 20 % of the highest peak
     of the loud blocks' autocorrelation (about their mean, unbiased), from 2 blocks to a
@@ -224,7 +235,7 @@ def _burst_period(loud: NDArray[np.bool_]) -> int | None:
     return int(peak[rho[peak] >= 0.8 * rho[peak].max()][0])
 
 
-def _burst_train(x: NDArray[np.float64], fs: float
+def _burst_train(b: int, loud: NDArray[np.bool_], rise: NDArray[np.int64], n: int
                  ) -> tuple[NDArray[np.int64], int, int] | None:
     """The bursts' onsets (samples) on one regular grid, how many loud stretches start on
     it and how many grid points lie within the recording; None when the loud blocks do not
@@ -234,8 +245,8 @@ def _burst_train(x: NDArray[np.float64], fs: float
     loud blocks folded on the period); the grid is fitted by least squares to the stretch
     starts within twice :data:`BURST_REGULARITY` of the period from that phase (the period
     need not be a whole number of blocks); a burst whose start the ringing before it hides
-    is still on it."""
-    b, loud, rise = _rises(x, fs)
+    is still on it. ``b``, ``loud``, ``rise``: :func:`_rises` of a recording of ``n``
+    samples."""
     period = _burst_period(loud)
     if period is None or rise.size < 3:
         return None
@@ -246,10 +257,9 @@ def _burst_train(x: NDArray[np.float64], fs: float
     if folded.all() or not folded.any():
         return None
     off = int(np.argmin(folded))  # a quiet phase: no run wraps past it
-    ring = np.roll(folded, -off)
-    edges = np.diff(np.r_[0, ring.astype(int), 0])
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    phase = (starts[np.argmax(ends - starts)] + off) % period
+    run = _longest_run(np.roll(folded, -off))
+    assert run is not None  # folded has a loud phase
+    phase = (run[0] + off) % period
     r = rise * b
     P0 = float(period * b)
     u = (r - phase * b) / P0
@@ -260,9 +270,9 @@ def _burst_train(x: NDArray[np.float64], fs: float
     period_s, first = np.polyfit(k, r[on_grid], 1)
     # two blocks earlier still: the anti-alias filter rings before a burst's sharp start
     first -= 2 * b + np.floor((first - 2 * b) / period_s) * period_s
-    onsets = np.round(first + period_s * np.arange(int((x.size - first) // period_s) + 1))
+    onsets = np.round(first + period_s * np.arange(int((n - first) // period_s) + 1))
     # (a burst starting with the recording has no onset in it: its record is not cut)
-    onsets = onsets[(onsets >= 0) & (onsets < x.size)].astype(np.int64)
+    onsets = onsets[(onsets >= 0) & (onsets < n)].astype(np.int64)
     # a burst is loud soon after its onset (none after the recording's last one)
     span = int(np.ceil(2 * BURST_REGULARITY * period_s / b)) + 3
     blk = onsets // b
@@ -286,12 +296,9 @@ def burst_onsets(force: NDArray[np.float64], fs: float) -> NDArray[np.int64]:
     array([  84,  596, 1108])
     """
     x = np.asarray(force, dtype=float).ravel()
-    x = x - np.median(x)
-    train = _burst_train(x, fs)
-    if train is None:
-        b, _, rise = _rises(x, fs)
-        return np.asarray(rise * b, dtype=np.int64)
-    return train[0]
+    b, loud, rise = _rises(x - np.median(x), fs)
+    train = _burst_train(b, loud, rise, x.size)
+    return np.asarray(rise * b, dtype=np.int64) if train is None else train[0]
 
 
 def shaker_signal(force: NDArray[np.float64], fs: float) -> ShakerSignal:
@@ -321,13 +328,13 @@ def shaker_signal(force: NDArray[np.float64], fs: float) -> ShakerSignal:
         return ShakerSignal("continuous", None, 0.0, 1.0)
     rho = r[lo:hi] / r[0]
     best = float(rho.max())
-    _, loud = _blocks(x, fs)
+    b, loud, rise = _rises(x, fs)
     duty = float(np.mean(loud)) if loud.size else 1.0
     if best >= PERIODIC_CORRELATION:
         peak = (rho[1:-1] >= rho[:-2]) & (rho[1:-1] >= rho[2:]) & (rho[1:-1] >= 0.98 * best)
         k = int(np.flatnonzero(peak)[0]) + 1 if peak.any() else int(np.argmax(rho))
         return ShakerSignal("periodic", lo + k, float(rho[k]), duty)
-    train = _burst_train(x, fs) if duty < 0.95 else None
+    train = _burst_train(b, loud, rise, n) if duty < 0.95 else None
     if train is not None and 2 * train[1] >= train[2]:  # most bursts start on the grid
         return ShakerSignal("burst", int(np.diff(train[0]).min()), best, duty)
     return ShakerSignal("continuous", None, best, duty)
@@ -396,11 +403,9 @@ def _quiet_from(force: NDArray[np.float64], fs: float, starts: NDArray[np.int64]
     guard = round(BURST_GUARD * fs)
     out = np.full(starts.size, length, dtype=np.int64)
     for k, s in enumerate(starts.tolist()):  # a few dozen records
-        edges = np.diff(np.r_[0, loud[s // b: (s + length) // b].astype(int), 0])
-        on, off = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        if on.size:
-            end = int(off[np.argmax(off - on)])
-            out[k] = min(length, (s // b + end) * b - s + guard)
+        run = _longest_run(loud[s // b: (s + length) // b])
+        if run is not None:
+            out[k] = min(length, (s // b + run[1]) * b - s + guard)
     return out
 
 
