@@ -172,6 +172,12 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None,
     choice: BandChoice | None = None
     if opt.mass_band is None or opt.stiffness_band is None:
         clean = problem.clean_lines
+        # the rigid-body modes are read from the lines under the rigidity check's limit;
+        # where lightly damped resonances make every line there unclean (a column's weight
+        # dips with its FRF's peak), fewer than 8 would be left: all the lines are used
+        under = problem.freq <= (rigid_band_top or problem.freq[-1])
+        if np.count_nonzero(clean & under) < 8 <= np.count_nonzero(under):
+            clean = np.ones_like(clean)
         snr = problem.line_snr
         # the stiffness band from the first line holding more signal than noise (the fit
         # weighs each line by its coherence; lines left out of the clean ones still count)
