@@ -74,8 +74,7 @@ def free_decay(seg: NDArray[np.float64], n_out: int, sigma: NDArray[np.float64],
     a = Vk @ ((Vk.T @ (A.T @ b)) / s2[keep])
     z = np.roots(np.r_[1.0, -a])
     z = np.where(np.abs(z) > 1, z / np.abs(z), z)
-    amp = np.linalg.lstsq(_powers(z, 0, n_s), y.T.astype(complex),
-                          rcond=None)[0]
+    amp = np.linalg.lstsq(_powers(z, 0, n_s), y.T.astype(complex), rcond=None)[0]
     zn = _powers(z, n_s, n_out)
     if fold:  # the geometric sum over the periods, at most FOLD_WRAPS (an undamped pole)
         zL = z**n_out

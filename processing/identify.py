@@ -548,10 +548,8 @@ def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tu
                                                          problem.w[ins]),
                           weights.stiffness_lines[ins])
     shapes = _leakage_shapes(problem, bands)
-    if not shapes:  # the upper residual or none, chosen on the whole band
-        upper = [(problem.w / problem.w[-1]) ** 2 + 0j]
-        if _spread(rough, weights, step, upper) < _spread(rough, weights, step, []):
-            shapes = upper
+    if not shapes and _upper_residual_chosen(rough, weights, step)[0]:  # on the whole band
+        shapes = [(problem.w / problem.w[-1]) ** 2 + 0j]
     trials = []
     for top in tops:
         keep = freq[idx] <= top * (1 + 1e-9)
