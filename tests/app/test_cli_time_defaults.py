@@ -24,6 +24,11 @@ from hardware_mocks.reference.timedata import (
 
 
 @cache
+def _printed(text: str, prefix: str) -> str:
+    """The first line of ``text`` that starts with ``prefix`` (a default's printed line)."""
+    return next(ln for ln in text.splitlines() if ln.startswith(prefix))
+
+
 def _hammer(seed: int) -> TimeTest:
     sc = build_scenario(ScenarioSpec(seed=seed, n_forces=9, n_sensors=4, elastic_ratio=None))
     return hammer_test(sc, HammerSpec(seed=seed, hits=4, spacing=3.0, n_double=1, n_clipped=1))
@@ -42,9 +47,9 @@ def test_frf_then_identify_hammer_defaults(seed: int, tmp_path: Path,
     assert "trigger level " in text and "force window: " in text
     assert text.count("rejected: hit") == 2  # the double hit and the clipped one
     assert "double hit" in text and "clipped" in text
-    line = next(ln for ln in text.splitlines() if ln.startswith("record "))
+    line = _printed(text, "record ")
     record = float(line.split()[1])
-    pre = float(next(ln for ln in text.splitlines() if ln.startswith("pre-trigger ")).split()[1])
+    pre = float(_printed(text, "pre-trigger ").split()[1])
     gaps = [np.diff([h.time for h in r.hits]).min() for r in t.runs]
     # 95 % of the spacing the triggers give (a sample or a few off the pulses' true starts):
     # every record ends well before the next hit
@@ -79,7 +84,7 @@ def test_force_ring_printed_and_given(
     write_uff(_hammer(2), src)
     assert main(["frf", str(src), "--out", str(tmp_path / "a.uff")]) == 0
     text = capsys.readouterr().out
-    fw = next(ln for ln in text.splitlines() if ln.startswith("force window: "))
+    fw = _printed(text, "force window: ")
     assert "and 0 samples (--force-ring; the force rings above its noise " in fw
     assert int(fw.split("its noise ")[1].split()[0]) >= 1
     assert main(["frf", str(src), "--force-ring", "5", "--out", str(tmp_path / "b.uff")]) == 0
@@ -107,12 +112,10 @@ def test_carryover_read_from_the_data_and_given(
     write_uff(_hammer(2), src)
     write_uff(_light_hammer(), light)
     assert main(["frf", str(src), "--out", str(tmp_path / "a.uff")]) == 0
-    line = next(ln for ln in capsys.readouterr().out.splitlines()
-                if ln.startswith("earlier hits' ringing: "))
+    line = _printed(capsys.readouterr().out, "earlier hits' ringing: ")
     assert "records used as they are (--carryover on to change)" in line
     assert main(["frf", str(light), "--out", str(tmp_path / "b.uff")]) == 0
-    line = next(ln for ln in capsys.readouterr().out.splitlines()
-                if ln.startswith("earlier hits' ringing: "))
+    line = _printed(capsys.readouterr().out, "earlier hits' ringing: ")
     assert float(line.split()[3]) >= 3
     assert "less the free decay fitted before it (--carryover off to change)" in line
     assert main(["frf", str(light), "--carryover", "off", "--out", str(tmp_path / "c.uff")]) == 0
@@ -178,8 +181,7 @@ def test_burst_records_completed_by_default_when_they_ring(
     src = tmp_path / "time.uff"
     write_uff(t, src)
     assert main(["frf", str(src), "--out", str(tmp_path / "a.uff")]) == 0
-    line = next(ln for ln in capsys.readouterr().out.splitlines()
-                if ln.startswith("earlier bursts' ringing: "))
+    line = _printed(capsys.readouterr().out, "earlier bursts' ringing: ")
     assert float(line.split()[3]) >= 3
     assert "its own continued past its end and put back at its start" in line
     assert main(["frf", str(src), "--carryover", "off", "--out", str(tmp_path / "b.uff")]) == 0
@@ -207,8 +209,7 @@ def test_record_tails_printed_and_given(tmp_path: Path,
     src = tmp_path / "time.uff"
     write_uff(_hammer(2), src)
     assert main(["frf", str(src), "--out", str(tmp_path / "a.uff")]) == 0
-    line = next(ln for ln in capsys.readouterr().out.splitlines()
-                if ln.startswith("record tails: "))
+    line = _printed(capsys.readouterr().out, "record tails: ")
     assert "folded back onto it: no leakage (--tail off to change)" in line
     assert main(["frf", str(src), "--tail", "on", "--exp-tau", "0.5",
                  "--out", str(tmp_path / "b.uff")]) == 2
