@@ -73,8 +73,9 @@ DOCS = Path(__file__).resolve().parent.parent / "docs" / "accuracy.md"
 TITLE = "## Time data: hammer and shaker tests"
 
 
-def case(i: int, kind: str) -> TimeTest:
-    """Generated test ``i`` of ``kind`` ("hammer" or "shaker"), deterministic in ``i``."""
+def case(i: int, kind: str, tip: float = 1.0) -> TimeTest:
+    """Generated test ``i`` of ``kind`` ("hammer" or "shaker"), deterministic in ``i``; a
+    hammer test's pulses ``tip`` times as wide as the band calls for."""
     rng = np.random.default_rng([2026, i, kind == "hammer"])
     spec = ScenarioSpec(seed=7000 + i + (500 if kind == "shaker" else 0),
                         shape=("block", "engine", "gearbox")[i % 3], n_sensors=4, n_forces=9,
@@ -85,7 +86,7 @@ def case(i: int, kind: str) -> TimeTest:
     damping = float(np.exp(rng.uniform(np.log(0.2), np.log(3.0))))
     if kind == "hammer":
         return hammer_test(sc, HammerSpec(seed=i, spacing=float(rng.uniform(2.5, 5.0)),
-                                          n_double=1, n_clipped=1, damping=damping,
+                                          n_double=1, n_clipped=1, damping=damping, tip=tip,
                                           noise_force=float(rng.uniform(2e-4, 2e-3)),
                                           noise_response=float(rng.uniform(1e-4, 1e-3))))
     drive = ("random", "burst", "chirp")[i % 3]

@@ -44,6 +44,7 @@ __all__ = [
     "excitation_type",
     "exponential_for",
     "find_triggers",
+    "force_band_top",
     "impact_defaults",
     "impact_frfset",
     "merge_results",
@@ -53,6 +54,12 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: ``FRFSet.meta`` key: the top of the hammer's usable band, Hz (:func:`force_band_top`)
+FORCE_BAND_TOP = "force_band_top"
+#: the usable band ends where the averaged force auto-spectrum falls under this fraction
+#: of its peak (20 dB: the usual limit of a hammer tip's band)
+FORCE_DROP = 0.01
 
 
 @dataclass(frozen=True)
@@ -572,6 +579,10 @@ def impact_frfset(
         "exponential_tau": taus.pop() if len(taus) == 1 else [r.exp_tau for r in results],
         "n_averages": [r.n_accepted for r in results],
     }
+    top = force_band_top(results[0].freq, np.stack([
+        r.spectra.Sff[0, 0].real for r in results if r.spectra is not None]))
+    if top is not None:
+        meta[FORCE_BAND_TOP] = top
     return FRFSet(
         freq=results[0].freq,
         H=np.concatenate(cols, axis=1),
@@ -585,6 +596,26 @@ def impact_frfset(
     )
 
 
+def force_band_top(freq: NDArray[np.float64], Sff: NDArray[np.float64]) -> float | None:
+    """The hammer's usable band: the highest line, Hz, under which every column's averaged
+    force auto-spectrum (``Sff``, (n_columns, n_f)) stays within ``FORCE_DROP`` (20 dB) of
+    its peak; None when it does to the end of the data.
+
+    Above it the pulse has little force left, and at the pulse's spectral zero (a half-sine
+    of width ``tau`` has its first at ``1.5 / tau``: 375 Hz for 4 ms) an FRF is response
+    noise and force errors over almost nothing: a spike the elastic-mode detection reads as
+    a mode. A harder tip (a shorter pulse) reaches higher.
+    """
+    S = np.atleast_2d(np.asarray(Sff, dtype=float))
+    peak = np.max(S, axis=1, keepdims=True)
+    after = np.arange(S.shape[1]) >= np.argmax(S, axis=1)[:, None]
+    low = after & (S < FORCE_DROP * peak)
+    if not np.any(low):
+        return None
+    first = int(np.min(np.where(np.any(low, axis=1), np.argmax(low, axis=1), S.shape[1])))
+    return float(freq[max(first - 1, 0)])
+
+
 # ---- defaults read from the data ----
 
 #: a force whose kurtosis exceeds this is impulsive (hammer); Gaussian random has 3, a sine
@@ -592,6 +623,9 @@ def impact_frfset(
 IMPULSIVE_KURTOSIS = 20.0
 #: impacts closer than this (s) are one hit (a double hit's rebound)
 SAME_HIT = 0.1
+#: impacts closer than this fraction of the median time between a recording's impacts are
+#: a double hit's rebound, not the hits' spacing (the record length)
+REBOUND_GAP = 0.25
 
 
 @dataclass(frozen=True)
@@ -826,7 +860,11 @@ def impact_defaults(force: ArrayLike, responses: ArrayLike, fs: float,
         raise InputError("no impact stands out of the force's noise: check the force channel")
     level = max(10 * sigma, 0.02 * peak)
     starts = _impacts(g, level, fs)
-    spacing = float(np.min(np.diff(starts)) / fs) if starts.size > 1 else None
+    gaps = np.diff(starts)
+    if gaps.size:  # a double hit's rebound (a soft tip's comes several pulse widths, tens
+        # of ms, after the first pulse: past SAME_HIT) is part of its hit, not the spacing
+        gaps = np.diff(starts[np.r_[True, gaps >= REBOUND_GAP * np.median(gaps)]])
+    spacing = float(np.min(gaps)) / fs if gaps.size else None
     # pulse widths: from first above 10 % of each impact's peak to back under 5 %
     w_n = max(1, round(SAME_HIT * fs))
     seg = g[np.minimum(starts[:, None] + np.arange(w_n), n - 1)]

@@ -75,6 +75,10 @@ class IdentifyOptions:
     #: resamples of the bootstrap over the hits or blocks of time data
     #: (:mod:`processing.bootstrap`); None: 200 when every point has at least 3; 0: none
     bootstrap: int | None = None
+    #: Hz: residual peaks above it are not taken for elastic modes (a hammer's force falls
+    #: to a spectral zero there); set by :func:`processing.identify.identify` from the FRFs'
+    #: ``meta["force_band_top"]``
+    elastic_top: float | None = None
 
 
 @dataclass(frozen=True)
@@ -331,8 +335,8 @@ def prepare(
         X, colw = _weighted_accelerances(H, E, coherence, geo.length, coherence_floor)
     line_ok = _usable_lines(colw, T, options.max_cond_T, geo.length)
     snr = None if coherence is None else _line_snr(coherence)
-    peaks = (elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep, line_snr=snr)
-             if n_r > 6 else ())
+    peaks = (elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep, line_snr=snr,
+                           fmax=options.elastic_top) if n_r > 6 else ())
     return Problem(
         options=options, freq=freq, w=2 * np.pi * freq, H=H, coherence=coherence, geometry=geo,
         E=E, Epinv=Ep, T=T, X=X, rel_err=rel_err, peaks=peaks,

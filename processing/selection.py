@@ -126,6 +126,7 @@ def elastic_peaks(
     rel_err: NDArray[np.float64] | None = None,
     Epinv: NDArray[np.float64] | None = None,
     line_snr: NDArray[np.float64] | None = None,
+    fmax: float | None = None,
 ) -> tuple[ElasticPeak, ...]:
     """Elastic modes seen in the data: peaks of the non-rigid residual.
 
@@ -138,7 +139,9 @@ def elastic_peaks(
     only: a peak of the residual's power at a rigid-body resonance (sensor or location
     errors) is a small part of the response there. With ``line_snr`` (n_f,), the
     signal-to-noise power ratio of each line, peaks on lines under 1 are noise (the lowest
-    lines, where accelerances are small).
+    lines, where accelerances are small). Peaks on lines above ``fmax`` (Hz) are not
+    counted (a hammer's force falls to its pulse's spectral zero there, where an FRF is
+    noise over almost nothing: a spike with a lightly damped mode's shape).
     ``rel_err`` and ``Epinv`` may be passed when already computed.
     """
     n_r, n_e, n_f = H.shape
@@ -158,6 +161,8 @@ def elastic_peaks(
                      by_abs[rel[by_abs] > max(min_rel, 10.0 * floor)])
     if line_snr is not None:
         idx = idx[line_snr[idx] >= 1.0]
+    if fmax is not None:
+        idx = idx[freq[idx] <= fmax]
     if idx.size == 0:
         return ()
     # keep the strongest residual directions only, for speed

@@ -33,12 +33,14 @@ from processing.excitation import (
 )
 from processing.identify import FROM_TIME_RECORDS
 from processing.impact import (
+    FORCE_BAND_TOP,
     MIN_PRETRIGGER,
     ImpactDefaults,
     ImpactResult,
     ImpactSettings,
     excitation_type,
     exponential_for,
+    force_band_top,
     impact_defaults,
     merge_results,
     pretrigger_for,
@@ -474,11 +476,15 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
                    np.array([k[1] for k in keys]), geometry, meta,
                    s.fmax if s.fmax is not None else first.fs / 2.56, reports)
     out.meta[FROM_TIME_RECORDS] = True  # kept in FRF files (the per-unit spectra are not)
-    if all(cols[k][3] is not None for k in keys):  # per-unit spectra: the bootstrap
+    units = [u for k in keys if (u := cols[k][3]) is not None]
+    if len(units) == len(keys):  # per-unit spectra: the bootstrap
         out.meta["time_units"] = TimeUnits(
-            "hit" if s.excitation == "impact" else "block",
-            tuple(u for k in keys if (u := cols[k][3]) is not None),
+            "hit" if s.excitation == "impact" else "block", tuple(units),
             np.array([k[0] for k in keys]), np.array([k[1] for k in keys]), s.estimator)
+    if s.excitation == "impact" and len(units) == len(keys):  # the hammer's usable band
+        top = force_band_top(units[0].freq, np.stack([u.Sff.mean(axis=0) for u in units]))
+        if top is not None:
+            out.meta[FORCE_BAND_TOP] = top
     if s.excitation == "random":
         out = _from_signal(out, s.coherence, reports)
     return out, reports + check_reports(out, s.coherence)

@@ -12,7 +12,8 @@ response before each impact is cut at the recording's start).
 Hammer test (:func:`hammer_test`), per excitation point one run of several hits:
 
 - half-sine pulses of varying width (0.9-1.1 of ``2.56 / fs``: a tip that excites up to the
-  analysis band) and amplitude (0.5-1.0 of the test's force), irregular spacing;
+  analysis band; ``tip`` times that for a softer one) and amplitude (0.5-1.0 of the test's
+  force), irregular spacing;
 - double hits (a second pulse 2.5-8 pulse widths after the first, 20-60 % of its height)
   and clipped hits (a hit at least twice the run's others, hard enough that three consecutive
   samples of one response channel exceed everything the other hits give it; that channel's
@@ -160,7 +161,9 @@ class HammerSpec:
     ``noise_force`` the force noise over the test's force (``offset`` its DC offset and
     drift), ``noise_response`` the responses' noise over their median peak (``settling`` the
     IEPE settling offset at the start, ``drift`` a slow sinusoidal drift, both over it too),
-    ``damping`` the factor on the mounts' loss factors,
+    ``damping`` the factor on the mounts' loss factors, ``tip`` the factor on the pulses'
+    widths (2: a soft tip, whose force's first spectral zero, at ``1.5 / width`` = 0.29 fs,
+    falls inside the analysis band),
     ``fs`` the sample rate (None: a power of two >= 2.56 times the scenario's span, >= 256 Hz).
     """
 
@@ -177,6 +180,7 @@ class HammerSpec:
     settling: float = 0.1
     drift: float = 1e-3
     damping: float = 1.0
+    tip: float = 1.0
     fs: float | None = None
 
 
@@ -324,7 +328,7 @@ def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
         times = lead + np.concatenate([[0.0], np.cumsum(gaps[:-1])])
         n = int(np.ceil((times[-1] + gaps.max()) * fs))  # the longest gap after the last hit
         t = np.arange(n) / fs
-        width = rng.uniform(0.9, 1.1, spec.hits) * 2.56 / fs
+        width = rng.uniform(0.9, 1.1, spec.hits) * 2.56 * spec.tip / fs
         peak = spec.force * rng.uniform(0.5, 1.0, spec.hits)
         which = int(rng.integers(spec.hits))
         kind = defect[e]

@@ -81,3 +81,18 @@ def test_record_and_window_follow_spacing_and_decay() -> None:
     widths = [h.width for h in light.runs[0].hits]
     assert min(widths) - 2 / light.fs < dl.pulse_width < max(widths) + 2 / light.fs
     assert 0 < dl.level < 0.1 * min(h.peak for h in light.runs[0].hits)
+
+
+def test_soft_tips_double_hit_is_no_spacing() -> None:
+    """A soft tip (pulses 2x the band's width, about 16 ms at 256 Hz) rebounds 2.5-8 widths
+    after its first pulse: 40-130 ms, past the 0.1 s within which two impacts are one. The
+    record was then cut to that rebound's gap (0.12 s for hits 4 s apart)."""
+    sc = _scenario(1)
+    for seed in range(4):
+        t = hammer_test(sc, HammerSpec(seed=seed, hits=4, spacing=3.0, n_double=4, tip=2.0,
+                                       fs=256))
+        for r in t.runs:
+            gaps = np.diff([h.time for h in r.hits])
+            d = impact_defaults(r.forces[0], r.responses, t.fs)
+            assert d.spacing is not None and abs(d.spacing - gaps.min()) < 0.05, (seed, d)
+            assert d.record > 0.5 * gaps.min()
