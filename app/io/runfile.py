@@ -36,11 +36,16 @@ from numpy.typing import NDArray
 from app.io.mounts import MountsFile, MountsFileError, mounts_from_dict
 from drivers.base import ChannelConfig
 from processing.data import FRFSet, Geometry
+from processing.impact import FORCE_BAND_TOP
 
 __all__ = ["SCHEMA_VERSION", "ChannelInfo", "RecordTable", "RunData", "RunFileError",
            "RunWriter", "iter_record_data", "read_run", "repair", "write_mounts"]
 
 SCHEMA_VERSION = 1
+#: numeric ``FRFSet.meta`` entries kept with a finished run's FRFs (attributes of ``/frf``):
+#: the identification reads them (the exponential window's damping is removed from C, no
+#: elastic mode is read above the hammer's usable band)
+STORED_META = ("exponential_tau", FORCE_BAND_TOP)
 FORMAT = "insitu-run"
 TEXT = 256  # bytes of a reason / note in the fixed-width string columns
 OVERRIDES = {"": 0, "accept": 1, "reject": -1}
@@ -341,6 +346,9 @@ class RunWriter:
             if frf is not None:
                 g = f.create_group("frf")
                 g.attrs["estimator"] = str(frf.meta.get("estimator", "H1"))
+                for key in STORED_META:  # numbers the identification reads from the FRFs
+                    if isinstance(v := frf.meta.get(key), int | float):
+                        g.attrs[key] = float(v)
                 _array(g, "freq", frf.freq, "Hz")
                 _array(g, "H", frf.H, "m/s^2/N")
                 if frf.coherence is not None:
@@ -540,7 +548,8 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
                      g["exc_nodes"][()], g["exc_dirs"][()], geometry,
                      g["coherence"][()] if "coherence" in g else None,
                      {"estimator": _str(g.attrs.get("estimator", "H1")),
-                      "n_averages": g["n_averages"][()].tolist()})
+                      "n_averages": g["n_averages"][()].tolist(),
+                      **{k: float(g.attrs[k]) for k in STORED_META if k in g.attrs}})
     result = json.loads(_str(f["result"][()])) if "result" in f else None
     mounts = _read_mounts(p, f["mounts"]) if "mounts" in f else None
     state = _str(f.attrs.get("state", ""))
