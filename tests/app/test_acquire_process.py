@@ -170,25 +170,27 @@ def test_station_without_a_control_channel_is_refused(
     assert "--mock-operator drives a bench started by insitu mock-bench" in capsys.readouterr().err
 
 
-def _same(a: Any, b: Any) -> None:
-    """Equal results: the same keys and texts, numbers to 1e-9 (the spectra's sums may
+def _same(a: Any, b: Any, path: str = "result") -> None:
+    """Equal results: the same keys and texts, numbers to 1e-6 (the spectra's sums may
     differ in the last digit, and with them which negligible contributions are listed)."""
     if isinstance(a, dict):
-        assert isinstance(b, dict) and a.keys() == b.keys()
+        assert isinstance(b, dict) and a.keys() == b.keys(), path
         for k in a:
             if k == "contributions":  # shares of numerically zero size come and go
                 a[k], b[k] = ([c for c in x if c["fraction"] > 1e-9] for x in (a[k], b[k]))
-            _same(a[k], b[k])
+            _same(a[k], b[k], f"{path}.{k}")
     elif isinstance(a, list) and any(isinstance(x, dict | str) for x in a):
-        assert isinstance(b, list) and len(a) == len(b)
-        for x, y in zip(a, b, strict=True):
-            _same(x, y)
+        assert isinstance(b, list) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _same(x, y, f"{path}[{i}]")
     elif isinstance(a, list | float) and not isinstance(a, bool):
-        # to 1e-9 of each value and of the largest in its array: an entry near zero (K's
-        # 0.36 N/m off the diagonal against 8.7e5 on it) differs by rounding, 1e-14 of K,
-        # when the summation order of another process's BLAS differs
+        # to 1e-6 of each value and of the largest in its array: the summation order of
+        # another process's BLAS differs, and the iterations (converged to 1e-10) carry the
+        # rounding on: K's 0.36 N/m off the diagonal (8.7e5 on it) differed by 1e-14 of K,
+        # a value of 1.4e-4 by 4.2e-9 of itself, between the acquiring process and the replay
+        # in fresh clones. A different band, line or model moves results by 1e-4 or more.
         B = np.asarray(b, dtype=float)
-        assert_allclose(np.asarray(a, dtype=float), B, rtol=1e-9,
-                        atol=1e-9 * float(np.max(np.abs(B), initial=0.0)))
+        assert_allclose(np.asarray(a, dtype=float), B, rtol=1e-6,
+                        atol=1e-6 * float(np.max(np.abs(B), initial=0.0)), err_msg=path)
     else:
-        assert a == b
+        assert a == b, path
