@@ -417,12 +417,12 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     """:func:`_solve_batch` for a fit with leakage shapes (the cleaning of the accelerances
     makes the iteration non-linear): the iteration itself, from the main fit's solution,
     resample by resample."""
-    from processing.identify import _leakage_shapes
+    from processing.identify import _leakage_shapes, upper_residual
 
     msel, ins = weights.mass_lines, bands.in_stiffness
     shapes = _leakage_shapes(problem, bands)
     if not shapes:  # the upper residual the fit chose
-        shapes = [(problem.w / problem.w[-1]) ** 2 + 0j]
+        shapes = [upper_residual(problem.w)]
     stacked = np.array([stack_real(sh[msel]) for sh in shapes])
     opt = dataclasses.replace(problem.options, tol=max(problem.options.tol, 1e-9))
     out = []

@@ -106,6 +106,7 @@ __all__ = [
     "identify",
     "identify_arrays",
     "settle_mass_band",
+    "upper_residual",
     "uncertainty",
     "weigh_lines",
 ]
@@ -363,12 +364,18 @@ class _StiffnessStep:
         return ch.model, ch.reason
 
 
+def upper_residual(w: NDArray[np.float64]) -> NDArray[np.complex128]:
+    """Frequency shape (all lines) of the upper residual, the modes above the band:
+    ``(w / w_top)^2``."""
+    return np.asarray((w / w[-1]) ** 2 + 0j, dtype=np.complex128)
+
+
 def _leakage_shapes(problem: Problem, bands: Bands) -> list[NDArray[np.complex128]]:
     """Frequency shapes (all lines) of the modelled leakage: each elastic mode, then w^2."""
     if not bands.leakage:
         return []
     w = problem.w
-    return [*(mode_shape_basis(w, p) for p in problem.peaks), (w / w[-1]) ** 2 + 0j]
+    return [*(mode_shape_basis(w, p) for p in problem.peaks), upper_residual(w)]
 
 
 def _iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
@@ -495,9 +502,8 @@ def _upper_residual_chosen(problem: Problem, weights: LineWeights,
     the band; a residual fitted to noise makes it scatter)."""
     if np.count_nonzero(weights.mass_lines) < 8:
         return False, "upper residual not modelled: fewer than 8 mass lines"
-    w = problem.w
     without = _spread(problem, weights, step, [])
-    with_ = _spread(problem, weights, step, [(w / w[-1]) ** 2 + 0j])
+    with_ = _spread(problem, weights, step, [upper_residual(problem.w)])
     use = with_ < without
     return use, (f"upper residual (w^2 term) {'modelled' if use else 'not modelled'}: "
                  f"half-band disagreement {with_:.2%} with it, {without:.2%} without")
@@ -552,7 +558,7 @@ def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tu
                                                          problem.w[ins]),
                           weights.stiffness_lines[ins])
     shapes = _leakage_shapes(problem, bands)
-    models = [shapes] if shapes else [[], [(problem.w / problem.w[-1]) ** 2 + 0j]]
+    models = [shapes] if shapes else [[], [upper_residual(problem.w)]]
     cands = []
     for top in tops:
         keep = freq[idx] <= top * (1 + 1e-9)
@@ -600,8 +606,7 @@ def fit(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
     if problem.improved and not shapes and opt.leakage == "auto":
         use, note = _upper_residual_chosen(problem, weights, step)
         if use:
-            w = problem.w
-            shapes = [(w / w[-1]) ** 2 + 0j]
+            shapes = [upper_residual(problem.w)]
             best = _fit_model(problem, weights, step, shapes)
     damping_note = "damping viscous (K + jwC): the article's model (plain method)"
     if problem.improved and opt.damping == "viscous":
@@ -930,7 +935,7 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
     InputError, GeometryError
         With a one-line message naming the problem and what to do.
     """
-    opt, notes = _within_force_band(frf, options or IdentifyOptions())
+    opt, notes = _force_band_options(frf, options or IdentifyOptions())
     rigid_top: float | None = None
     rigid_raised: float | None = None
     if opt.use_rigidity and (opt.mass_band is None or opt.stiffness_band is None):
@@ -953,7 +958,7 @@ def identify(frf: FRFSet, options: IdentifyOptions | None = None) -> Identificat
     return result
 
 
-def _within_force_band(frf: FRFSet, opt: IdentifyOptions) -> tuple[IdentifyOptions, list[str]]:
+def _force_band_options(frf: FRFSet, opt: IdentifyOptions) -> tuple[IdentifyOptions, list[str]]:
     """The options with ``elastic_top`` at the hammer's usable band (``meta[FORCE_BAND_TOP]``,
     set where hammer FRFs are estimated) when it ends inside the data, and a note; as they
     are otherwise, or when given."""

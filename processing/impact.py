@@ -563,15 +563,16 @@ def impact_frfset(
     en = np.asarray(exc_nodes).ravel()
     if len(results) != en.size:
         raise InputError(f"{len(results)} impact results for {en.size} excitation DOFs")
-    cols, cohs = [], []
+    cols, cohs, forces = [], [], []
     for j, r in enumerate(results):
-        if r.H is None or r.coherence is None:
+        if r.H is None or r.coherence is None or r.spectra is None:
             why = "; ".join(sorted({v.reason for v in r.verdicts})) or "no hit found"
             raise InputError(f"excitation {j} (node {en[j]}) has no accepted hit: {why}")
         if not np.array_equal(r.freq, results[0].freq):
             raise InputError("impact results have different frequency lines")
         cols.append(r.H)
         cohs.append(r.coherence)
+        forces.append(r.spectra.Sff[0, 0].real)  # the averaged force auto-spectrum
     taus = {r.exp_tau for r in results}
     meta: dict[str, object] = {
         "estimator": results[0].estimator,
@@ -579,9 +580,7 @@ def impact_frfset(
         "exponential_tau": taus.pop() if len(taus) == 1 else [r.exp_tau for r in results],
         "n_averages": [r.n_accepted for r in results],
     }
-    top = force_band_top(results[0].freq, np.stack([
-        r.spectra.Sff[0, 0].real for r in results if r.spectra is not None]))
-    if top is not None:
+    if (top := force_band_top(results[0].freq, np.stack(forces))) is not None:
         meta[FORCE_BAND_TOP] = top
     return FRFSet(
         freq=results[0].freq,

@@ -477,13 +477,12 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
                    s.fmax if s.fmax is not None else first.fs / 2.56, reports)
     out.meta[FROM_TIME_RECORDS] = True  # kept in FRF files (the per-unit spectra are not)
     units = [u for k in keys if (u := cols[k][3]) is not None]
-    if len(units) == len(keys):  # per-unit spectra: the bootstrap
+    if len(units) == len(keys):  # per-unit spectra: the bootstrap, the hammer's usable band
         out.meta["time_units"] = TimeUnits(
             "hit" if s.excitation == "impact" else "block", tuple(units),
             np.array([k[0] for k in keys]), np.array([k[1] for k in keys]), s.estimator)
-    if s.excitation == "impact" and len(units) == len(keys):  # the hammer's usable band
-        top = force_band_top(units[0].freq, np.stack([u.Sff.mean(axis=0) for u in units]))
-        if top is not None:
+        if s.excitation == "impact" and (top := force_band_top(
+                units[0].freq, np.stack([u.Sff.mean(axis=0) for u in units]))) is not None:
             out.meta[FORCE_BAND_TOP] = top
     if s.excitation == "random":
         out = _from_signal(out, s.coherence, reports)
