@@ -106,8 +106,8 @@ __all__ = [
     "identify",
     "identify_arrays",
     "settle_mass_band",
-    "upper_residual",
     "uncertainty",
+    "upper_residual",
     "weigh_lines",
 ]
 
