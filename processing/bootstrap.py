@@ -13,7 +13,8 @@ bootstrap uncertainty.
 
 Units
     :class:`processing.units.TimeUnits` (per column, the spectra of each unit), attached by
-    the pipeline to ``FRFSet.meta["time_units"]``.
+    the pipeline to the measurement's provenance
+    (:attr:`processing.measurement.Provenance.units`).
 
 Re-identification
     Without modelled leakage the coupled inertia-stiffness iteration (section 2.2) is an
@@ -33,27 +34,27 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from processing.data import FRFSet, InputError
-from processing.identify import Bands, Fit, LineWeights, _iterate, _StiffnessStep
+from processing.data import InputError
 from processing.inertia import MASS_BASIS, mass_matrix
 from processing.massline import MassLineProblem, stack_real
 from processing.physical import constrain_physical
-from processing.problem import (
-    TIME_DATA_ERROR_FLOOR,
-    IdentifyOptions,
-    Problem,
-    h1_variances,
-    prepare,
-    typical_rms,
-)
+from processing.problem import Problem, h1_variances, typical_rms
 from processing.results import UNCERTAIN_KEYS
 from processing.spectral import CrossSpectra, frf
-from processing.stiffness import _BLOCKS, _DUP, line_operators
+from processing.stages import (
+    Bands,
+    Fit,
+    LineWeights,
+    StiffnessStep,
+    iterate,
+    leakage_shapes,
+    upper_residual,
+)
+from processing.stiffness import DAMPING_BLOCKS, DUPLICATION, line_operators
 from processing.uncertainty import derived_of_draws, draw_covariance
 from processing.units import TimeUnits, UnitKind
 
-__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "bootstrap_identify", "resample",
-           "weighted_accelerances"]
+__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "resample", "weighted_accelerances"]
 
 #: resamples when none are asked for
 DEFAULT_RESAMPLES = 200
@@ -281,10 +282,10 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
     (n, n_l, 6, n_e) with column weights ``ws_`` (n, n_e, n_l): it is affine in M, returned
     as its value at M = 0, (K, C, D) each (n, 6, 6), and its change per unit of each
     parameter, each (n, 10, 6, 6)
-    (``_StiffnessStep``, vectorised over resamples)."""
+    (:class:`processing.stages.StiffnessStep`, vectorised over resamples)."""
     n = Xs.shape[0]
     w = problem.w[weights.stiffness_lines]
-    a, T, opt = problem.window_decay, problem.T, problem.options
+    a, T, symmetric = problem.window_decay, problem.T, problem.solver.symmetric
     MB = MASS_BASIS[None]  # (1, 10, 6, 6), symmetric
     zero, zl = np.zeros((n, 6, 6)), np.zeros((n, 10, 6, 6))
     if not problem.improved:
@@ -296,7 +297,7 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
             cc = float(np.sum(w * (-sq).imag) / np.sum(w**2))
             kk = float(np.mean((-sq).real)) - a * cc
             Kl, Cl = np.broadcast_to(kk * MB, zl.shape), np.broadcast_to(cc * MB, zl.shape)
-            if opt.symmetric:
+            if symmetric:
                 K0, C0 = 0.5 * (K0 + np.swapaxes(K0, 1, 2)), 0.5 * (C0 + np.swapaxes(C0, 1, 2))
             return (K0, C0, zero), (Kl, Cl, zl)
         # the article's line average of eq. 14: K = mean(w^2) M - mean(w^2 Re B), C
@@ -320,7 +321,7 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
     G0r, G0i, G1r, G1i = G[0].real, G[0].imag, G[1].real, G[1].imag
     full = [[G0r, -G1i, -G0i], [G1i, G[2].real, G1r], [G0i, G1r, G0r]]
-    blocks = _BLOCKS[model]
+    blocks = DAMPING_BLOCKS[model]
     k = len(blocks)
     Nb = np.concatenate([np.concatenate([full[r][c] for c in blocks], axis=2)
                          for r in blocks], axis=1)  # (n, 6k, 6k)
@@ -338,8 +339,8 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
     # the value at M = 0 and the change per parameter: eleven right-hand sides at once
     r = np.concatenate([rhs(-Q2, -Q3)[:, None],
                         rhs(A0[:, None] @ (MB + 0j), A1[:, None] @ (MB + 0j))], axis=1)
-    if opt.symmetric:
-        dup = np.kron(np.eye(k), _DUP)
+    if symmetric:
+        dup = np.kron(np.eye(k), DUPLICATION)
         v = np.linalg.solve(dup.T @ Nfull @ dup, dup.T @ np.swapaxes(r, 1, 2))
         v = np.swapaxes(dup @ v, 1, 2)  # (n, 11, 36 k)
     else:
@@ -363,7 +364,7 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
     leakage shapes) with its lines and damping model, solved for the fixed point of the
     inertia-stiffness iteration directly.
 
-    For fixed data the iteration (:func:`processing.identify._iterate`) is affine in theta:
+    For fixed data the iteration (:func:`processing.stages.iterate`) is affine in theta:
     the stiffness step is affine in M, the mass-line solve linear in K, C, D. So
     ``theta = t0 + L theta`` is one 10x10 solve a resample.
     """
@@ -417,26 +418,24 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     """:func:`_solve_batch` for a fit with leakage shapes (the cleaning of the accelerances
     makes the iteration non-linear): the iteration itself, from the main fit's solution,
     resample by resample."""
-    from processing.identify import _leakage_shapes, upper_residual
-
     msel, ins = weights.mass_lines, bands.in_stiffness
-    shapes = _leakage_shapes(problem, bands)
+    shapes = leakage_shapes(problem, bands)
     if not shapes:  # the upper residual the fit chose
         shapes = [upper_residual(problem.w)]
     stacked = np.array([stack_real(sh[msel]) for sh in shapes])
-    opt = dataclasses.replace(problem.options, tol=max(problem.options.tol, 1e-9))
+    solver = dataclasses.replace(problem.solver, tol=max(problem.solver.tol, 1e-9))
     out = []
     for Xb, wmb, wsb in zip(X, wm_, ws_, strict=True):  # not affine: one at a time
         weights = dataclasses.replace(weights, mass=wmb, stiffness=wsb)
-        pb = dataclasses.replace(problem, X=Xb, options=opt)
+        pb = dataclasses.replace(problem, X=Xb, solver=solver)
         ops = (fitted.operators if problem.improved
                else line_operators(Xb[..., ins], problem.T, problem.w[ins]))
-        step = _StiffnessStep(pb, weights, ops, weights.stiffness_lines[ins])
+        step = StiffnessStep(pb, weights, ops, weights.stiffness_lines[ins])
         step.model = fitted.damping_model
         ml = MassLineProblem(Xb[..., msel], weights=weights.mass, row_scale=problem.row_scale,
                              shapes=stacked)
         Xs = Xb[..., weights.stiffness_lines]
-        _, theta, K, C, _D, Xc, _, _ = _iterate(pb, weights, ml, step, shapes, (fitted.theta, Xs))
+        _, theta, K, C, _D, Xc, _, _ = iterate(pb, weights, ml, step, shapes, (fitted.theta, Xs))
         if problem.options.physical:  # K, C on the cleaned lines, as the main fit
             theta = constrain_physical(theta, ml.normal)
             K, C, _D = step(mass_matrix(theta), Xc)
@@ -503,33 +502,3 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
                    for _ in range(c.n_units))
     return Bootstrap(theta, K, C, np.concatenate(counts, axis=1),
                      groups, units.kind, tuple(c.n_units for c in units.columns))
-
-
-def bootstrap_identify(frf: FRFSet, options: IdentifyOptions | None = None,
-                       n: int = DEFAULT_RESAMPLES, seed: int = 0,
-                       ) -> tuple[Fit, Bootstrap | str]:
-    """The main fit of ``identify(frf, options)`` and its bootstrap over the units in
-    ``frf.meta["time_units"]`` alone (without the other sources): for studies of the
-    bootstrap itself. Bands as :func:`processing.identify.identify` takes or chooses them;
-    no point refinement."""
-    from processing.identify import _rigid_band_tops, choose_bands, fit, weigh_lines
-
-    opt = options or IdentifyOptions()
-    units = frf.meta.get("time_units")
-    if not isinstance(units, TimeUnits):
-        raise InputError("the FRFs carry no per-hit or per-block spectra (time data only)")
-    aligned = units.aligned(frf.exc_nodes, frf.exc_dirs)
-    if aligned is None:
-        raise InputError("the time data's units do not cover every excitation column")
-    tops: tuple[float | None, float | None] = (None, None)
-    if opt.use_rigidity and (opt.mass_band is None or opt.stiffness_band is None):
-        tops = _rigid_band_tops(frf)[:2]
-    tau = frf.meta.get("exponential_tau")
-    problem = prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
-                      coherence=frf.coherence, options=opt,
-                      exponential_tau=float(tau) if isinstance(tau, int | float) and tau > 0
-                      else None, coherence_floor=TIME_DATA_ERROR_FLOOR)
-    bands = choose_bands(problem, *tops)
-    weights = weigh_lines(problem, bands)
-    fitted = fit(problem, bands, weights)
-    return fitted, resample(problem, bands, weights, fitted, aligned, n, seed)

@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from processing.inertia import MASS_BASIS
 from processing.massline import MassLineProblem
-from processing.stiffness import _DUP
+from processing.stiffness import DUPLICATION
 
 __all__ = ["Draws", "MonteCarloModel", "StatedUncertainty", "build_model", "simulate"]
 
@@ -235,7 +235,7 @@ def _solve_draws(model: MonteCarloModel, dP: NDArray[np.float64], tilt: NDArray[
         blocks[:, :, i, :, :, i, :] = m.s2[i] * Nb
     Nfull = blocks.reshape(n, 72, 72)
     if m.symmetric:
-        _DUP2 = np.kron(np.eye(2), _DUP)  # [vech K; vech C] -> [vec K; vec C]
+        _DUP2 = np.kron(np.eye(2), DUPLICATION)  # [vech K; vech C] -> [vec K; vec C]
         S = _DUP2[None] @ np.linalg.solve(_DUP2.T[None] @ Nfull @ _DUP2[None], _DUP2.T[None])
     else:
         S = np.linalg.inv(Nfull)

@@ -31,7 +31,7 @@ from processing.montecarlo import StatedUncertainty
 from processing.results import Method
 from processing.selection import ElasticPeak, elastic_peaks, reconstruction_error
 
-__all__ = ["IdentifyOptions", "Problem", "prepare"]
+__all__ = ["IdentifyOptions", "Problem", "SolverSettings", "prepare"]
 
 
 #: noise floor of every FRF value, relative to the FRFs' median RMS over lines, for FRFs
@@ -45,27 +45,18 @@ TIME_DATA_ERROR_FLOOR = 3e-2
 
 @dataclass(frozen=True)
 class IdentifyOptions:
-    """Options of :func:`processing.identify.identify`. Bands in Hz; ``None`` chooses them."""
+    """The user's choices for :func:`processing.identify.fit`. Bands in Hz; ``None`` chooses
+    them. How the solver works is apart (:class:`SolverSettings`); what is read from the data
+    lives in the measurement (:class:`processing.measurement.Provenance`) and the result."""
 
     method: Method = "improved"
     mass_band: tuple[float, float] | None = None
     stiffness_band: tuple[float, float] | None = None
     physical: bool = False
-    #: section 3: keep lines whose reconstruction error is below level x the band mean
-    level: float = 3.0
-    max_cond_T: float = DEFAULT_MAX_COND_T
+    #: coherence under which an FRF value counts as low (it is weighed down, never dropped)
     coherence_threshold: float = 0.8
-    max_iter: int = 50
-    tol: float = 1e-10
-    #: improved method: model elastic leakage when elastic modes are seen ("auto") or never
-    leakage: Literal["auto", "off"] = "auto"
-    symmetric: bool = True
-    #: relative FRF noise above which elastic leakage is not modelled
-    leakage_max_noise: float = 0.002
     #: rounds of response-point location refinement (:mod:`processing.refine`); 0 = off
     refine_points: int = 0
-    #: bound the automatic mass-line band by the rigidity check (article section 5.1)
-    use_rigidity: bool = True
     #: standard deviations of the results from the fit's covariance (:mod:`processing.uncertainty`)
     uncertainty: bool = True
     #: damping model of K*: chosen from the data ("auto") or viscous K + jwC only
@@ -75,10 +66,24 @@ class IdentifyOptions:
     #: resamples of the bootstrap over the hits or blocks of time data
     #: (:mod:`processing.bootstrap`); None: 200 when every point has at least 3; 0: none
     bootstrap: int | None = None
-    #: Hz: residual peaks above it are not taken for elastic modes (a hammer's force falls
-    #: to a spectral zero there); set by :func:`processing.identify.identify` from the FRFs'
-    #: ``meta["force_band_top"]``
-    elastic_top: float | None = None
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """How the identification's solver works (the defaults serve every test)."""
+
+    #: section 3: keep lines whose reconstruction error is below level x the band mean
+    level: float = 3.0
+    max_cond_T: float = DEFAULT_MAX_COND_T
+    max_iter: int = 50
+    tol: float = 1e-10
+    #: improved method: model elastic leakage when elastic modes are seen ("auto") or never
+    leakage: Literal["auto", "off"] = "auto"
+    symmetric: bool = True
+    #: relative FRF noise above which elastic leakage is not modelled
+    leakage_max_noise: float = 0.002
+    #: bound the automatic mass-line band by the rigidity check (article section 5.1)
+    use_rigidity: bool = True
 
 
 @dataclass(frozen=True)
@@ -88,6 +93,7 @@ class Problem:
     Attributes
     ----------
     options : IdentifyOptions
+    solver : SolverSettings
     freq, w : (n_f,) line frequencies, Hz and rad/s
     H : (n_resp, n_exc, n_f) complex accelerances, (m/s^2)/N
     coherence : (n_resp, n_exc, n_f) or None
@@ -102,7 +108,7 @@ class Problem:
     col_weights : (n_exc, n_f) weight of each excitation column on each line, from the
         coherence of its FRF values (1 without coherence; see :func:`_weighted_accelerances`)
     line_ok : (n_f,) lines where T restricted to the coherent columns has rank 6 and
-        condition at most ``options.max_cond_T``
+        condition at most ``solver.max_cond_T``
     row_scale : (6,) scale of the equation rows (1/L on moments, improved method) or None
     exponential_tau : time constant of an exponential window on the records, s, or None
     warnings : messages of the geometry checks
@@ -111,6 +117,7 @@ class Problem:
     """
 
     options: IdentifyOptions
+    solver: SolverSettings
     freq: NDArray[np.float64]
     w: NDArray[np.float64]
     H: NDArray[np.complex128]
@@ -308,20 +315,25 @@ def prepare(
     options: IdentifyOptions,
     exponential_tau: float | None,
     coherence_floor: float = COHERENCE_NOISE_FLOOR,
+    solver: SolverSettings | None = None,
+    elastic_top: float | None = None,
 ) -> Problem:
     """Check the input and build the :class:`Problem` (shapes as in :class:`FRFSet`).
 
     ``coherence_floor`` is the floor of every FRF value's error under the coherence,
     relative to the FRFs' typical RMS (:data:`COHERENCE_NOISE_FLOOR` for FRFs given,
-    :data:`TIME_DATA_ERROR_FLOOR` for FRFs estimated here from time records).
+    :data:`TIME_DATA_ERROR_FLOOR` for FRFs estimated here from time records); residual
+    peaks above ``elastic_top`` (Hz) are not taken for elastic modes (a hammer's force falls
+    to a spectral zero there).
 
     Raises
     ------
     InputError, GeometryError
         With a one-line message naming the problem and what to do.
     """
+    solver = solver or SolverSettings()
     freq, H_all, coherence, k0 = _checked_arrays(freq, H, coherence)
-    geo, warnings = _checked_geometry(resp_xyz, resp_dirs, exc_xyz, exc_dirs, options.max_cond_T)
+    geo, warnings = _checked_geometry(resp_xyz, resp_dirs, exc_xyz, exc_dirs, solver.max_cond_T)
     E = response_matrix(resp_xyz, resp_dirs)
     T = excitation_matrix(exc_xyz, exc_dirs)
     n_r, n_e = H_all.shape[:2]
@@ -333,12 +345,13 @@ def prepare(
         X, colw = X0, np.ones((n_e, freq.size))
     else:
         X, colw = _weighted_accelerances(H, E, coherence, geo.length, coherence_floor)
-    line_ok = _usable_lines(colw, T, options.max_cond_T, geo.length)
+    line_ok = _usable_lines(colw, T, solver.max_cond_T, geo.length)
     snr = None if coherence is None else _line_snr(coherence)
     peaks = (elastic_peaks(freq, H, E, rel_err=rel_err, Epinv=Ep, line_snr=snr,
-                           fmax=options.elastic_top) if n_r > 6 else ())
+                           fmax=elastic_top) if n_r > 6 else ())
     return Problem(
-        options=options, freq=freq, w=2 * np.pi * freq, H=H, coherence=coherence, geometry=geo,
+        options=options, solver=solver, freq=freq, w=2 * np.pi * freq, H=H,
+        coherence=coherence, geometry=geo,
         E=E, Epinv=Ep, T=T, X=X, rel_err=rel_err, peaks=peaks,
         noise=noise_level(rel_err, freq, peaks, n_r), col_weights=colw, line_ok=line_ok,
         row_scale=1.0 / scaling(geo.length) if options.method == "improved" else None,

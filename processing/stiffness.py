@@ -17,7 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "DAMPING_BLOCKS",
     "DAMPING_MODELS",
+    "DUPLICATION",
     "DampingChoice",
     "DampingModel",
     "LineOperators",
@@ -118,15 +120,16 @@ def _duplication() -> NDArray[np.float64]:
     return D
 
 
-_DUP = _duplication()
+#: the duplication matrix: vech of a symmetric 6x6 -> its vec
+DUPLICATION = _duplication()
 
 #: the damping terms of ``K* = K + j w C + j D`` a fit may hold: viscous C, structural
 #: (hysteretic) D, or both
 DampingModel = Literal["viscous", "hysteretic", "both"]
 DAMPING_MODELS: tuple[DampingModel, ...] = ("viscous", "hysteretic", "both")
 #: the unknown blocks of each model, indices into (K, C, D)
-_BLOCKS: dict[str, tuple[int, ...]] = {"viscous": (0, 1), "hysteretic": (0, 2),
-                                       "both": (0, 1, 2)}
+DAMPING_BLOCKS: dict[str, tuple[int, ...]] = {"viscous": (0, 1), "hysteretic": (0, 2),
+                                              "both": (0, 1, 2)}
 
 
 @dataclass(frozen=True)
@@ -177,14 +180,14 @@ class StiffnessMoments:
             G0r, G0i, G1r, G1i = self.G0.real, self.G0.imag, self.G1.real, self.G1.imag
             # Gram blocks of the regressors x (K), j w x (C) and j x (D)
             full = [[G0r, -G1i, -G0i], [G1i, self.G2.real, G1r], [G0i, G1r, G0r]]
-            b = _BLOCKS[model]
+            b = DAMPING_BLOCKS[model]
             n = len(b)
             Nb = np.block([[full[r][c] for c in b] for r in b])
             # full normal matrix over the stacked row-major vecs: row blocks s2_i * Nb
             Nfull = np.einsum("i,ij,taub->tiaujb", s2, np.eye(6), Nb.reshape(n, 6, n, 6))
             Nfull = Nfull.reshape(36 * n, 36 * n)
             if symmetric:  # unknowns [vech K; vech C; ...] through the duplication matrix
-                dup = np.kron(np.eye(n), _DUP)
+                dup = np.kron(np.eye(n), DUPLICATION)
                 S = np.asarray(dup @ np.linalg.solve(dup.T @ Nfull @ dup, dup.T), dtype=float)
             else:
                 S = np.asarray(np.linalg.inv(Nfull), dtype=float)
@@ -256,10 +259,10 @@ def fit_stiffness(
               - (Q[q + 2] - a**2 * Q[q] - 2j * a * Q[q + 1]) for q in (0, 1))
     s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
     rhs = (R0.real, R1.imag, R0.imag)  # right-hand sides of K, C, D: Re of conj(regressor) y
-    r = np.concatenate([(rhs[b] * s2[None, :]).T.ravel() for b in _BLOCKS[model]])
+    r = np.concatenate([(rhs[b] * s2[None, :]).T.ravel() for b in DAMPING_BLOCKS[model]])
     v = mom.solver(s2, symmetric, model) @ r
     parts = [np.zeros((6, 6))] * 3
-    for k, b in enumerate(_BLOCKS[model]):
+    for k, b in enumerate(DAMPING_BLOCKS[model]):
         parts[b] = v[36 * k:36 * (k + 1)].reshape(6, 6)
     K = parts[0] - a * parts[1]  # the fit's K is K + a C with a window
     return StiffnessFit(K, parts[1], mom.n_equations, parts[2], model)
@@ -327,7 +330,7 @@ def choose_damping(
         sf = fit_stiffness(mom, T, w, M, row_scale=row_scale, symmetric=symmetric, model=model)
         rss, yss = stiffness_residual(X, T, w, M, sf, weights=weights, row_scale=row_scale)
         rss = max(rss, _RSS_FLOOR * yss, 1e-300)
-        bic[model] = n * float(np.log(rss / n)) + per_block * len(_BLOCKS[model]) * np.log(n)
+        bic[model] = n * float(np.log(rss / n)) + per_block * len(DAMPING_BLOCKS[model]) * np.log(n)
     best = min(DAMPING_MODELS, key=lambda m: bic[m])
     chosen: DampingModel = best if bic[best] < bic["viscous"] - _BIC_MARGIN else "viscous"
     names = {"viscous": "viscous C", "hysteretic": "structural D", "both": "C and D"}
