@@ -31,8 +31,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing.data import FRFSet, Geometry, InputError
 from processing.decay import CARRY_MIN, CARRY_STRETCH, free_decay, noise_sigma
+from processing.measurement import Measurement, Provenance
 from processing.spectral import CrossSpectra, combine, frf, record_spectra
-from processing.units import UnitSpectra, record_units
+from processing.units import TimeUnits, UnitSpectra, record_units
 from processing.windows import exponential_window, force_window
 
 __all__ = [
@@ -47,6 +48,7 @@ __all__ = [
     "force_band_top",
     "impact_defaults",
     "impact_frfset",
+    "impact_measurement",
     "merge_results",
     "pretrigger_for",
     "process_impacts",
@@ -55,8 +57,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: ``FRFSet.meta`` key: the top of the hammer's usable band, Hz (:func:`force_band_top`)
-FORCE_BAND_TOP = "force_band_top"
 #: the usable band ends where the averaged force auto-spectrum falls under this fraction
 #: of its peak (20 dB: the usual limit of a hammer tip's band)
 FORCE_DROP = 0.01
@@ -548,15 +548,19 @@ def merge_results(results: Sequence[ImpactResult]) -> ImpactResult:
                         {**first.meta, "n_averages": sp.n_averages}, units)
 
 
-def impact_frfset(
+def impact_measurement(
     results: Sequence[ImpactResult],
     geometry: Geometry,
     resp_nodes: ArrayLike,
     resp_dirs: ArrayLike,
     exc_nodes: ArrayLike,
     exc_dirs: ArrayLike,
-) -> FRFSet:
-    """An :class:`FRFSet` with one column per excitation point, in the order of ``results``.
+    units: TimeUnits | None = None,
+) -> Measurement:
+    """A :class:`~processing.measurement.Measurement` with one FRF column per excitation
+    point, in the order of ``results``: estimated here from hits, with the exponential
+    window's tau (when every point shares one), the hammer's usable band
+    (:func:`force_band_top`) and the per-hit spectra ``units`` when given.
 
     Raises InputError naming the excitation without any accepted hit.
     """
@@ -574,15 +578,8 @@ def impact_frfset(
         cohs.append(r.coherence)
         forces.append(r.spectra.Sff[0, 0].real)  # the averaged force auto-spectrum
     taus = {r.exp_tau for r in results}
-    meta: dict[str, object] = {
-        "estimator": results[0].estimator,
-        "excitation": "impact",
-        "exponential_tau": taus.pop() if len(taus) == 1 else [r.exp_tau for r in results],
-        "n_averages": [r.n_accepted for r in results],
-    }
-    if (top := force_band_top(results[0].freq, np.stack(forces))) is not None:
-        meta[FORCE_BAND_TOP] = top
-    return FRFSet(
+    estimator = results[0].estimator
+    frf = FRFSet(
         freq=results[0].freq,
         H=np.concatenate(cols, axis=1),
         resp_nodes=np.asarray(resp_nodes),
@@ -591,8 +588,27 @@ def impact_frfset(
         exc_dirs=np.asarray(exc_dirs),
         geometry=geometry,
         coherence=np.concatenate(cohs, axis=1),
-        meta=meta,
+        meta={"estimator": estimator, "excitation": "impact",
+              "n_averages": [r.n_accepted for r in results]},
     )
+    return Measurement(frf, Provenance(
+        origin="estimated", excitation="impact", estimator=estimator, units=units,
+        exponential_tau=taus.pop() if len(taus) == 1 else None,
+        force_band_top=force_band_top(results[0].freq, np.stack(forces))))
+
+
+def impact_frfset(
+    results: Sequence[ImpactResult],
+    geometry: Geometry,
+    resp_nodes: ArrayLike,
+    resp_dirs: ArrayLike,
+    exc_nodes: ArrayLike,
+    exc_dirs: ArrayLike,
+) -> FRFSet:
+    """The FRFs of :func:`impact_measurement` (one column per excitation point, in the order
+    of ``results``), without their provenance."""
+    return impact_measurement(results, geometry, resp_nodes, resp_dirs, exc_nodes,
+                              exc_dirs).frf
 
 
 def force_band_top(freq: NDArray[np.float64], Sff: NDArray[np.float64]) -> float | None:

@@ -110,8 +110,9 @@ class Provenance:
         return out
 
     @classmethod
-    def restored(cls, attrs: Mapping[str, object]) -> Provenance:
-        """The provenance a file kept (:meth:`stored`); InputError naming a bad field."""
+    def restored(cls, attrs: Mapping[str, object], origin: Origin = "given") -> Provenance:
+        """The provenance a file kept (:meth:`stored`; ``origin`` when it names none);
+        InputError naming a bad field."""
         def number(name: str) -> float | None:
             v = attrs.get(name)
             if v is None:
@@ -121,10 +122,8 @@ class Provenance:
             except ValueError as err:
                 raise InputError(f"provenance field {name} is not a number: {v!r}") from err
 
-        origin = str(attrs.get("origin", "given"))
-        if origin != "estimated":
-            origin = "given"
-        return cls(origin="estimated" if origin == "estimated" else "given",
+        kept = str(attrs.get("origin", origin))
+        return cls(origin="estimated" if kept == "estimated" else "given",
                    excitation=str(attrs.get("excitation", "")),
                    estimator=str(attrs.get("estimator", "H1")),
                    exponential_tau=number("exponential_tau"),

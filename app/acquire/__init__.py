@@ -14,10 +14,12 @@ Public API (stable; the GUI builds on it):
   ``on_paused``, ``on_resumed``, ``on_error``, ``on_finished``, and ``on_samples`` with a
   :class:`SampleBlock` after every read, for live traces), :class:`HitRecord`,
   :class:`PointFRF`, :class:`Progress`, :class:`RunState`;
-- replay: :func:`analyse_run`; overrides of a stored run: :func:`override_run`.
+- a run's measurement from its stored records: :func:`run_measurement` (every view opens
+  run files through :func:`app.pipeline.load`); overrides of a stored run:
+  :func:`override_run`.
 """
 
-from app.acquire.analysis import analyse_run
+from app.acquire.analysis import run_measurement
 from app.acquire.events import HitRecord, Listener, PointFRF, Progress, RunState, SampleBlock
 from app.acquire.hammer import HammerProcedure
 from app.acquire.overrides import OverrideOutcome, override_run
@@ -51,8 +53,8 @@ __all__ = [
     "ShakerProcedure",
     "ShakerSettings",
     "TestPlan",
-    "analyse_run",
     "load_plan",
     "override_run",
     "parse_plan",
+    "run_measurement",
 ]

@@ -8,30 +8,33 @@ same FRFs and the same identification, bit for bit.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from app.acquire.blocks import BlockAnalysis, RecordLoader, shaker_frfset
+from app.acquire.blocks import BlockAnalysis, RecordLoader, shaker_measurement
 from app.acquire.plan import RecordSettings, TestPlan
 from app.io.runfile import RunData
 from processing.data import FRFSet, Geometry, InputError
-from processing.identify import FROM_TIME_RECORDS, IdentificationResult, IdentifyOptions, identify
 from processing.impact import (
     ImpactResult,
     ImpactSettings,
     impact_frfset,
+    impact_measurement,
     merge_results,
     process_impacts,
 )
+from processing.measurement import Measurement
 from processing.units import TimeUnits, UnitSpectra
 
 __all__ = ["PointColumn", "RecordAnalysis", "RecordLoader", "RunAnalysis", "analyse_blocks",
-           "analyse_records", "analyse_run", "check_identifiable", "frfset", "hit_result",
-           "host_timed", "impact_settings", "margin_samples", "point_result", "run_frfs",
-           "run_units"]
+           "analyse_records", "analysis_measurement", "anti_aliased", "check_identifiable",
+           "frfset", "hit_result", "host_timed", "impact_settings", "margin_samples",
+           "point_result", "run_measurement", "run_units"]
 
 
 def margin_samples(fs: float) -> int:
@@ -73,12 +76,12 @@ def frfset(plan: TestPlan, points: Sequence[ImpactResult], geometry: Geometry,
     return impact_frfset(points, geometry, resp_nodes, resp_dirs, plan.exc_nodes, plan.exc_dirs)
 
 
-def identify_frfs(frf: FRFSet, options: IdentifyOptions | None = None) -> IdentificationResult:
-    """The identification of a run's FRFs, on the lines above 0 Hz and up to fs / 2.56
-    (above it the front ends' anti-alias filters shape the data)."""
-    lines = frf.select_lines(frf.anti_alias_fmax())
-    lines.meta[FROM_TIME_RECORDS] = True  # a run's hits or blocks
-    return identify(lines, options or IdentifyOptions())
+def anti_aliased(m: Measurement) -> Measurement:
+    """A run's measurement on its lines above 0 Hz and up to fs / 2.56 (above it the front
+    ends' anti-alias filters shape the data)."""
+    fmax = m.frf.anti_alias_fmax()
+    return dataclasses.replace(m, frf=m.frf.select_lines(fmax), provenance=dataclasses.replace(
+        m.provenance, anti_alias_fmax=fmax))
 
 
 class PointColumn(Protocol):
@@ -301,20 +304,6 @@ def analyse_blocks(run: RunData) -> tuple[TestPlan, BlockAnalysis]:
     return plan, blocks
 
 
-def analyse_run(run: RunData, options: IdentifyOptions | None = None) -> (
-    tuple[FRFSet, IdentificationResult, RecordAnalysis]
-):
-    """Recompute every verdict, the FRFs and the identification from a run file's raw records.
-
-    Returns the FRFs, the identification and the analysis (:class:`RunAnalysis` for a
-    hammer run, :class:`~app.acquire.blocks.BlockAnalysis` for a shaker run). A run whose
-    force was aligned by host timing only is refused (InputError, one line).
-    """
-    check_identifiable(run)
-    frf, ana = run_frfs(run)
-    return frf, identify_frfs(frf, options), ana
-
-
 def run_units(ana: RecordAnalysis, max_averages: int | None = None) -> TimeUnits | None:
     """The per-hit (hammer) or per-block (shaker) spectra of every point with a used record,
     for the bootstrap (:mod:`processing.bootstrap`); None when no point has one, or when the
@@ -342,27 +331,57 @@ def check_identifiable(run: RunData) -> None:
         raise InputError(f"{run.path}: not identified: {host_timed(dev, ref)}")
 
 
-def run_frfs(run: RunData, max_averages: int | None = None
-             ) -> tuple[FRFSet, RecordAnalysis]:
-    """The FRFs of a run's stored records (every point needs an accepted record) and the
-    analysis they come from; :func:`analyse_run` without the identification. With
-    ``max_averages``, each point averages only its first used records."""
+def analysis_measurement(ana: RecordAnalysis, geometry: Geometry,
+                         resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64],
+                         source: str, points: Sequence[int] | None = None,
+                         max_averages: int | None = None) -> Measurement:
+    """The measurement of a run's analysis, on all its lines: the FRF columns of ``points``
+    (hammer; every point when None) or of every drive (shaker), each averaging its first
+    ``max_averages`` used records (all when None), with the per-hit or per-block spectra
+    (:func:`run_units`), and for hits the window's tau and the hammer's usable band. The
+    live run and a run file's records (:func:`run_measurement`) both come here.
+
+    Raises InputError naming a point (a drive) without a used record.
+    """
+    plan = ana.plan
+    units = run_units(ana, max_averages)
+    if isinstance(ana, RunAnalysis):
+        idx = list(range(len(plan.excitations))) if points is None else list(points)
+        cols = [ana.point(j, max_averages) for j in idx]
+        for j, r in zip(idx, cols, strict=True):
+            if r is None:
+                raise InputError(f"excitation {plan.excitations[j].label} has no accepted "
+                                 "hit: resume the run (insitu acquire --resume)")
+        m = impact_measurement([r for r in cols if r is not None], geometry, resp_nodes,
+                               resp_dirs, plan.exc_nodes[idx], plan.exc_dirs[idx], units)
+    else:
+        assert isinstance(ana, BlockAnalysis)
+        drives = [ana.point(d, max_averages) for d in range(len(plan.drives))]
+        m = shaker_measurement(plan, drives, geometry, resp_nodes, resp_dirs, units)
+    return dataclasses.replace(m, source=source)
+
+
+def run_measurement(run: RunData, max_averages: int | None = None) -> tuple[
+    Measurement, RecordAnalysis
+]:
+    """The measurement of a run file's stored records, every record judged again
+    (:func:`analysis_measurement` of :func:`analyse_records` or :func:`analyse_blocks`),
+    and the analysis it comes from (the identification refuses a run whose force was
+    aligned by host timing only: :func:`check_identifiable`)."""
     if run.method == "shaker":
-        splan, blocks = analyse_blocks(run)
-        resp = run.channels[splan.n_references:]
-        cols = [blocks.point(d, max_averages) for d in range(len(splan.drives))]
-        return shaker_frfset(splan, cols, run.geometry, np.array([c.node for c in resp]),
-                             np.array([c.direction for c in resp])), blocks
-    resp = run.channels[1:]
-    resp_nodes, resp_dirs = np.array([c.node for c in resp]), np.array([c.direction for c in resp])
-    plan, ana = analyse_records(run)
-    points = [ana.point(j, max_averages) for j in range(len(plan.excitations))]
-    for j, r in enumerate(points):
-        if r is None:
-            raise InputError(f"{run.path}: excitation {plan.excitations[j].label} has no "
-                             "accepted hit: resume the run (insitu acquire --resume)")
-    return frfset(plan, [r for r in points if r is not None], run.geometry, resp_nodes,
-                  resp_dirs), ana
+        _, blocks = analyse_blocks(run)
+        resp = run.channels[blocks.plan.n_references:]
+        ana: RecordAnalysis = blocks
+    else:
+        _, ana = analyse_records(run)
+        resp = run.channels[1:]
+    try:
+        m = analysis_measurement(ana, run.geometry, np.array([c.node for c in resp]),
+                                 np.array([c.direction for c in resp]), Path(run.path).name,
+                                 max_averages=max_averages)
+    except InputError as err:
+        raise InputError(f"{run.path}: {err}") from err
+    return m, ana
 
 
 def host_timed(force_device: str, frontend: str) -> str:

@@ -36,11 +36,12 @@ from numpy.typing import NDArray
 
 from app.acquire.plan import ShakerSettings, TestPlan
 from processing.data import FRFSet, Geometry, InputError
+from processing.measurement import Measurement, Provenance
 from processing.spectral import CrossSpectra, SpectralAccumulator, frf
-from processing.units import UnitSpectra
+from processing.units import TimeUnits, UnitSpectra
 
 __all__ = ["REBUILD_BLOCKS", "WINDOWS", "WORKERS", "BlockAnalysis", "BlockResult",
-           "RecordLoader", "block_verdict", "shaker_frfset"]
+           "RecordLoader", "block_verdict", "shaker_frfset", "shaker_measurement"]
 
 #: window of each waveform's blocks (scipy window names)
 WINDOWS = {"random": "hann", "burst-random": "boxcar", "chirp": "boxcar"}
@@ -267,10 +268,13 @@ class BlockAnalysis:
         return st
 
 
-def shaker_frfset(plan: TestPlan, points: Sequence[BlockResult | None], geometry: Geometry,
-                  resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64]) -> FRFSet:
-    """All drives' FRF columns as one FRF set, one column per excitation in plan order
-    (``points[d]``: drive ``d``'s result; raises InputError naming a drive without blocks)."""
+def shaker_measurement(plan: TestPlan, points: Sequence[BlockResult | None],
+                       geometry: Geometry, resp_nodes: NDArray[np.int64],
+                       resp_dirs: NDArray[np.float64], units: TimeUnits | None = None,
+                       ) -> Measurement:
+    """All drives' FRF columns as one measurement, one column per excitation in plan order
+    (``points[d]``: drive ``d``'s result; raises InputError naming a drive without blocks),
+    estimated here from blocks, with their spectra ``units`` when given."""
     cols, cohs, n_avg = [], [], []
     for d, r in enumerate(points):
         if r is None:
@@ -281,10 +285,18 @@ def shaker_frfset(plan: TestPlan, points: Sequence[BlockResult | None], geometry
         cohs.append(r.coherence)
         n_avg += [r.n_accepted] * r.H.shape[1]
     first = next(r for r in points if r is not None)
-    meta: dict[str, object] = {"estimator": plan.record.estimator,
-                               "excitation": f"shaker {plan.shaker.waveform}",
+    excitation = f"shaker {plan.shaker.waveform}"
+    meta: dict[str, object] = {"estimator": plan.record.estimator, "excitation": excitation,
                                "window": WINDOWS[plan.shaker.waveform], "n_averages": n_avg}
     if plan.n_references > 1:
         meta["shakers"] = plan.n_references
-    return FRFSet(first.freq, np.concatenate(cols, axis=1), resp_nodes, resp_dirs,
-                  plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1), meta)
+    frf = FRFSet(first.freq, np.concatenate(cols, axis=1), resp_nodes, resp_dirs,
+                 plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1), meta)
+    return Measurement(frf, Provenance(origin="estimated", excitation=excitation,
+                                       estimator=plan.record.estimator, units=units))
+
+
+def shaker_frfset(plan: TestPlan, points: Sequence[BlockResult | None], geometry: Geometry,
+                  resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64]) -> FRFSet:
+    """The FRFs of :func:`shaker_measurement`, without their provenance."""
+    return shaker_measurement(plan, points, geometry, resp_nodes, resp_dirs).frf

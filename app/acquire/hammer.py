@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.acquire.analysis import RunAnalysis, frfset, host_timed, margin_samples
+from app.acquire.analysis import RunAnalysis, analysis_measurement, host_timed, margin_samples
 from app.acquire.events import HitRecord
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
 from app.acquire.procedure import StopRequestedError
@@ -32,6 +32,7 @@ from drivers.station import StationConfig
 from processing.data import FRFSet
 from processing.geometry import GeometryReport
 from processing.identify import IdentificationResult
+from processing.measurement import Measurement
 
 __all__ = ["HammerProcedure", "station_summary"]
 
@@ -120,6 +121,7 @@ class HammerProcedure(RecordingProcedure):
             [c.full_scale for c in self.rows]), loader=self._load_records)
         self.point_index = 0
         self.frf: FRFSet | None = None
+        self.measurement: Measurement | None = None
         self.result: IdentificationResult | None = None
         self.hits: list[HitRecord] = []
         self._streams: HitStreams | None = None
@@ -324,9 +326,7 @@ class HammerProcedure(RecordingProcedure):
     def _complete(self) -> None:
         """All points done: FRFs, identification, final state in the file."""
         assert self.writer is not None
-        points = [self.analysis.point(j) for j in range(len(self.plan.excitations))]
-        resp = self.rows[1:]
-        frf = frfset(self.plan, [p for p in points if p is not None], self.plan.geometry(),
-                     *self.plan.response_dofs(self.station))
-        assert len(resp) == frf.H.shape[0]
-        self._finish_run(frf)
+        m = analysis_measurement(self.analysis, self.plan.geometry(),
+                                 *self.plan.response_dofs(self.station), self.path.name)
+        assert len(self.rows) - 1 == m.frf.H.shape[0]
+        self._finish_run(m)

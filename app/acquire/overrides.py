@@ -2,7 +2,7 @@
 
 :func:`override_run` sets the override column of some records, then recomputes
 the FRFs and the identification from the raw records through the replay's code
-(:func:`app.acquire.analysis.analyse_run`) and stores them when every point has
+(:func:`app.acquire.analysis.run_measurement`) and stores them when every point has
 the hits (or blocks) the plan asks for: ``insitu replay`` then gives the same
 FRFs and result. A run that lacks hits after the change is left for
 ``insitu acquire --resume`` to complete.
@@ -27,14 +27,16 @@ import numpy as np
 from app.acquire.analysis import (
     analyse_blocks,
     analyse_records,
+    anti_aliased,
     check_identifiable,
-    identify_frfs,
-    run_frfs,
+    run_measurement,
 )
 from app.acquire.plan import parse_plan
 from app.io.runfile import OVERRIDES, RunData, RunFileError, RunWriter, read_run
 from processing.data import InputError
 from processing.geometry import GeometryError, check_geometry
+from processing.identify import fit
+from processing.measurement import Measurement
 
 __all__ = ["OverrideOutcome", "override_run", "parse_override"]
 
@@ -130,15 +132,15 @@ def override_run(path: str | Path, overrides: Mapping[int, str],
     amended = dataclasses.replace(run, records=dataclasses.replace(rec, override=tuple(new)))
     used, need = _needed(amended)
     missing = [(j, n, need) for j, n in enumerate(used) if n < need]
-    frf = None
+    measurement: Measurement | None = None
     result: dict[str, Any] | None = None
     message = ""
     if not missing:
-        frf, _ = run_frfs(amended)
+        measurement, _ = run_measurement(amended)
         if identify and _spans_six_dofs(amended):  # as the live run: not a partial plan
             try:
                 check_identifiable(amended)
-                result = identify_frfs(frf).to_json()
+                result = fit(anti_aliased(measurement)).to_json()
             except (InputError, GeometryError) as err:
                 message = f"identification failed: {err}"
     state = "finished" if not missing else (
@@ -150,5 +152,5 @@ def override_run(path: str | Path, overrides: Mapping[int, str],
         for i in changed:
             writer.set_override(i, new[i])
     finally:
-        writer.finish(state, message, frf, result)
+        writer.finish(state, message, measurement, result)
     return OverrideOutcome(read_run(p), changed, not missing, missing, message, result)

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from app.acquire.analysis import RecordAnalysis, identify_frfs
+from app.acquire.analysis import RecordAnalysis, anti_aliased
 from app.acquire.events import HitRecord, PointFRF, Progress
 from app.acquire.plan import PlanError, TestPlan
 from app.acquire.procedure import Procedure
@@ -23,7 +23,8 @@ from app.io.runfile import RunWriter
 from drivers.station import StationConfig
 from processing.data import FRFSet, InputError
 from processing.geometry import GeometryError, GeometryReport
-from processing.identify import IdentificationResult
+from processing.identify import IdentificationResult, fit
+from processing.measurement import Measurement
 
 __all__ = ["RecordingProcedure"]
 
@@ -44,6 +45,8 @@ class RecordingProcedure(Procedure):
     point_index: int
     writer: RunWriter | None
     frf: FRFSet | None
+    #: the run's measurement once every point is done (all lines; the fit cuts at fs / 2.56)
+    measurement: Measurement | None
     result: IdentificationResult | None
     do_identify: bool
     geometry_report: GeometryReport
@@ -123,17 +126,19 @@ class RecordingProcedure(Procedure):
         if self.writer is not None:
             self.writer.add_note(text, time.monotonic() - self._t0 + self._t_offset)
 
-    def _finish_run(self, frf: FRFSet) -> None:
-        """Store the FRFs and, when the plan allows, the identification; the run is done."""
+    def _finish_run(self, measurement: Measurement) -> None:
+        """Store the FRFs and, when the plan allows, the identification (the fit every view
+        makes of the run file: :func:`processing.identify.fit` of its lines up to fs / 2.56);
+        the run is done."""
         assert self.writer is not None
-        self.frf = frf
+        self.measurement, self.frf = measurement, measurement.frf
         message, result_json = "", None
         if self.do_identify and self.geometry_report.ok:
             try:
-                self.result = identify_frfs(frf)
+                self.result = fit(anti_aliased(measurement))
                 result_json = self.result.to_json()
             except (InputError, GeometryError) as err:
                 message = f"identification failed: {err}"
                 self.emit("on_error", message)
-        self.writer.finish("finished", message, frf, result_json)
+        self.writer.finish("finished", message, measurement, result_json)
         self.writer = None

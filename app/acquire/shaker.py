@@ -38,7 +38,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.acquire.blocks import WINDOWS, BlockAnalysis, block_verdict, shaker_frfset
+from app.acquire.analysis import analysis_measurement
+from app.acquire.blocks import WINDOWS, BlockAnalysis, block_verdict
 from app.acquire.events import HitRecord
 from app.acquire.hammer import station_summary
 from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
@@ -53,6 +54,7 @@ from drivers.station import StationConfig
 from processing.data import FRFSet
 from processing.geometry import GeometryReport
 from processing.identify import IdentificationResult
+from processing.measurement import Measurement
 
 __all__ = ["ShakerProcedure"]
 
@@ -125,6 +127,7 @@ class ShakerProcedure(RecordingProcedure):
         self.writer: RunWriter | None = None
         self.point_index = 0
         self.frf: FRFSet | None = None
+        self.measurement: Measurement | None = None
         self.result: IdentificationResult | None = None
         self.hits: list[HitRecord] = []
         self._auto: dict[int, bool] = {}
@@ -350,7 +353,6 @@ class ShakerProcedure(RecordingProcedure):
 
     def _complete(self) -> None:
         assert self.writer is not None
-        points = [self.analysis.point(d) for d in range(len(self.plan.drives))]
-        frf = shaker_frfset(self.plan, points, self.plan.geometry(),
-                            *self.plan.response_dofs(self.station))
-        self._finish_run(frf)
+        self._finish_run(analysis_measurement(self.analysis, self.plan.geometry(),
+                                              *self.plan.response_dofs(self.station),
+                                              self.path.name))

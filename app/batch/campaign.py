@@ -1,6 +1,7 @@
 """A campaign: many run/UFF/FRF files identified on a Dask cluster, one table row per file.
 
-:func:`identify_file` is the task (it runs on a worker: open through the pipeline, identify,
+:func:`identify_file` is the task (it runs on a worker: :func:`app.pipeline.load`, then
+:func:`processing.identify.fit`,
 reduce to one row; a failure is the row's one-line error, never an exception);
 :func:`run_campaign` maps it over the files; :func:`write_tables` writes the rows as CSV,
 Parquet and HTML.
@@ -20,10 +21,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from distributed import Client, as_completed
 
-from app.pipeline import Settings, n_skipped, open_frfs
+from app.pipeline import Settings, load
 from app.report.analysis import message_of
 from app.report.tables import Z95, half_width
-from processing.identify import IdentificationResult, IdentifyOptions, identify
+from processing.identify import IdentificationResult, IdentifyOptions, fit
 
 __all__ = ["COLUMNS", "TABLE_NAME", "identify_file", "result_row", "run_campaign",
            "write_tables"]
@@ -85,15 +86,16 @@ def identify_file(path: str, settings: Settings, options: IdentifyOptions) -> Ro
     t0 = time.perf_counter()
     row: Row = {"file": path}
     try:
-        frf, reports = open_frfs(path, settings)
-        result = identify(frf, options)
+        m = load(path, settings)
+        result = fit(m, options)
     except Exception as err:  # a bad file must not stop the campaign: its row says why
         text = message_of(err)
         if not isinstance(err, ValueError | OSError | ArithmeticError):
             text = f"{type(err).__name__}: {text}"
         row.update(status="error", error=text)
     else:
-        row.update(status="ok", error="", skipped_runs=n_skipped(reports), **result_row(result))
+        row.update(status="ok", error="", skipped_runs=m.provenance.skipped,
+                   **result_row(result))
     row["seconds"] = time.perf_counter() - t0
     return row
 

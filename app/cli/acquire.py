@@ -219,10 +219,11 @@ def _apply_overrides(args: argparse.Namespace, console: Console) -> bool:
     what = "FRFs and identification" if out.result is not None else "FRFs (partial plan)"
     console.print(f"{what} recomputed and stored in {args.out}")
     if out.result is not None:
-        from app.acquire.analysis import analyse_run
         from app.cli.summary import print_result
+        from app.pipeline import RUN_FILE, load
+        from processing.identify import fit
 
-        print_result(analyse_run(out.run)[1], console)
+        print_result(fit(load(args.out, fmt=RUN_FILE)), console)
     return True
 
 

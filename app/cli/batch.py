@@ -83,8 +83,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"no such file: {', '.join(missing[:5])}"
                         + (f" and {len(missing) - 5} more" if len(missing) > 5 else ""))
     settings = settings_from(args)  # every option checked before any work is sent
-    args.stated = identify_verb.stated_from(args)
-    options = identify_verb.options_from(args)
+    options = identify_verb.options_from(args, identify_verb.stated_from(args))
     console = Console()
     t0 = time.perf_counter()
     with open_client(args.scheduler, args.workers) as client:

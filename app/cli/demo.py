@@ -22,9 +22,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from app.acquire.events import Listener
 from app.cli.common import UserError
 from app.cli.summary import print_result
-from app.io.uff import read_frf_uff, write_frf_uff
+from app.io.uff import write_frf_uff
+from app.pipeline import FRF_UFF, load
 from hardware_mocks.benches import BENCHES, get_bench
-from processing.identify import IdentifyOptions, identify
+from processing.identify import IdentifyOptions, fit
 from processing.inertia import inertia_properties
 
 
@@ -132,10 +133,10 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{bench.name}.uff"
         write_frf_uff(path, bench.frfset(args.noise, args.location_error, seed=1))
-        frf = read_frf_uff(path)
+        m = load(path, fmt=FRF_UFF)
     truth = inertia_properties(model.theta)
     for method in ("plain", "improved"):
         console.rule(f"{method} method")
-        result = identify(frf, IdentifyOptions(method=method))
+        result = fit(m, IdentifyOptions(method=method))
         print_result(result, console, truth=truth, K_truth=model.K, C_truth=model.C)
     return 0

@@ -24,15 +24,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from app.cli.common import UserError
 from app.io.frf_h5 import write_frf_h5
 from app.io.uff import write_frf_uff
-from app.pipeline import RUN_FILE, TIME_UFF, OpenError, RunReport, Settings, n_skipped, open_frfs
+from app.pipeline import RUN_FILE, TIME_UFF, OpenError, RunReport, Settings, load
 from app.pipeline.formats import H5_SUFFIXES, UFF_SUFFIXES
-from processing.data import FRFSet
+from processing.measurement import Measurement
 from processing.spectral import ESTIMATORS
 
 
@@ -117,20 +118,20 @@ def settings_from(args: argparse.Namespace, **kwargs: Any) -> Settings:
                     fmax=args.fmax, **kwargs)
 
 
-def open_and_show(args: argparse.Namespace, settings: Settings,
-                  fmt: str | None = None) -> tuple[FRFSet, int]:
-    """``args.file``'s FRFs through the pipeline, its reports printed (a run left out: one
-    stderr line); returns the FRFs and the number of runs, points or columns left out."""
+def load_and_show(path: Path, args: argparse.Namespace, settings: Settings,
+                  fmt: str | None = None) -> Measurement:
+    """``path``'s measurement through the pipeline (:func:`app.pipeline.load`), its reports
+    printed (a run left out: one stderr line)."""
     try:
-        frf, reports = open_frfs(args.file, settings, fmt=fmt)
+        m = load(path, settings, fmt=fmt)
     except OpenError as err:
         show_reports(args, err.reports)
         raise
-    show_reports(args, reports)
-    return frf, n_skipped(reports)
+    show_reports(args, m.provenance.reports)
+    return m
 
 
-def show_reports(args: argparse.Namespace, reports: list[RunReport]) -> None:
+def show_reports(args: argparse.Namespace, reports: Sequence[RunReport]) -> None:
     """Print the pipeline's reports: a run left out on stderr (:func:`skipped`)."""
     for r in reports:
         if r.skipped:
@@ -147,9 +148,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out {out}: unknown suffix {out.suffix!r}: use .uff or .unv (UFF 58) "
                         "or .h5 or .hdf5 (HDF5 FRF file)")
     fmt = RUN_FILE if args.file.suffix.lower() in H5_SUFFIXES else TIME_UFF
-    frfs, n_bad = open_and_show(args, settings, fmt)
+    m = load_and_show(args.file, args, settings, fmt)
+    frfs, n_bad = m.frf, m.provenance.skipped
     if suffix in H5_SUFFIXES:
-        write_frf_h5(out, frfs, source=str(args.file))
+        write_frf_h5(out, m, source=str(args.file))
     else:
         write_frf_uff(out, frfs, binary=args.binary, coherence=True)
     print(f"{frfs.H.shape[0]} x {frfs.H.shape[1]} FRFs ({frfs.meta.get('estimator', 'H1')}), "

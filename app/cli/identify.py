@@ -14,21 +14,23 @@ identification then runs on the others and the exit status is 2.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
 
 from app.cli.common import UserError
-from app.cli.frf import add_processing_arguments, open_and_show, settings_from
+from app.cli.frf import add_processing_arguments, load_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
 from app.pipeline import TIME_UFF, detect_format
 from app.pipeline.settings import TestUncertaintySettings
 from app.report.mount_system import mount_system
 from processing.data import FRFSet
-from processing.identify import IdentificationResult, IdentifyOptions, identify
+from processing.identify import IdentificationResult, IdentifyOptions, fit
 from processing.montecarlo import StatedUncertainty
 from processing.mounts import check_mounts
 
@@ -140,7 +142,10 @@ def bootstrap_from(args: argparse.Namespace) -> int | None:
     return int(n)
 
 
-def options_from(args: argparse.Namespace) -> IdentifyOptions:
+def options_from(args: argparse.Namespace, stated: StatedUncertainty | None) -> IdentifyOptions:
+    """The user's identification choices of the command line (checked, one line each)."""
+    if args.refine_points < 0:
+        raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
     return IdentifyOptions(
         method=args.method,
         mass_band=tuple(args.mass_band) if args.mass_band else None,
@@ -149,41 +154,50 @@ def options_from(args: argparse.Namespace) -> IdentifyOptions:
         refine_points=args.refine_points,
         coherence_threshold=args.coherence,
         uncertainty=not args.no_uncertainty,
-        stated=args.stated,
+        stated=stated,
         bootstrap=bootstrap_from(args),
     )
 
 
+@dataclass(frozen=True)
+class _Mounts:
+    """The mount-system options: the mounts table (or None) and the two frequencies."""
+
+    table: MountsFile | None
+    excitation_hz: float | None
+    loss_factor_hz: float | None
+
+
 def run(args: argparse.Namespace) -> int:
-    if args.refine_points < 0:
-        raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
-    settings = settings_from(args)  # every option checked before any file is read
-    args.stated = stated_from(args)
-    args.mounts_file = mounts_from(args)
+    options = options_from(args, stated_from(args))  # every option checked before any file
+    settings = settings_from(args)
+    mounts = _Mounts(mounts_from(args), args.excitation_hz, args.loss_factor_hz)
     fmt = detect_format(args.file)
     if fmt == TIME_UFF:
         how = f"{args.excitation} excitation" if args.excitation else "settings from the data"
         print(f"{args.file}: time records; computing FRFs ({how})")
-    frf, n_bad = open_and_show(args, settings, fmt)
-    stored = frf.meta.get("mounts")
-    if args.mounts_file is None and isinstance(stored, MountsFile):
+    m = load_and_show(args.file, args, settings, fmt)
+    stored = m.frf.meta.get("mounts")
+    if mounts.table is None and isinstance(stored, MountsFile):
         print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")
         check_mounts(stored.mounts)
-        args.mounts_file = stored
-    return max(_report(args, frf, identify(frf, options_from(args))), 2 if n_bad else 0)
+        mounts = dataclasses.replace(mounts, table=stored)
+    result = fit(m, options)
+    _report(args.file, args.out, m.frf, result, mounts)
+    return 2 if m.provenance.skipped else 0
 
 
-def _report(args: argparse.Namespace, frf: FRFSet, result: IdentificationResult) -> int:
+def _report(path: Path, out: Path | None, frf: FRFSet, result: IdentificationResult,
+            mounts: _Mounts) -> None:
     console = Console()
-    console.print(f"[bold]{args.file}[/bold]: {frf.H.shape[0]} response DOFs x "
+    console.print(f"[bold]{path}[/bold]: {frf.H.shape[0]} response DOFs x "
                   f"{frf.H.shape[1]} excitations, {frf.freq.size} lines "
                   f"{frf.freq[0]:g}-{frf.freq[-1]:g} Hz")
     print_result(result, console)
     if result.uncertainty is not None:
         console.print("uncertainty: " + "; ".join(result.uncertainty.sources))
-    ms = mount_system(result, args.mounts_file, args.excitation_hz, args.loss_factor_hz)
+    ms = mount_system(result, mounts.table, mounts.excitation_hz, mounts.loss_factor_hz)
     print_mount_system(ms, console)
-    if args.out:
-        args.out.write_text(json.dumps({**result.to_json(), **ms.to_json()}, indent=2))
-        console.print(f"result written to {args.out}")
-    return 0
+    if out:
+        out.write_text(json.dumps({**result.to_json(), **ms.to_json()}, indent=2))
+        console.print(f"result written to {out}")

@@ -1,9 +1,10 @@
 """``insitu replay RUN.h5``: recompute FRFs and the identification from a run's raw records.
 
-Uses the same code as the live run (hammer hits or shaker blocks), on the records
-as stored, with the operator's overrides: the FRFs and the result are identical to
-the live run's. A run whose force was aligned by host timing only is refused.
-To change an override, see ``insitu acquire --resume --override``.
+The run file is loaded as every view loads it (:func:`app.pipeline.load`: the live run's own
+code on the records as stored, with the operator's overrides) and fitted
+(:func:`processing.identify.fit`): the FRFs and the result are identical to the live run's,
+and the command says whether they are. A run whose force was aligned by host timing only
+is refused. To change an override, see ``insitu acquire --resume --override``.
 """
 
 from __future__ import annotations
@@ -16,10 +17,11 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from app.acquire.analysis import analyse_run
 from app.cli.common import UserError
 from app.cli.summary import print_result
 from app.io.runfile import read_run
+from app.pipeline import RUN_FILE, load
+from processing.identify import fit
 
 
 def add_parser(sub: Any) -> None:
@@ -34,14 +36,16 @@ def run(args: argparse.Namespace) -> int:
     data = read_run(args.file)
     if len(data.records) == 0:
         raise UserError(f"{args.file}: the run holds no record yet")
-    frf, result, _ = analyse_run(data)
+    m = load(args.file, fmt=RUN_FILE)
+    frf, result = m.frf, fit(m)
     what = "blocks" if data.method == "shaker" else "hits"
     console = Console()
     acc = int(np.count_nonzero(data.records.accepted))
     console.print(f"[bold]{args.file}[/bold] ({data.state}): {len(data.records)} {what}, "
                   f"{acc} used, {frf.H.shape[0]} x {frf.H.shape[1]} FRFs")
-    if data.frf is not None:
-        same = np.array_equal(data.frf.H, frf.H) and data.result == json.loads(
+    if data.measurement is not None:
+        stored = data.measurement.frf.select_lines(frf.freq[-1])  # kept on all its lines
+        same = np.array_equal(stored.H, frf.H) and data.result == json.loads(
             json.dumps(result.to_json()))
         console.print("identical to the live run" if same else
                       "[yellow]differs from the FRFs stored by the live run[/yellow]")

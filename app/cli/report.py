@@ -49,12 +49,12 @@ def run(args: argparse.Namespace) -> int:
     if mounts is not None:
         check_mounts(mounts.mounts)
     try:
-        frf, reports, _ = open_source(args.file)
+        m, _ = open_source(args.file)
     except OpenError as err:
         show_reports(args, err.reports)
         raise
-    show_reports(args, reports)
-    a = analyse(frf, IdentifyOptions(physical=args.physical), args.file.name)
+    show_reports(args, m.provenance.reports)
+    a = analyse(m, IdentifyOptions(physical=args.physical), args.file.name)
     # figures are drawn by Qt off screen: no display needed
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6 import QtWidgets

@@ -1,4 +1,4 @@
-"""The state every view shares: the FRF set being analysed, its analysis and the options.
+"""The state every view shares: the measurement being analysed, its analysis and the options.
 
 :class:`Session` is the one place that starts background work on the data: loading a file
 and (re-)identifying. Views call its methods and redraw on its signals; none of them runs
@@ -7,6 +7,7 @@ numerics on the GUI thread.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from app.report.analysis import Analysis, analyse
 from app.report.sources import open_source
 from processing.data import FRFSet
 from processing.identify import IdentifyOptions
+from processing.measurement import Measurement
 
 __all__ = ["Session"]
 
@@ -29,7 +31,8 @@ class Session(QtCore.QObject):
     Signals
     -------
     data_changed(FRFSet)
-        New FRFs (a file opened, or an acquisition finished); an analysis follows.
+        New FRFs (a file opened, or an acquisition finished: a new measurement); an
+        analysis follows.
     analysis_changed(Analysis)
         A newer analysis of the current data is ready.
     message(str, str)
@@ -47,7 +50,8 @@ class Session(QtCore.QObject):
     def __init__(self, runner: TaskRunner, parent: QtCore.QObject | None = None) -> None:
         super().__init__(parent)
         self.runner = runner
-        self.frf: FRFSet | None = None
+        self.measurement: Measurement | None = None
+        self.frf: FRFSet | None = None  # the measurement's FRFs
         self.source = ""
         self.path: Path | None = None
         self.format: str | None = None  # the file's format (app.pipeline.FORMATS), if any
@@ -66,12 +70,14 @@ class Session(QtCore.QObject):
         self.message.emit("info", f"opening {p.name} …")
         self.runner.submit("session.load", lambda: (p, *open_source(p)))
 
-    def set_frf(self, frf: FRFSet, source: str, path: Path | None = None,
-                fmt: str | None = None) -> None:
-        """Make ``frf`` the current data and analyse it with automatic bands.
+    def set_measurement(self, measurement: Measurement, source: str, path: Path | None = None,
+                        fmt: str | None = None) -> None:
+        """Make ``measurement`` the current data and analyse it with automatic bands.
 
         ``fmt`` is the format of the file at ``path`` (:data:`app.pipeline.FORMATS`)."""
-        self.frf, self.source, self.path, self.format = frf, source, path, fmt
+        self.measurement, self.frf = measurement, measurement.frf
+        self.source, self.path, self.format = source, path, fmt
+        frf = measurement.frf
         self._generation += 1
         self.analysis = None
         self.options = replace(self.options, mass_band=None, stiffness_band=None)
@@ -92,20 +98,20 @@ class Session(QtCore.QObject):
 
     def reanalyse(self) -> None:
         """Identify and check the current data again (no-op without data)."""
-        frf, opt, src, gen = self.frf, self.options, self.source, self._generation
-        if frf is None:
+        m, opt, src, gen = self.measurement, self.options, self.source, self._generation
+        if m is None:
             return
-        self.runner.submit("session.analysis", lambda: (gen, analyse(frf, opt, src)))
+        self.runner.submit("session.analysis", lambda: (gen, analyse(m, opt, src)))
 
     @QtCore.Slot(str, object)
     def _on_done(self, key: str, result: object) -> None:
         if key == "session.load":
             assert isinstance(result, tuple)
-            path, frf, reports, fmt = result
-            self.message.emit(*_opened(path, reports, fmt))
-            if isinstance(frf.meta.get("mounts"), MountsFile):  # a run file's mounts table
-                self.set_mounts(frf.meta["mounts"])
-            self.set_frf(frf, path.name, path, fmt)
+            path, m, fmt = result
+            self.message.emit(*_opened(path, m.provenance.reports, fmt))
+            if isinstance(mounts := m.frf.meta.get("mounts"), MountsFile):  # a run file's
+                self.set_mounts(mounts)
+            self.set_measurement(m, path.name, path, fmt)
         elif key == "session.analysis":
             assert isinstance(result, tuple)
             gen, result = result
@@ -125,7 +131,7 @@ class Session(QtCore.QObject):
             self.message.emit("error", f"analysis failed: {message}")
 
 
-def _opened(path: Path, reports: list[RunReport], fmt: str) -> tuple[str, str]:
+def _opened(path: Path, reports: Sequence[RunReport], fmt: str) -> tuple[str, str]:
     """The message bar's (level, text) for a file opened: what it was, what was left out."""
     left_out = [r.message for r in reports if r.skipped]
     if not left_out:

@@ -25,9 +25,10 @@ import h5py
 import numpy as np
 
 from processing.data import FRFSet, Geometry
+from processing.measurement import Measurement, Provenance
 
 __all__ = ["FORMAT", "SCHEMA_VERSION", "FRFFileError", "h5_format", "read_frf_h5",
-           "write_frf_h5"]
+           "read_frf_measurement", "write_frf_h5"]
 
 SCHEMA_VERSION = 1
 FORMAT = "insitu-frf"
@@ -68,14 +69,17 @@ def h5_format(path: str | Path) -> str:
         return ""
 
 
-def write_frf_h5(path: str | Path, frf: FRFSet, *, source: str = "") -> None:
-    """Write an FRF set to an HDF5 FRF file (replaced atomically).
+def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "") -> None:
+    """Write FRFs (a measurement with its provenance) to an HDF5 FRF file (replaced
+    atomically).
 
     Parameters
     ----------
     path : output file (``.h5``)
     frf : FRFs (m/s^2/N) with their DOFs, geometry (m), optional coherence and ``meta``
-        (written as JSON; numpy values become lists, anything else its ``str``)
+        (written as JSON; numpy values become lists, anything else its ``str``); a
+        measurement's provenance is kept whole in the attributes of ``/provenance`` (the
+        per-hit or per-block spectra are not kept)
     source : what the FRFs were computed from (root attribute ``source``)
 
     Raises
@@ -84,9 +88,12 @@ def write_frf_h5(path: str | Path, frf: FRFSet, *, source: str = "") -> None:
         The file cannot be written.
     """
     p = Path(path)
+    prov = frf.provenance if isinstance(frf, Measurement) else Provenance()
+    frf = frf.frf if isinstance(frf, Measurement) else frf
     tmp = p.with_name(p.name + ".tmp")
     try:
         with h5py.File(tmp, "w") as f:
+            f.create_group("provenance").attrs.update(prov.stored())
             f.attrs.update({
                 "format": FORMAT, "schema_version": SCHEMA_VERSION, "source": source,
                 "estimator": str(frf.meta.get("estimator", "H1")),
@@ -98,8 +105,7 @@ def write_frf_h5(path: str | Path, frf: FRFSet, *, source: str = "") -> None:
                 "exc_dirs": frf.exc_dirs, "geometry/node_ids": frf.geometry.node_ids,
                 "geometry/xyz": frf.geometry.xyz,
                 # the per-hit spectra of time data (the bootstrap's) are not kept
-                "meta": json.dumps({k: v for k, v in frf.meta.items() if k != "time_units"},
-                                   default=_jsonable),
+                "meta": json.dumps(frf.meta, default=_jsonable),
             }
             if frf.coherence is not None:
                 values["coherence"] = frf.coherence
@@ -151,3 +157,33 @@ def read_frf_h5(path: str | Path) -> FRFSet:
             )
         except (KeyError, ValueError, TypeError) as err:
             raise FRFFileError(f"{p}: damaged FRF file: {str(err).splitlines()[0]}") from err
+
+
+#: keys of ``/meta`` that files written before ``/provenance`` existed used for it
+_OLD_PROVENANCE = ("exponential_tau", "force_band_top")
+
+
+def read_frf_measurement(path: str | Path) -> Measurement:
+    """The measurement of an FRF file: :func:`read_frf_h5` and the provenance kept with
+    the FRFs (``/provenance``; a file written before it: the ``from_time_records``,
+    ``exponential_tau`` and ``force_band_top`` entries of ``/meta``).
+
+    Raises
+    ------
+    FRFFileError
+        As :func:`read_frf_h5`, or a provenance field that is not a number.
+    """
+    p = Path(path)
+    frf = read_frf_h5(p)
+    try:
+        with h5py.File(p, "r") as f:
+            if "provenance" in f:
+                attrs = {k: _str(v) for k, v in f["provenance"].attrs.items()}
+            else:
+                attrs = {k: str(v) for k in _OLD_PROVENANCE
+                         if isinstance(v := frf.meta.get(k), int | float)}
+                attrs["origin"] = "estimated" if frf.meta.get("from_time_records") else "given"
+                attrs["estimator"] = str(frf.meta.get("estimator", "H1"))
+        return Measurement(frf, Provenance.restored(attrs), p.name)
+    except (OSError, ValueError) as err:
+        raise FRFFileError(f"{p}: damaged FRF file: {str(err).splitlines()[0]}") from err

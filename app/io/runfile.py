@@ -36,16 +36,12 @@ from numpy.typing import NDArray
 from app.io.mounts import MountsFile, MountsFileError, mounts_from_dict
 from drivers.base import ChannelConfig
 from processing.data import FRFSet, Geometry
-from processing.impact import FORCE_BAND_TOP
+from processing.measurement import Measurement, Provenance
 
 __all__ = ["SCHEMA_VERSION", "ChannelInfo", "RecordTable", "RunData", "RunFileError",
            "RunWriter", "iter_record_data", "read_run", "repair", "write_mounts"]
 
 SCHEMA_VERSION = 1
-#: numeric ``FRFSet.meta`` entries kept with a finished run's FRFs (attributes of ``/frf``):
-#: the identification reads them (the exponential window's damping is removed from C, no
-#: elastic mode is read above the hammer's usable band)
-STORED_META = ("exponential_tau", FORCE_BAND_TOP)
 FORMAT = "insitu-run"
 TEXT = 256  # bytes of a reason / note in the fixed-width string columns
 OVERRIDES = {"": 0, "accept": 1, "reject": -1}
@@ -129,7 +125,8 @@ class RunData:
     geometry: Geometry
     records: RecordTable
     notes: tuple[tuple[float, str], ...]
-    frf: FRFSet | None
+    #: the FRFs stored when the run finished and their provenance (no per-hit spectra), or None
+    measurement: Measurement | None
     result: dict[str, Any] | None
     #: the mounts table (optional group ``/mounts``), or None
     mounts: MountsFile | None = None
@@ -334,7 +331,7 @@ class RunWriter:
                 notes[name][i] = v
 
     # -- ending ---------------------------------------------------------------------------------
-    def finish(self, state: str, message: str = "", frf: FRFSet | None = None,
+    def finish(self, state: str, message: str = "", measurement: Measurement | None = None,
                result: Mapping[str, Any] | None = None) -> None:
         """Record the final state, FRFs and result; the writer is closed after it."""
         with self._session() as f:
@@ -343,12 +340,10 @@ class RunWriter:
             for key in ("frf", "result"):
                 if key in f:
                     del f[key]
-            if frf is not None:
+            if measurement is not None:
+                frf = measurement.frf
                 g = f.create_group("frf")
-                g.attrs["estimator"] = str(frf.meta.get("estimator", "H1"))
-                for key in STORED_META:  # numbers the identification reads from the FRFs
-                    if isinstance(v := frf.meta.get(key), int | float):
-                        g.attrs[key] = float(v)
+                g.attrs.update(measurement.provenance.stored())  # the per-hit spectra: records
                 _array(g, "freq", frf.freq, "Hz")
                 _array(g, "H", frf.H, "m/s^2/N")
                 if frf.coherence is not None:
@@ -544,12 +539,13 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
     frf = None
     if "frf" in f:
         g = f["frf"]
-        frf = FRFSet(g["freq"][()], g["H"][()], g["resp_nodes"][()], g["resp_dirs"][()],
-                     g["exc_nodes"][()], g["exc_dirs"][()], geometry,
-                     g["coherence"][()] if "coherence" in g else None,
-                     {"estimator": _str(g.attrs.get("estimator", "H1")),
-                      "n_averages": g["n_averages"][()].tolist(),
-                      **{k: float(g.attrs[k]) for k in STORED_META if k in g.attrs}})
+        frf = Measurement(FRFSet(
+            g["freq"][()], g["H"][()], g["resp_nodes"][()], g["resp_dirs"][()],
+            g["exc_nodes"][()], g["exc_dirs"][()], geometry,
+            g["coherence"][()] if "coherence" in g else None,
+            {"estimator": _str(g.attrs.get("estimator", "H1")),
+             "n_averages": g["n_averages"][()].tolist()}),
+            Provenance.restored({k: _str(v) for k, v in g.attrs.items()}, "estimated"), p.name)
     result = json.loads(_str(f["result"][()])) if "result" in f else None
     mounts = _read_mounts(p, f["mounts"]) if "mounts" in f else None
     state = _str(f.attrs.get("state", ""))
@@ -560,7 +556,7 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
         method=_str(f.attrs.get("method", "")),
         plan_data=json.loads(_str(f["plan"][()])),
         station_data=json.loads(_str(f["station"][()])),
-        channels=channels, geometry=geometry, records=records, notes=notes, frf=frf,
+        channels=channels, geometry=geometry, records=records, notes=notes, measurement=frf,
         result=result, mounts=mounts)
 
 

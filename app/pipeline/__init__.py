@@ -1,9 +1,11 @@
-"""From a file to its FRFs: the one path every view (command line, GUI, report) takes.
+"""From a file to its measurement: the one path every view (command line, GUI, report,
+batch) takes.
 
-``open_frfs(path, settings) -> (FRFSet, [RunReport])`` reads any of the four input formats
+``load(path, settings) -> Measurement`` reads any of the four input formats
 (:mod:`app.pipeline.formats`), computes FRFs from time records (:mod:`app.pipeline.time_uff`)
 or a run file's stored records (:mod:`app.pipeline.runs`), cuts them to their usable lines
-and returns what it found on the way as reports instead of printing them.
+and keeps what it found on the way as reports in the measurement's provenance instead of
+printing them. Every view then calls :func:`processing.identify.fit` on it.
 """
 
 from app.pipeline.formats import (
@@ -14,9 +16,9 @@ from app.pipeline.formats import (
     SUFFIXES,
     TIME_UFF,
     detect_format,
-    open_frfs,
+    load,
 )
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 
 __all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "RUN_FILE", "SUFFIXES", "TIME_UFF", "OpenError",
-           "RunReport", "Settings", "detect_format", "n_skipped", "open_frfs"]
+           "RunReport", "Settings", "detect_format", "load", "n_skipped"]

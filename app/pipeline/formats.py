@@ -1,7 +1,7 @@
-"""The input formats and the one dispatch from a file to its FRFs.
+"""The input formats and the one dispatch from a file to its measurement.
 
 A fifth format is added here: a name in :data:`FORMATS`, its test in :func:`detect_format`
-and its reader (``(path, Settings) -> (FRFSet, [RunReport])``) in :data:`READERS`.
+(headers only) and its reader (``(path, Settings) -> Measurement``) in :data:`READERS`.
 """
 
 from __future__ import annotations
@@ -10,16 +10,16 @@ from collections.abc import Callable
 from pathlib import Path
 
 from app.io.frf_h5 import FORMAT as FRF_H5_FORMAT
-from app.io.frf_h5 import h5_format, read_frf_h5
+from app.io.frf_h5 import h5_format, read_frf_measurement
 from app.io.uff import read_frf_uff
 from app.io.uff_time import uff_holds_time_data
 from app.pipeline.runs import open_run_file
-from app.pipeline.settings import RunReport, Settings
+from app.pipeline.settings import Settings
 from app.pipeline.time_uff import open_time_uff
-from processing.data import FRFSet
+from processing.measurement import Measurement, Provenance
 
 __all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "H5_SUFFIXES", "READERS", "RUN_FILE", "SUFFIXES",
-           "TIME_UFF", "UFF_SUFFIXES", "detect_format", "open_frfs"]
+           "TIME_UFF", "UFF_SUFFIXES", "detect_format", "load"]
 
 FRF_UFF = "frf-uff"
 TIME_UFF = "time-uff"
@@ -38,7 +38,7 @@ H5_SUFFIXES = (".h5", ".hdf5")
 #: every suffix some format is read from
 SUFFIXES = UFF_SUFFIXES + H5_SUFFIXES
 
-Reader = Callable[[Path, Settings], tuple[FRFSet, list[RunReport]]]
+Reader = Callable[[Path, Settings], Measurement]
 
 
 def detect_format(path: str | Path) -> str:
@@ -50,12 +50,14 @@ def detect_format(path: str | Path) -> str:
     return TIME_UFF if uff_holds_time_data(p) else FRF_UFF
 
 
-def _frf_uff(path: Path, _: Settings) -> tuple[FRFSet, list[RunReport]]:
-    return read_frf_uff(path), []
+def _frf_uff(path: Path, _: Settings) -> Measurement:
+    frf = read_frf_uff(path)  # FRFs given: their coherence stands for their noise
+    return Measurement(frf, Provenance(estimator=str(frf.meta.get("estimator", "H1"))),
+                       path.name)
 
 
-def _frf_h5(path: Path, _: Settings) -> tuple[FRFSet, list[RunReport]]:
-    return read_frf_h5(path), []
+def _frf_h5(path: Path, _: Settings) -> Measurement:
+    return read_frf_measurement(path)
 
 
 #: format -> reader
@@ -67,9 +69,9 @@ READERS: dict[str, Reader] = {
 }
 
 
-def open_frfs(path: str | Path, settings: Settings | None = None, *,
-              fmt: str | None = None) -> tuple[FRFSet, list[RunReport]]:
-    """The FRFs of a file of any format, and what was reported on the way.
+def load(path: str | Path, settings: Settings | None = None, *,
+         fmt: str | None = None) -> Measurement:
+    """The measurement of a file of any format: every view's one way in.
 
     Parameters
     ----------
@@ -80,9 +82,12 @@ def open_frfs(path: str | Path, settings: Settings | None = None, *,
 
     Returns
     -------
-    frf : accelerance FRFs, (m/s^2)/N, with coherence when the format has it
-    reports : one line per run or point (verdicts, runs left out: ``skipped``) and the
-        coherence gate and rigidity check of FRFs computed from records; empty for FRF files
+    Measurement
+        Accelerance FRFs, (m/s^2)/N, with coherence when the format has it, and their
+        provenance: given or estimated here, the per-hit or per-block spectra, the
+        exponential window, the hammer's usable band, and the reports (one line per run or
+        point: verdicts, runs left out, ``skipped``; the coherence gate and rigidity check of
+        FRFs computed from records; none for FRF files).
 
     Raises
     ------
@@ -92,7 +97,8 @@ def open_frfs(path: str | Path, settings: Settings | None = None, *,
 
     Examples
     --------
-    >>> frf, reports = open_frfs("run.h5", Settings(stored=True))  # doctest: +SKIP
+    >>> m = load("run.h5")  # doctest: +SKIP
+    >>> fit(m).properties.mass  # doctest: +SKIP
     """
     p = Path(path)
     return READERS[fmt or detect_format(p)](p, settings or Settings())

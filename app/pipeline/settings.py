@@ -11,6 +11,7 @@ from typing import Literal
 import scipy.signal
 
 from processing.data import InputError
+from processing.measurement import Report
 
 __all__ = ["OpenError", "RunReport", "Settings", "TestUncertaintySettings", "parse_quantity"]
 
@@ -73,8 +74,6 @@ class Settings:
         is refused; a run whose force is aligned by host timing only is refused too: it is
         not identifiable) or ``"usable"`` (points without one are reported and left out,
         FRFs computed for any run)
-    stored : run files: a finished run's stored FRFs instead of recomputing them (with
-        ``run_points="all"``)
     """
 
     excitation: Literal["random", "impact"] | None = None
@@ -94,7 +93,6 @@ class Settings:
     coherence: float = 0.8
     fmax: float | None = None
     run_points: Literal["all", "usable"] = "all"
-    stored: bool = False
 
     def __post_init__(self) -> None:
         """Every option checked once, here, in the units the user typed; one line each."""
@@ -166,18 +164,9 @@ class Settings:
                                            self.exp_tau, self.ring, self.tail))
 
 
-@dataclass(frozen=True)
-class RunReport:
-    """One line about a run, a point, an FRF column or the checks of the FRF set.
-
-    Attributes
-    ----------
-    message : the line, naming what it is about
-    skipped : True when that run, point or column was bad and is left out of the FRFs
-    """
-
-    message: str
-    skipped: bool = False
+#: one line about a run, a point, an FRF column or the checks (kept in the measurement's
+#: provenance: :class:`processing.measurement.Report`)
+RunReport = Report
 
 
 class OpenError(InputError):

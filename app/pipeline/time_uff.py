@@ -31,9 +31,7 @@ from processing.excitation import (
     shaker_signal,
     steady_periods,
 )
-from processing.identify import FROM_TIME_RECORDS
 from processing.impact import (
-    FORCE_BAND_TOP,
     MIN_PRETRIGGER,
     ImpactDefaults,
     ImpactResult,
@@ -47,6 +45,7 @@ from processing.impact import (
     process_impacts,
     wanted_record,
 )
+from processing.measurement import Measurement, Provenance
 from processing.spectral import CrossSpectra, SpectralAccumulator, combine, frf, record_spectra
 from processing.units import MIN_UNITS, TimeUnits, UnitSpectra, record_units, welch_units
 
@@ -434,12 +433,15 @@ def _resolve(runs: list[TimeRun], s: Settings,
                                ring=ring, carryover=carryover, tail=tail), levels, lines
 
 
-def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
-    """FRFs with coherence and geometry from the time runs of a UFF file.
+def open_time_uff(path: Path, s: Settings) -> Measurement:
+    """The measurement of the time runs of a UFF file: FRFs with coherence and geometry,
+    estimated here, with the per-hit or per-block spectra, the exponential window's tau and
+    the hammer's usable band.
 
-    Returns the FRF set on the lines up to ``s.fmax`` (default fs / 2.56) and the reports:
-    each run's verdicts, each bad run (skipped), the coherence gate and the rigidity check.
-    Raises :class:`OpenError` (one line) when no run is usable or a setting fits no run.
+    The FRFs are on the lines up to ``s.fmax`` (default fs / 2.56); the reports (in the
+    provenance) are each run's verdicts, each bad run (skipped), the coherence gate and the
+    rigidity check. Raises :class:`OpenError` (one line) when no run is usable or a setting
+    fits no run.
     """
     runs, problems = read_time_uff(path, strict=False)
     reports = [RunReport(msg, skipped=True) for _, msg in problems]
@@ -468,25 +470,27 @@ def open_time_uff(path: Path, s: Settings) -> tuple[FRFSet, list[RunReport]]:
     first = runs[0]
     geometry, _ = read_geometry_uff(path)
     keys = list(cols)
-    meta: dict[str, object] = {"estimator": s.estimator, "excitation": s.excitation,
-                               "exponential_tau": s.exp_tau or None if s.excitation == "impact"
-                               else None}
+    fmax = s.fmax if s.fmax is not None else first.fs / 2.56
     out = assemble(cols[keys[0]][2], [cols[k][0] for k in keys], [cols[k][1] for k in keys],
                    first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),
-                   np.array([k[1] for k in keys]), geometry, meta,
-                   s.fmax if s.fmax is not None else first.fs / 2.56, reports)
-    out.meta[FROM_TIME_RECORDS] = True  # kept in FRF files (the per-unit spectra are not)
+                   np.array([k[1] for k in keys]), geometry,
+                   {"estimator": s.estimator, "excitation": s.excitation}, fmax, reports)
     units = [u for k in keys if (u := cols[k][3]) is not None]
+    time_units, top = None, None
     if len(units) == len(keys):  # per-unit spectra: the bootstrap, the hammer's usable band
-        out.meta["time_units"] = TimeUnits(
+        time_units = TimeUnits(
             "hit" if s.excitation == "impact" else "block", tuple(units),
             np.array([k[0] for k in keys]), np.array([k[1] for k in keys]), s.estimator)
-        if s.excitation == "impact" and (top := force_band_top(
-                units[0].freq, np.stack([u.Sff.mean(axis=0) for u in units]))) is not None:
-            out.meta[FORCE_BAND_TOP] = top
+        if s.excitation == "impact":
+            top = force_band_top(units[0].freq, np.stack([u.Sff.mean(axis=0) for u in units]))
     if s.excitation == "random":
         out = _from_signal(out, s.coherence, reports)
-    return out, reports + check_reports(out, s.coherence)
+    reports += check_reports(out, s.coherence)
+    return Measurement(out, Provenance(
+        origin="estimated", excitation=str(s.excitation), estimator=s.estimator,
+        units=time_units, exponential_tau=s.exp_tau or None if s.excitation == "impact"
+        else None, force_band_top=top, anti_alias_fmax=fmax, reports=tuple(reports)),
+        Path(path).name)
 
 
 #: fewest lines left by :func:`_from_signal`

@@ -1,4 +1,4 @@
-"""Everything the views and the report show about one FRF set, computed in one call.
+"""Everything the views and the report show about one measurement, computed in one call.
 
 :func:`analyse` is pure computation (no Qt) so the GUI can run it in a worker thread and
 ``insitu report`` without a GUI. Failures of one part (an impossible geometry, a band outside
@@ -14,8 +14,9 @@ from numpy.typing import NDArray
 
 from processing.coherence import CoherenceGate, coherence_gate
 from processing.data import FRFSet
-from processing.geometry import GeometryReport, check_geometry
-from processing.identify import IdentificationResult, IdentifyOptions, identify
+from processing.geometry import DEFAULT_MAX_COND_T, GeometryReport, check_geometry
+from processing.identify import IdentificationResult, IdentifyOptions, fit
+from processing.measurement import Measurement
 from processing.rigidity import RigidityCheck, rigidity_check
 
 __all__ = ["Analysis", "analyse", "message_of"]
@@ -29,11 +30,12 @@ def message_of(err: BaseException) -> str:
 
 @dataclass(frozen=True)
 class Analysis:
-    """Identification and checks of one FRF set.
+    """Identification and checks of one measurement.
 
     Attributes
     ----------
-    frf : the measured FRFs (accelerance, (m/s^2)/N)
+    measurement : the measurement identified (:func:`processing.identify.fit`)
+    frf : its FRFs on the lines above 0 Hz (accelerance, (m/s^2)/N)
     source : where they came from (file name or "acquisition")
     options : identification options used
     geometry : rank/condition of E and T, or None when the geometry itself is unusable
@@ -42,6 +44,7 @@ class Analysis:
     gate : coherence gate at the options' threshold, or None without coherence
     """
 
+    measurement: Measurement
     frf: FRFSet
     source: str
     options: IdentifyOptions
@@ -74,27 +77,29 @@ class Analysis:
         return f"{head}; identified mass {self.result.properties.mass:.2f} kg"
 
 
-def analyse(frf: FRFSet, options: IdentifyOptions | None = None, source: str = "") -> Analysis:
-    """Identify and check ``frf``; never raises for bad data (messages instead).
+def analyse(measurement: Measurement, options: IdentifyOptions | None = None,
+            source: str = "") -> Analysis:
+    """Identify (:func:`processing.identify.fit`, as every view does) and check
+    ``measurement``; never raises for bad data (messages instead).
 
     Parameters
     ----------
-    frf : FRFSet
+    measurement : the FRFs and their provenance (:func:`app.pipeline.load`)
     options : identification options (bands, method, physical constraint)
     source : label shown in views and reports
 
     Examples
     --------
     >>> from hardware_mocks.benches import get_bench  # doctest: +SKIP
-    >>> analyse(get_bench("engine-rigid").frfset()).result.properties.mass  # doctest: +SKIP
+    >>> analyse(Measurement(get_bench("engine-rigid").frfset())).result  # doctest: +SKIP
     110.0...
     """
     opt = options or IdentifyOptions()
-    frf = frf.select_lines()  # f > 0: accelerance and coherence defined
+    frf = measurement.frf.select_lines()  # f > 0: accelerance and coherence defined
     geometry: GeometryReport | None
     try:
         geometry = check_geometry(frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
-                                  max_cond_T=opt.max_cond_T)
+                                  max_cond_T=DEFAULT_MAX_COND_T)
     except ValueError as err:
         geometry = None
         geo_error: str | None = message_of(err)
@@ -104,7 +109,7 @@ def analyse(frf: FRFSet, options: IdentifyOptions | None = None, source: str = "
     error: str | None = geo_error
     if geometry is not None:
         try:
-            result = identify(frf, opt)
+            result = fit(measurement, opt)
         except (ValueError, ArithmeticError) as err:  # InputError, GeometryError, LinAlgError
             error = message_of(err)
     rigidity: RigidityCheck | None = None
@@ -116,5 +121,5 @@ def analyse(frf: FRFSet, options: IdentifyOptions | None = None, source: str = "
     gate = None
     if frf.coherence is not None:
         gate = coherence_gate(frf.coherence, frf.freq, opt.coherence_threshold)
-    return Analysis(frf, source or str(frf.meta.get("file", "FRFs")), opt, geometry, result,
-                    error, rigidity, rigidity_error, gate)
+    return Analysis(measurement, frf, source or measurement.source or "FRFs", opt, geometry,
+                    result, error, rigidity, rigidity_error, gate)

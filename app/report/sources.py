@@ -1,25 +1,26 @@
-"""Open the FRFs a report or the GUI shows: any file the command line reads.
+"""Open the measurement a report or the GUI shows: any file the command line reads.
 
-A thin view over :func:`app.pipeline.open_frfs`: the GUI and ``insitu report`` accept the
-suffixes of :data:`app.pipeline.SUFFIXES`, open a finished run's stored FRFs, and compute
-FRFs from time records with the command line's default settings.
+A thin view over :func:`app.pipeline.load`: the GUI and ``insitu report`` accept the
+suffixes of :data:`app.pipeline.SUFFIXES` and load every file with the command line's
+default settings, as ``insitu identify`` does (a run file's records processed again).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from app.pipeline import SUFFIXES, RunReport, Settings, detect_format, open_frfs
+from app.pipeline import SUFFIXES, Settings, detect_format, load
 from processing.data import FRFSet, InputError
+from processing.measurement import Measurement
 
 __all__ = ["SETTINGS", "SUFFIXES", "load_frfs", "open_source"]
 
-#: how the views open a file: a finished run's stored FRFs, time data as ``insitu frf`` does
-SETTINGS = Settings(stored=True)
+#: how the views open a file: as ``insitu identify`` does, with its default settings
+SETTINGS = Settings()
 
 
-def open_source(path: str | Path) -> tuple[FRFSet, list[RunReport], str]:
-    """The FRFs of ``path``, the pipeline's reports, and the file's format
+def open_source(path: str | Path) -> tuple[Measurement, str]:
+    """The measurement of ``path`` (its reports in its provenance) and the file's format
     (:data:`app.pipeline.FORMATS`).
 
     Raises
@@ -34,10 +35,9 @@ def open_source(path: str | Path) -> tuple[FRFSet, list[RunReport], str]:
             f"records (.uff, .unv), a run file or an FRF file ({', '.join(SUFFIXES[2:])})"
         )
     fmt = detect_format(p)
-    frf, reports = open_frfs(p, SETTINGS, fmt=fmt)
-    return frf, reports, fmt
+    return load(p, SETTINGS, fmt=fmt), fmt
 
 
 def load_frfs(path: str | Path) -> FRFSet:
     """The FRF set of ``path`` (see :func:`open_source`)."""
-    return open_source(path)[0]
+    return open_source(path)[0].frf

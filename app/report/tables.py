@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.report.analysis import Analysis
+from processing.geometry import DEFAULT_MAX_COND_T
 from processing.inertia import InertiaProperties
 from processing.results import Uncertainty
 
@@ -165,9 +166,9 @@ def check_rows(a: Analysis) -> list[CheckRow]:
     if g is None:
         rows.append(CheckRow("geometry (rank, cond of E and T)", False, a.error or ""))
     else:
-        ok = g.ok and g.cond_T <= a.options.max_cond_T
+        ok = g.ok and g.cond_T <= DEFAULT_MAX_COND_T
         detail = (f"rank E {g.rank_E}, cond E {g.cond_E:.1f}; rank T {g.rank_T}, "
-                  f"cond T {g.cond_T:.1f} (limit {a.options.max_cond_T:g})")
+                  f"cond T {g.cond_T:.1f} (limit {DEFAULT_MAX_COND_T:g})")
         if g.messages:
             detail += ": " + "; ".join(g.messages)
         rows.append(CheckRow("geometry (rank, cond of E and T)", ok, detail))

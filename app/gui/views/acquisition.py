@@ -19,6 +19,7 @@ from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
+from app.acquire.analysis import anti_aliased
 from app.acquire.events import HitRecord, PointFRF, Progress, RunState
 from app.acquire.hammer import HammerProcedure
 from app.acquire.plan import TestPlan
@@ -361,7 +362,7 @@ class AcquisitionView(QtWidgets.QWidget):
         path = proc.path if proc is not None else None
         n = len(self.hits)
         things = f"{n} {self.word}{'' if n == 1 else 's'}"
-        if state is RunState.FINISHED and proc is not None and proc.frf is not None:
+        if state is RunState.FINISHED and proc is not None and proc.measurement is not None:
             self.next_label.setText("Finished: every point done")
             self.progress_bar.setValue(self.progress_bar.maximum())
             self.message.emit("info", f"acquisition finished: {things} saved in {path}")
@@ -370,8 +371,10 @@ class AcquisitionView(QtWidgets.QWidget):
                     write_mounts(path, self.session.mounts)
                 except RunFileError as err:
                     self.message.emit("error", f"the mounts table was not saved: {err}")
-            frf = proc.frf.select_lines(proc.frf.anti_alias_fmax())  # as the pipeline opens it
-            self.session.set_frf(frf, path.name if path else "acquisition", path, RUN_FILE)
+            # the run's own measurement, cut as the pipeline opens the run file: the same
+            # numbers as the stored result and every view of the file
+            self.session.set_measurement(anti_aliased(proc.measurement),
+                                         path.name if path else "acquisition", path, RUN_FILE)
         else:
             why = proc.message if proc is not None and proc.message else state.value
             self.next_label.setText(f"Ended ({state.value}): {why}")
