@@ -54,7 +54,9 @@ ATTACH = "attach the shaker"
 #: seconds a stopped run has to end (its devices released, its file closed) before we exit
 STOP_WAIT = 15.0
 
-class _Bars(Listener):
+class ProgressBars(Listener):
+    """Rich progress bars of a run: points (or stops) done, records of the current one."""
+
     def __init__(self, progress: Progress, plan: TestPlan, console: Console) -> None:
         self.progress = progress
         self.console = console
@@ -318,7 +320,7 @@ def run(args: argparse.Namespace) -> int:
         gave_up = ""
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
-            bars = _Bars(progress, proc.plan, console)
+            bars = ProgressBars(progress, proc.plan, console)
             proc.add_listener(bars)
             proc.start()
             try:

@@ -75,7 +75,7 @@ class _Resumer(Listener):
 def _acquire(args: argparse.Namespace, console: Console) -> int:
     from app.acquire import HammerProcedure
     from app.acquire.events import RunState
-    from app.cli.acquire import _Bars
+    from app.cli.acquire import ProgressBars
     from app.mockbench import unavailable
 
     if why := unavailable():
@@ -94,7 +94,7 @@ def _acquire(args: argparse.Namespace, console: Console) -> int:
         proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
-            proc.add_listener(_Bars(progress, plan, console))
+            proc.add_listener(ProgressBars(progress, plan, console))
             resumer = _Resumer(proc, console)
             proc.add_listener(resumer)
             proc.start()
