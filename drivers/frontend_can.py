@@ -31,6 +31,7 @@ import logging
 import queue
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from importlib.resources import files
 from typing import Any, ClassVar
 
@@ -38,6 +39,7 @@ import can
 import cantools
 import numpy as np
 from cantools.database.can import Database
+from cantools.database.namedsignalvalue import NamedSignalValue
 
 from drivers.base import ChannelConfig, StreamHealth, StreamingFrontEnd
 from drivers.errors import (
@@ -79,6 +81,22 @@ class FrameLayout:
         self.per_group = 4 if fd else 2
         self.seq_modulo = 65536 if fd else 1024
         self.signals = [[f"S{k}C{j}" for j in range(self.per_group)] for k in range(self.samples)]
+
+
+def _as_int(value: int | float | str | NamedSignalValue) -> int:
+    """One decoded signal as an integer (a named value by its number)."""
+    return int(value.value if isinstance(value, NamedSignalValue) else value)
+
+
+@dataclass
+class _Assembly:
+    """The sample block being assembled from its groups' frames."""
+
+    counts: np.ndarray  # (n_inputs, samples) raw counts
+    current: int | None = None  # sequence number of the block being assembled
+    got: set[int] = field(default_factory=set)  # groups received
+    ovl: set[int] = field(default_factory=set)  # inputs flagged overloaded
+    pending: bool = False  # a block is being assembled and not yet handed over
 
 
 class CanFrontEnd(StreamingFrontEnd):
@@ -130,6 +148,7 @@ class CanFrontEnd(StreamingFrontEnd):
         self._reader = ReaderThread(name)
         self.serial_number = 0
         self.last_status: dict[str, int] = {}
+        self._n_status = 0  # FE_STATUS frames received in this stream
 
     @classmethod
     def from_config(cls, config: DeviceConfig, **overrides: Any) -> CanFrontEnd:
@@ -146,7 +165,7 @@ class CanFrontEnd(StreamingFrontEnd):
                                                   scaling=scaling)
         if not isinstance(decoded, dict):
             raise ProtocolError(f"{self.name}: frame {frame_id:#x} is a container", self.name)
-        return {k: int(v) for k, v in decoded.items()}  # type: ignore[arg-type]
+        return {k: _as_int(v) for k, v in decoded.items()}
 
     # -- commands ---------------------------------------------------------------------------------
     def encode_command(self, opcode: str, **fields: int) -> bytes:
@@ -254,30 +273,9 @@ class CanFrontEnd(StreamingFrontEnd):
             self._buffer.fail(err)
 
     def _stream(self) -> None:
-        lay = self.layout
-        n_groups = len(self._groups)
-        current: int | None = None  # sequence number of the block being assembled
-        counts = np.zeros((self.n_inputs, lay.samples))
-        got: set[int] = set()
-        ovl: set[int] = set()
-        pending = False  # a block is being assembled and not yet handed over
-        n_status = 0
-
-        def flush(t_rx: float) -> None:
-            missing_groups = set(self._groups) - got
-            block = counts[self._rows] * self._scale[:, None]
-            if missing_groups:
-                for g in missing_groups:
-                    block[(self._rows // lay.per_group) == g] = np.nan
-                self.health.lost_samples += lay.samples
-                self.health.gaps += 1
-                logger.debug("%s: block %s lost group(s) %s", self.name, current,
-                               sorted(missing_groups))
-            rows = frozenset(i for i, r in enumerate(self._rows) if int(r) in ovl)
-            for i in rows:
-                self.health.overloaded.add(self.channels[i].name)
-            self._buffer.append(block, t_rx, rows)
-
+        """Dispatch received frames until the reader is asked to stop."""
+        block = _Assembly(np.zeros((self.n_inputs, self.layout.samples)))
+        self._n_status = 0
         while not self._reader.stopping:
             msg = self._link.recv(0.05)
             if msg is None:
@@ -285,65 +283,104 @@ class CanFrontEnd(StreamingFrontEnd):
             t_rx = time.monotonic()
             fid = msg.arbitration_id
             if fid == ID_ACK:
-                if len(msg.data) < 2:  # a damaged answer: the command then times out
-                    self.health.bad_frames += 1
-                    continue
-                self._acks.put((msg.data[0], msg.data[1]))
-                self._buffer.touch()
-                continue
-            if fid == ID_STATUS:
-                try:
-                    status = self.decode(ID_STATUS, msg.data)
-                except (cantools.database.DecodeError, ProtocolError, ValueError) as err:
-                    self.health.bad_frames += 1
-                    logger.debug("%s: bad status frame %s: %s", self.name, msg.data.hex(), err)
-                    continue
-                n_status += 1
-                status["_n"] = n_status
-                self.last_status = status
-                if status["BUFFER_OVERFLOW"]:
-                    self.health.buffer_overflows += 1
-                    logger.warning("%s: device buffer overflow (samples lost)", self.name)
-                self._buffer.touch()
-                continue
-            if fid != lay.frame_id:
-                continue
-            try:
-                sig = self.decode(fid, msg.data, scaling=False)
-                group, seq = int(sig["GROUP"]), int(sig["SEQ"])
-                if group not in self._groups:
-                    raise ProtocolError(f"{self.name}: frame for group {group} not requested",
-                                        self.name)
-            except (cantools.database.DecodeError, ProtocolError, KeyError, ValueError) as err:
-                self.health.bad_frames += 1
-                logger.debug("%s: bad sample frame %s: %s", self.name, msg.data.hex(), err)
-                continue
-            self.health.frames += 1
-            if seq != current:
-                if pending:
-                    flush(t_rx)  # the block lost some of its frames
-                if current is not None:
-                    lost = (seq - current - 1) % lay.seq_modulo
-                    if lost:
-                        self.health.gaps += 1
-                        self.health.lost_samples += lost * lay.samples
-                        self._buffer.append_missing(lost * lay.samples)
-                current = seq
-                got.clear()
-                ovl.clear()
-                counts[:] = 0.0
-                pending = True
-            elif not pending or group in got:
-                self.health.bad_frames += 1  # duplicate frame
-                continue
-            base = group * lay.per_group
-            for k, names in enumerate(lay.signals):
-                for j, s in enumerate(names):
-                    counts[base + j, k] = sig[s]
-            for j in range(lay.per_group):
-                if sig[f"OVL{j}"]:
-                    ovl.add(base + j)
-            got.add(group)
-            if len(got) == n_groups:
-                flush(t_rx)
-                pending = False
+                self._on_ack(msg)
+            elif fid == ID_STATUS:
+                self._on_status(msg)
+            elif fid == self.layout.frame_id:
+                self._on_samples(msg, t_rx, block)
+
+    def _on_ack(self, msg: can.Message) -> None:
+        """Queue an FE_ACK for :meth:`command`."""
+        if len(msg.data) < 2:  # a damaged answer: the command then times out
+            self.health.bad_frames += 1
+            return
+        self._acks.put((msg.data[0], msg.data[1]))
+        self._buffer.touch()
+
+    def _on_status(self, msg: can.Message) -> None:
+        """Keep an FE_STATUS as :attr:`last_status`; count a device buffer overflow."""
+        try:
+            status = self.decode(ID_STATUS, msg.data)
+        except (cantools.database.DecodeError, ProtocolError, ValueError) as err:
+            self.health.bad_frames += 1
+            logger.debug("%s: bad status frame %s: %s", self.name, msg.data.hex(), err)
+            return
+        self._n_status += 1
+        status["_n"] = self._n_status
+        self.last_status = status
+        if status["BUFFER_OVERFLOW"]:
+            self.health.buffer_overflows += 1
+            logger.warning("%s: device buffer overflow (samples lost)", self.name)
+        self._buffer.touch()
+
+    def _decode_samples(self, msg: can.Message) -> tuple[dict[str, int], int, int] | None:
+        """A sample frame's signals, group and sequence number; None (counted) if it is bad."""
+        try:
+            sig = self.decode(msg.arbitration_id, msg.data, scaling=False)
+            group, seq = int(sig["GROUP"]), int(sig["SEQ"])
+            if group not in self._groups:
+                raise ProtocolError(f"{self.name}: frame for group {group} not requested",
+                                    self.name)
+        except (cantools.database.DecodeError, ProtocolError, KeyError, ValueError) as err:
+            self.health.bad_frames += 1
+            logger.debug("%s: bad sample frame %s: %s", self.name, msg.data.hex(), err)
+            return None
+        return sig, group, seq
+
+    def _on_samples(self, msg: can.Message, t_rx: float, block: _Assembly) -> None:
+        """Add a sample frame to the block it belongs to; hand the block over once complete."""
+        decoded = self._decode_samples(msg)
+        if decoded is None:
+            return
+        sig, group, seq = decoded
+        self.health.frames += 1
+        if seq != block.current:
+            self._begin_block(block, seq, t_rx)
+        elif not block.pending or group in block.got:
+            self.health.bad_frames += 1  # duplicate frame
+            return
+        lay = self.layout
+        base = group * lay.per_group
+        for k, names in enumerate(lay.signals):
+            for j, s in enumerate(names):
+                block.counts[base + j, k] = sig[s]
+        for j in range(lay.per_group):
+            if sig[f"OVL{j}"]:
+                block.ovl.add(base + j)
+        block.got.add(group)
+        if len(block.got) == len(self._groups):
+            self._flush(block, t_rx)
+            block.pending = False
+
+    def _begin_block(self, block: _Assembly, seq: int, t_rx: float) -> None:
+        """Start block ``seq``: hand over an unfinished one, count the blocks skipped."""
+        if block.pending:
+            self._flush(block, t_rx)  # the block lost some of its frames
+        if block.current is not None:
+            lost = (seq - block.current - 1) % self.layout.seq_modulo
+            if lost:
+                self.health.gaps += 1
+                self.health.lost_samples += lost * self.layout.samples
+                self._buffer.append_missing(lost * self.layout.samples)
+        block.current = seq
+        block.got.clear()
+        block.ovl.clear()
+        block.counts[:] = 0.0
+        block.pending = True
+
+    def _flush(self, block: _Assembly, t_rx: float) -> None:
+        """Scale the block to physical units and append it; a missing group's rows are NaN."""
+        lay = self.layout
+        missing_groups = set(self._groups) - block.got
+        data = block.counts[self._rows] * self._scale[:, None]
+        if missing_groups:
+            for g in missing_groups:
+                data[(self._rows // lay.per_group) == g] = np.nan
+            self.health.lost_samples += lay.samples
+            self.health.gaps += 1
+            logger.debug("%s: block %s lost group(s) %s", self.name, block.current,
+                           sorted(missing_groups))
+        rows = frozenset(i for i, r in enumerate(self._rows) if int(r) in block.ovl)
+        for i in rows:
+            self.health.overloaded.add(self.channels[i].name)
+        self._buffer.append(data, t_rx, rows)

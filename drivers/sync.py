@@ -226,6 +226,24 @@ def signal_delay(reference: np.ndarray, other: np.ndarray, fs: float, *,
     >>> print(f"{d * 1e3:.4f} ms, correlation {c:.3f}")
     2.3700 ms, correlation 0.996
     """
+    a, b, energy = _delay_records(reference, other)
+    n = a.size
+    nfft = scipy.fft.next_fast_len(2 * n)
+    A, B = scipy.fft.rfft(a, nfft), scipy.fft.rfft(b, nfft)
+    S = np.conj(A) * B
+    lag, peak = _correlation_peak(S, n, nfft)
+    f = scipy.fft.rfftfreq(nfft, 1.0 / fs)
+    f_hi = fs / 2.56 if f_max is None else f_max
+    return _phase_slope_delay(S, f, lag, fs, f_hi), peak / energy
+
+
+def _delay_records(reference: np.ndarray, other: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
+    """The two records of :func:`signal_delay` as flat float arrays, and their joint energy.
+
+    Raises :class:`SyncError` if they differ in length, are shorter than 8 samples,
+    have lost (NaN) samples or one is all zero.
+    """
     a = np.asarray(reference, dtype=float).ravel()
     b = np.asarray(other, dtype=float).ravel()
     if a.shape != b.shape or a.size < 8:
@@ -236,10 +254,15 @@ def signal_delay(reference: np.ndarray, other: np.ndarray, fs: float, *,
     energy = float(np.sqrt(np.sum(a**2) * np.sum(b**2)))
     if energy == 0:
         raise SyncError("signal_delay: a record is all zero: no common signal to align on")
-    n = a.size
-    nfft = scipy.fft.next_fast_len(2 * n)
-    A, B = scipy.fft.rfft(a, nfft), scipy.fft.rfft(b, nfft)
-    S = np.conj(A) * B
+    return a, b, energy
+
+
+def _correlation_peak(S: np.ndarray, n: int, nfft: int) -> tuple[float, float]:
+    """Lag (samples, parabola-refined) and value of the cross-correlation's peak.
+
+    ``S`` is the cross-spectrum ``conj(A) B`` of two ``n``-sample records zero-padded
+    to ``nfft``; the value is taken at the peak's integer lag.
+    """
     c = scipy.fft.irfft(S, nfft)  # c[k] = sum a[i] b[i + k]
     c = np.concatenate([c[nfft - n + 1:], c[:n]])  # lags -(n-1) .. n-1
     k = int(np.argmax(c))
@@ -249,14 +272,21 @@ def signal_delay(reference: np.ndarray, other: np.ndarray, fs: float, *,
         den = y0 - 2 * y1 + y2
         if den < 0:
             lag += 0.5 * float(y0 - y2) / float(den)
-    f = scipy.fft.rfftfreq(nfft, 1.0 / fs)
+    return lag, float(c[k])
+
+
+def _phase_slope_delay(S: np.ndarray, f: np.ndarray, lag: float, fs: float,
+                       f_max: float) -> float:
+    """Delay, s: ``lag`` samples refined by the weighted slope of the cross-spectrum's phase.
+
+    Uses the lines ``0 < f <= f_max`` where ``|S|`` exceeds 1e-3 of its peak; without
+    any, the delay is ``lag / fs``.
+    """
     resid = S * np.exp(2j * np.pi * f * lag / fs)  # phase -2 pi f (delay - lag / fs)
     w = np.abs(resid)
-    keep = (f > 0) & (f <= (fs / 2.56 if f_max is None else f_max)) & (w > 1e-3 * w.max())
-    if np.any(keep):
-        phi = np.angle(resid[keep])
-        wf = w[keep] * f[keep]
-        lag_s = lag / fs - float(np.sum(wf * phi) / (2 * np.pi * np.sum(wf * f[keep])))
-    else:
-        lag_s = lag / fs
-    return lag_s, float(c[k] / energy)
+    keep = (f > 0) & (f <= f_max) & (w > 1e-3 * w.max())
+    if not np.any(keep):
+        return lag / fs
+    phi = np.angle(resid[keep])
+    wf = w[keep] * f[keep]
+    return lag / fs - float(np.sum(wf * phi) / (2 * np.pi * np.sum(wf * f[keep])))

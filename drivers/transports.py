@@ -20,6 +20,7 @@ import logging
 import socket
 import threading
 import time
+from typing import Any
 
 import can
 import serial
@@ -186,7 +187,7 @@ class CanLink:
     """
 
     def __init__(self, bus: can.BusABC | None = None, name: str = "can",
-                 **bus_kwargs: object) -> None:
+                 **bus_kwargs: Any) -> None:
         self.name = name
         self._bus = bus
         self._own_bus = bus is None
@@ -200,7 +201,7 @@ class CanLink:
                 _socketcand_filter)  # adding the same filter twice is a no-op
             self._probe_server()
         try:
-            self._bus = can.Bus(**self._bus_kwargs)  # type: ignore[arg-type]
+            self._bus = can.Bus(**self._bus_kwargs)
         except (can.CanError, OSError, ValueError, ImportError) as err:
             raise DeviceNotAvailableError(
                 f"{self.name}: cannot open CAN bus {self._bus_kwargs}: {_brief(err)}", self.name
