@@ -312,18 +312,8 @@ def process_impacts(
     >>> process_impacts(x, fs, s, force_accept=True).verdicts[0].reason[:20]
     'accepted by override'
     """
-    x, names, full_scale = _checked_input(data, fs, force_channel, channel_names, ranges,
-                                          max_averages)
-    hits = _Hits.find(x, fs, settings, force_channel, full_scale)
-    if settings.carryover:
-        _remove_carryover(x, hits, fs, settings, force_channel)
-    if settings.complete:
-        _complete_tails(x, hits, fs, force_channel)
-    verdicts, accepted = _verdicts(hits, names, fs, force_accept, max_averages)
-    for v in verdicts:
-        if v.reason:
-            log.info("hit %d at sample %d %s", v.index, v.trigger,
-                     v.reason if v.accepted else f"rejected: {v.reason}")
+    hits, verdicts, accepted = _judged_hits(data, fs, settings, force_channel, channel_names,
+                                            ranges, force_accept, max_averages)
     L, pre = settings.record_length, settings.pretrigger
     freq = np.asarray(np.fft.rfftfreq(L, 1.0 / fs), dtype=np.float64)
     meta: dict[str, object] = {"fs": float(fs), "record_length": L, "pretrigger": pre}
@@ -338,6 +328,32 @@ def process_impacts(
     units = record_units(rec, fs, windows, force_channel) if keep_units else None
     return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta,
                         units)
+
+
+def _judged_hits(data: ArrayLike, fs: float, settings: ImpactSettings, force_channel: int,
+                 channel_names: Sequence[str] | None, ranges: ArrayLike | None,
+                 force_accept: bool, max_averages: int | None,
+                 ) -> tuple[_Hits, list[HitVerdict], NDArray[np.bool_]]:
+    """The hits of a recording, cleaned as ``settings`` ask, one verdict per trigger (each
+    logged) and which complete records are averaged (:func:`process_impacts`'s parameters)."""
+    x, names, full_scale = _checked_input(data, fs, force_channel, channel_names, ranges,
+                                          max_averages)
+    hits = _Hits.find(x, fs, settings, force_channel, full_scale)
+    if settings.carryover:
+        _remove_carryover(x, hits, fs, settings, force_channel)
+    if settings.complete:
+        _complete_tails(x, hits, fs, force_channel)
+    verdicts, accepted = _verdicts(hits, names, fs, force_accept, max_averages)
+    _log_verdicts(verdicts)
+    return hits, verdicts, accepted
+
+
+def _log_verdicts(verdicts: Sequence[HitVerdict]) -> None:
+    """Log, at INFO, each verdict that has a reason."""
+    for v in verdicts:
+        if v.reason:
+            log.info("hit %d at sample %d %s", v.index, v.trigger,
+                     v.reason if v.accepted else f"rejected: {v.reason}")
 
 
 def _remove_carryover(x: NDArray[Any], hits: _Hits, fs: float, settings: ImpactSettings,

@@ -271,23 +271,10 @@ def fit_mount_rates(
     """
     if len(mounts) == 0:
         raise MountGeometryError("no mount given: the mounts file needs at least one [[mount]]")
-    Km = np.asarray(K, dtype=float)
-    if Km.shape != (6, 6) or not np.all(np.isfinite(Km)):
-        raise MountGeometryError("K must be a finite 6x6 matrix")
-    Km = 0.5 * (Km + Km.T)
+    Km = _symmetric_K(K)
     design = mount_design(mounts)  # (3n, 6, 6)
     n_r = design.shape[0]
-    if K_std is None:
-        W = _centroid_scaling(mounts)
-        D = (vech(np.einsum("ki,jkl,lm->jim", W, design, W)) * _OFF).T  # (21, 3n)
-        y = vech(W.T @ Km @ W) * _OFF
-    else:
-        s = np.asarray(K_std, dtype=float)
-        if s.shape != (6, 6) or not np.all(s > 0):
-            raise MountGeometryError("K_std must be a 6x6 matrix of positive numbers")
-        w = 1.0 / vech(s)
-        D = (vech(design) * w).T
-        y = vech(Km) * w
+    D, y = _weighted_problem(mounts, design, Km, K_std)
     scale = np.linalg.norm(D, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     Dn = D / scale
@@ -298,20 +285,10 @@ def fit_mount_rates(
     dof = D.shape[0] - rank
     # covariance of the scaled variables: (Dn^T Dn)^+ restricted to the row space
     inv = (Vt[:rank].T / sv[:rank] ** 2) @ Vt[:rank]
-    if K_std is not None:
-        s2 = 1.0
-    elif dof > 0:
-        s2 = float(rnorm**2 / dof)
-    else:
-        s2 = float("nan")
+    s2 = _residual_variance(K_std is not None, float(rnorm), dof)
     var = np.clip(np.diag(inv), 0.0, None) * s2 / scale**2
     if K_cov is not None:
-        P = _rate_operator(mounts, Dn, scale, None if K_std is None else 1.0 / vech(
-            np.asarray(K_std, dtype=float)))
-        Sigma = np.asarray(K_cov, dtype=float)
-        if Sigma.shape != (36, 36) or not np.all(np.isfinite(Sigma)):
-            raise MountGeometryError("K_cov must be a finite 36x36 covariance of vec(K)")
-        var = np.fmax(var, np.einsum("rj,jk,rk->r", P, Sigma, P))
+        var = np.fmax(var, _propagated_variance(mounts, Dn, scale, K_std, K_cov))
     std = np.sqrt(var)
     std = np.where(ident, std, np.nan)
     ynorm = float(np.linalg.norm(y))
@@ -327,6 +304,53 @@ def fit_mount_rates(
         dof=dof,
         known_variance=K_std is not None,
     )
+
+
+def _symmetric_K(K: ArrayLike) -> NDArray[np.float64]:
+    """K as a finite, symmetrised 6x6 float matrix; raises :class:`MountGeometryError`."""
+    Km = np.asarray(K, dtype=float)
+    if Km.shape != (6, 6) or not np.all(np.isfinite(Km)):
+        raise MountGeometryError("K must be a finite 6x6 matrix")
+    return 0.5 * (Km + Km.T)
+
+
+def _weighted_problem(mounts: Sequence[MountGeometry], design: NDArray[np.float64],
+                      Km: NDArray[np.float64], K_std: ArrayLike | None,
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Design (21, 3n) and data (21,) of the rate fit, weighted by 1 / ``K_std`` when
+    given, else by the centroid scaling of the mounts."""
+    if K_std is None:
+        W = _centroid_scaling(mounts)
+        D = (vech(np.einsum("ki,jkl,lm->jim", W, design, W)) * _OFF).T  # (21, 3n)
+        y = vech(W.T @ Km @ W) * _OFF
+        return D, y
+    s = np.asarray(K_std, dtype=float)
+    if s.shape != (6, 6) or not np.all(s > 0):
+        raise MountGeometryError("K_std must be a 6x6 matrix of positive numbers")
+    w = 1.0 / vech(s)
+    return (vech(design) * w).T, vech(Km) * w
+
+
+def _residual_variance(known_variance: bool, rnorm: float, dof: int) -> float:
+    """Variance of unit weight: 1 when the weights are K's standard deviations, else the
+    residual's per degree of freedom (NaN without any)."""
+    if known_variance:
+        return 1.0
+    if dof > 0:
+        return float(rnorm**2 / dof)
+    return float("nan")
+
+
+def _propagated_variance(mounts: Sequence[MountGeometry], Dn: NDArray[np.float64],
+                         scale: NDArray[np.float64], K_std: ArrayLike | None,
+                         K_cov: ArrayLike) -> NDArray[np.float64]:
+    """(3n,) variances of the rates carried from the (36, 36) covariance of vec(K)."""
+    P = _rate_operator(mounts, Dn, scale, None if K_std is None else 1.0 / vech(
+        np.asarray(K_std, dtype=float)))
+    Sigma = np.asarray(K_cov, dtype=float)
+    if Sigma.shape != (36, 36) or not np.all(np.isfinite(Sigma)):
+        raise MountGeometryError("K_cov must be a finite 36x36 covariance of vec(K)")
+    return np.einsum("rj,jk,rk->r", P, Sigma, P)
 
 
 def _rate_operator(mounts: Sequence[MountGeometry], Dn: NDArray[np.float64],

@@ -273,6 +273,26 @@ def choose_bands(
     times the highest rigid-body mode (not into the mass line). ``line_weights`` (n_f,)
     weigh the lines in the rigid-body mode estimate (:func:`quick_rigid_modes`).
     """
+    limits, top = _band_limits(freq, elastic, rigid_band_top, rigid_band_fallback,
+                               elastic_margin)
+    fr = _rigid_modes_for_bands(freq, X, T, limits[0][0], top, line_weights)
+    f_rig = float(fr[-1])
+    lo, f_hi, name, set_aside = _mass_line(freq, f_rig, limits, mass_low_factor)
+    reason = (f"mass line {lo:.1f}-{f_hi:.1f} Hz: from {lo / f_rig:.2g}x the highest "
+              f"rigid-body mode ({f_rig:.1f} Hz) to {name}")
+    if set_aside:
+        reason += ("; set aside, as it leaves no mass line above the rigid-body modes: "
+                   + ", ".join(set_aside))
+    s_lo, s_hi = _stiffness_band(freq, f_rig, lo, stiffness_low)
+    return BandChoice((float(lo), float(f_hi)), (s_lo, float(s_hi)), f_rig, fr, elastic,
+                      reason, bool(set_aside))
+
+
+def _band_limits(freq: NDArray[np.float64], elastic: tuple[ElasticPeak, ...],
+                 rigid_band_top: float | None, rigid_band_fallback: float | None,
+                 elastic_margin: float) -> tuple[list[tuple[float, str]], float]:
+    """The candidate tops of the mass line (Hz, with their names), in the order
+    :func:`choose_bands` tries them, and the top the elastic margin sets (Hz)."""
     f_end = float(freq[-1])
     f_el = min(p.frequency for p in elastic) if elastic else None
     limits: list[tuple[float, str]] = []
@@ -287,7 +307,15 @@ def choose_bands(
     if f_el and 0.9 * f_el < f_end:
         limits.append((0.9 * f_el, f"0.9x the first elastic mode ({f_el:.1f} Hz)"))
     limits.append((f_end, "the end of the data"))
-    rig_lines = (freq > 0) & (freq <= limits[0][0])  # rigid modes from below the first limit
+    return limits, top
+
+
+def _rigid_modes_for_bands(freq: NDArray[np.float64], X: NDArray[np.complex128],
+                           T: NDArray[np.float64], first_limit: float, top: float,
+                           line_weights: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """Rigid-body mode frequencies (Hz) read from the lines under ``first_limit``, with the
+    fallbacks :func:`choose_bands` describes."""
+    rig_lines = (freq > 0) & (freq <= first_limit)  # rigid modes from below the first limit
     if np.count_nonzero(rig_lines) < 4:
         rig_lines = (freq > 0) & (freq <= max(top, float(freq[min(7, freq.size - 1)])))
     fr = quick_rigid_modes(X[..., rig_lines], T, 2 * np.pi * freq[rig_lines],
@@ -297,35 +325,41 @@ def choose_bands(
     if fr[-1] <= 0:  # still none: the strongest resonance of the rigid-body accelerances
         power = np.sum(np.abs(X[..., rig_lines]) ** 2, axis=(0, 1))
         fr = np.full(6, float(freq[rig_lines][np.argmax(power)]))
-    if fr[-1] > 2 * limits[0][0] and limits[0][0] < top:
+    if fr[-1] > 2 * first_limit and first_limit < top:
         # far above the first limit: the lines under it are too few or too noisy to read
         # the modes from; read them again over the lines up to twice the limit
-        wide = (freq > 0) & (freq <= min(top, max(2 * limits[0][0],
+        wide = (freq > 0) & (freq <= min(top, max(2 * first_limit,
                                                   float(freq[min(7, freq.size - 1)]))))
         fw = quick_rigid_modes(X[..., wide], T, 2 * np.pi * freq[wide],
                                None if line_weights is None else line_weights[wide])
         if 0 < fw[-1] < fr[-1]:
             fr = fw
-    f_rig = float(fr[-1])
+    return fr
+
+
+def _mass_line(freq: NDArray[np.float64], f_rig: float, limits: list[tuple[float, str]],
+               mass_low_factor: float) -> tuple[float, float, str, list[str]]:
+    """Bottom and top (Hz) of the mass line under the first limit that leaves one, the
+    top's name, and the limits set aside on the way."""
     set_aside: list[str] = []
     for f_hi, name in limits:
         lo = _mass_line_low(freq, f_rig, f_hi, mass_low_factor)
         if lo is not None:
-            break
+            return lo, f_hi, name, set_aside
         set_aside.append(f"{name} ({f_hi:.1f} Hz)")
-    else:  # the rigid-body modes reach the end of the data: the top third of the lines
-        f_hi, name = f_end, "the end of the data"
-        lo = float(freq[max(0, (2 * freq.size) // 3 - 1)])
-        set_aside.append(f"{mass_low_factor:g}x the highest rigid-body mode")
-    reason = (f"mass line {lo:.1f}-{f_hi:.1f} Hz: from {lo / f_rig:.2g}x the highest "
-              f"rigid-body mode ({f_rig:.1f} Hz) to {name}")
-    if set_aside:
-        reason += ("; set aside, as it leaves no mass line above the rigid-body modes: "
-                   + ", ".join(set_aside))
+    # the rigid-body modes reach the end of the data: the top third of the lines
+    lo = float(freq[max(0, (2 * freq.size) // 3 - 1)])
+    set_aside.append(f"{mass_low_factor:g}x the highest rigid-body mode")
+    return lo, float(freq[-1]), "the end of the data", set_aside
+
+
+def _stiffness_band(freq: NDArray[np.float64], f_rig: float, lo: float,
+                    stiffness_low: float | None) -> tuple[float, float]:
+    """Stiffness band (Hz): from the first line (or ``stiffness_low``) to 1.5 times the
+    highest rigid-body mode, not into the mass line starting at ``lo``."""
     s_hi = min(1.5 * f_rig, lo)
     s_lo = float(freq[freq > 0][0]) if stiffness_low is None else float(stiffness_low)
     if s_hi <= s_lo:  # the rigid-body modes lie under the first line given: up to the mass line
         above = freq[freq > s_lo]
         s_hi = max(lo, float(above[0])) if above.size else lo
-    return BandChoice((float(lo), float(f_hi)), (s_lo, float(s_hi)), f_rig, fr, elastic,
-                      reason, bool(set_aside))
+    return s_lo, s_hi
