@@ -6,7 +6,7 @@ what numpy would do in several: the window (a short convolution in frequency whe
 short cosine sum, such as Hann), the mean removal, the products with each reference and
 the squares, added to float64 sums. Spectra arrive as interleaved real views ``(re, im,
 ...)`` of ``2 n_f`` values; the sums, per line (read by
-:func:`processing.spectral._spectra_sums`), are ``P[2a] += Re(conj(F_a) X)``,
+:func:`processing.spectral._averaged_spectra`), are ``P[2a] += Re(conj(F_a) X)``,
 ``P[2a + 1] += Im(conj(F_a) X)`` and ``Q += |X|^2``. Each channel's sums are written by
 one thread, every value summed over the segments in order, and the FFT of a segment does
 not depend on the others in its call: the same bits whatever the block boundaries, the

@@ -41,8 +41,6 @@ __all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError",
 ESTIMATORS = ("H1", "H2", "Hv")
 
 Scaling = Literal["density", "spectrum"]
-#: summed (Sff, Sfx, Sxx) of some segments
-_Sums = tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.float64]]
 
 
 class SpectralError(ValueError):
@@ -253,13 +251,21 @@ def _channel_roles(
     return refs, resps
 
 
-def _spectra_sums(P: NDArray[np.float64], Q: NDArray[np.float64], refs: tuple[int, ...],
-                  resps: tuple[int, ...]) -> _Sums:
-    """``(Sff, Sfx, Sxx)`` sums (complex128, float64) from the sums of
-    :func:`processing._welch_kernel.accumulate`: P (2 n_ref, n_ch, n_f), Q (n_ch, n_f)."""
+def _averaged_spectra(freq: NDArray[np.float64], nfft: int, norm: float, n_avg: int,
+                      P: NDArray[np.float64], Q: NDArray[np.float64], refs: tuple[int, ...],
+                      resps: tuple[int, ...]) -> CrossSpectra:
+    """One-sided spectra, divided by ``norm`` and averaged over ``n_avg`` segments (or records)
+    of ``nfft`` samples, from the sums of :func:`processing._welch_kernel.accumulate`:
+    P (2 n_ref, n_ch, n_f), Q (n_ch, n_f)."""
+    scale = np.full(freq.size, 2.0 / norm)
+    scale[0] = 1.0 / norm
+    if nfft % 2 == 0:
+        scale[-1] = 1.0 / norm
+    scale /= n_avg
     cross = np.empty((P.shape[0] // 2, *P.shape[1:]), np.complex128)
     cross.real, cross.imag = P[0::2], P[1::2]
-    return cross[:, list(refs)], cross[:, list(resps)], Q[list(resps)]
+    return CrossSpectra(freq, cross[:, list(refs)] * scale, cross[:, list(resps)] * scale,
+                        Q[list(resps)] * scale, n_avg, refs, resps)
 
 
 #: the window of spectra already windowed in time
@@ -288,14 +294,6 @@ def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
     if np.abs(rebuilt - win).max() > 1e-13 * np.abs(win).max():
         return None
     return taps
-
-
-def _onesided_scale(n_f: int, nfft: int, norm: float) -> NDArray[np.float64]:
-    scale = np.full(n_f, 2.0 / norm)
-    scale[0] = 1.0 / norm
-    if nfft % 2 == 0:
-        scale[-1] = 1.0 / norm
-    return scale
 
 
 class SpectralAccumulator:
@@ -525,11 +523,8 @@ class SpectralAccumulator:
         norm = self.fs * np.sum(self.window**2) if self.scaling == "density" else np.sum(
             self.window
         ) ** 2
-        scale = _onesided_scale(self.freq.size, self.nperseg, float(norm)) / n
-        Sff, Sfx, Sxx = _spectra_sums(self._P, self._Q, self._refs, self._resps)
-        return CrossSpectra(
-            self.freq, Sff * scale, Sfx * scale, Sxx * scale, n, self._refs, self._resps
-        )
+        return _averaged_spectra(self.freq, self.nperseg, float(norm), n, self._P, self._Q,
+                                 self._refs, self._resps)
 
 
 def welch_spectra(data: ArrayLike, fs: float, nperseg: int, noverlap: int | None = None,
@@ -584,7 +579,5 @@ def record_spectra(
     for a, r in enumerate(refs):
         _kernel.window_ref(Z[r].view(x.dtype), n, _NO_TAPS, False, a, fg, buf)
     _kernel.accumulate(fg, Z.view(x.dtype), n, _NO_TAPS, False, 0, P, Q, buf)
-    Sff, Sfx, Sxx = _spectra_sums(P, Q, refs, resps)
     freq = np.asarray(np.fft.rfftfreq(n, 1.0 / fs), dtype=np.float64)
-    scale = _onesided_scale(freq.size, n, fs * n) / n_rec
-    return CrossSpectra(freq, Sff * scale, Sfx * scale, Sxx * scale, n_rec, refs, resps)
+    return _averaged_spectra(freq, n, fs * n, n_rec, P, Q, refs, resps)
