@@ -11,10 +11,12 @@ import pytest
 from numpy.testing import assert_allclose
 
 from app.acquire import HammerProcedure, Listener, RunState
-from app.acquire.analysis import analyse_run
+from app.acquire.analysis import run_measurement
 from app.cli.main import main
 from app.io.runfile import read_run
 from app.mockbench.bench import InProcessBench, plan_for_bench
+from app.pipeline import RUN_FILE, load
+from processing.identify import fit
 from processing.inertia import inertia_properties
 
 #: well-conditioned subset of the engine's 18 excitations (cond(T) 7.5)
@@ -63,12 +65,14 @@ def test_engine_identified_within_tolerance_and_replay_is_identical(tmp_path: Pa
     run = read_run(path)
     assert run.state == "finished" and len(run.records) == len(POINTS)
     assert run.records.accepted.all() and run.records.data.shape[1] == 13
-    assert run.frf is not None and np.array_equal(run.frf.H, proc.frf.H)
+    assert run.measurement is not None and np.array_equal(run.measurement.frf.H, proc.frf.H)
     # the file holds the procedure's result JSON, every key and value (through JSON once)
     assert run.result == json.loads(json.dumps(proc.result.to_json()))
-    frf, result, _ = analyse_run(run)
+    whole, _ = run_measurement(run)  # the whole-band FRFs, as the live run stored them
+    frf = whole.frf
     assert np.array_equal(frf.H, proc.frf.H)
     assert np.array_equal(frf.coherence, proc.frf.coherence, equal_nan=True)
+    result = fit(load(path, fmt=RUN_FILE))  # what every view identifies from the run file
     assert np.array_equal(result.theta, proc.result.theta)
     assert np.array_equal(result.K, proc.result.K)
 

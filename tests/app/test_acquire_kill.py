@@ -49,7 +49,7 @@ def test_kill_9_then_resume(tmp_path: Path) -> None:
     assert done.state == "finished" and len(done.records) == 6
     assert (done.records.data[: len(kept)] == kept).all()  # nothing lost or rewritten
     assert sorted(done.records.point.tolist()) == list(range(6))
-    assert done.frf is not None and done.frf.H.shape == (12, 6, 257)
+    assert done.measurement is not None and done.measurement.frf.H.shape == (12, 6, 257)
     # 0.5 s records are too short for this bench: the run says so instead of failing
     assert done.result is None, done.result
     assert done.message.startswith("identification failed"), done.message

@@ -24,7 +24,7 @@ from app.acquire.analysis import (
     hit_result,
     margin_samples,
     point_result,
-    run_frfs,
+    run_measurement,
 )
 from app.acquire.blocks import BlockAnalysis
 from app.acquire.plan import TestPlan
@@ -186,10 +186,10 @@ def test_the_procedure_keeps_no_samples(tmp_path: Path) -> None:
     assert seen and all(seen)
     assert all(h.data is None for h in proc.hits)
     # the running sums give the replay's FRFs (all records at once), bit for bit
-    frf, _ = run_frfs(run)
-    assert proc.frf is not None and run.frf is not None
-    assert_array_equal(frf.H, proc.frf.H)
-    assert_array_equal(frf.H, run.frf.H)
+    replay = run_measurement(run)[0].frf
+    assert proc.frf is not None and run.measurement is not None
+    assert_array_equal(replay.H, proc.frf.H)
+    assert_array_equal(replay.H, run.measurement.frf.H)
 
 
 def _shaker_plan() -> TestPlan:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from app.acquire import HammerProcedure, Listener, RunState
-from app.acquire.analysis import run_frfs
+from app.acquire.analysis import run_measurement
 from app.cli.main import main
 from app.io.runfile import read_run
 from app.mockbench.bench import InProcessBench, plan_for_bench
@@ -64,8 +64,8 @@ def test_overrides_during_a_run_and_from_the_command_line(tmp_path: Path, capsys
     assert list(rec.accepted) == [h.accepted for h in proc.hits]
     assert rec.point.tolist().count(0) == 3 and rec.accepted[rec.point == 0].sum() == 2
     # replay honours the overrides: the same FRFs as the live run, bit for bit
-    frf, _ = run_frfs(run)
-    assert run.frf is not None and np.array_equal(frf.H, run.frf.H)
+    frf = run_measurement(run)[0].frf
+    assert run.measurement is not None and np.array_equal(frf.H, run.measurement.frf.H)
     assert np.array_equal(frf.H, proc.frf.H)
     assert frf.meta["n_averages"] == [2, 2]
 
@@ -76,9 +76,9 @@ def test_overrides_during_a_run_and_from_the_command_line(tmp_path: Path, capsys
     assert "record 2: override reject -> none" in out and "recomputed and stored" in out
     after = read_run(path)
     assert after.records.override[:2] == ("accept", "") and after.state == "finished"
-    assert after.frf is not None and after.frf.meta["n_averages"] == [3, 2]
-    frf2, _ = run_frfs(after)
-    assert np.array_equal(frf2.H, after.frf.H) and not np.array_equal(frf2.H, frf.H)
+    assert after.measurement is not None and after.measurement.frf.meta["n_averages"] == [3, 2]
+    frf2 = run_measurement(after)[0].frf
+    assert np.array_equal(frf2.H, after.measurement.frf.H) and not np.array_equal(frf2.H, frf.H)
     assert np.array_equal(after.records.data, rec.data)  # raw records untouched
 
     # mistakes are one line each, and change nothing

@@ -9,11 +9,13 @@ import pytest
 from numpy.testing import assert_allclose
 
 from app.acquire import HammerProcedure, PlanError, RunState
-from app.acquire.analysis import analyse_run, run_frfs
+from app.acquire.analysis import check_identifiable, run_measurement
 from app.io.runfile import read_run
 from app.mockbench.bench import InProcessBench, plan_for_bench
+from app.pipeline import RUN_FILE, load
 from drivers.sync import signal_delay
 from processing.data import InputError
+from processing.identify import fit
 from processing.inertia import inertia_properties
 
 POINTS = [0, 1, 3, 4, 6, 8, 9, 12, 15]
@@ -50,7 +52,8 @@ def test_serial_hammer_aligned_on_the_common_channel_identifies_the_mass(tmp_pat
     for i in range(len(rec)):
         d, corr = signal_delay(rec.sync[i], rec.data[i, 0], rec.fs)
         assert abs(d) * rec.fs < 1e-3 and corr > 0.95
-    frf, result, _ = analyse_run(run)
+    frf = run_measurement(run)[0].frf  # the whole band, as the live run stored it
+    result = fit(load(path, fmt=RUN_FILE))  # what every view identifies from the run file
     assert np.array_equal(frf.H, proc.frf.H) and np.array_equal(result.theta, proc.result.theta)
 
 
@@ -67,7 +70,9 @@ def test_host_timed_force_is_refused_for_identification(tmp_path: Path) -> None:
         assert proc.wait(30) is RunState.FINISHED, proc.message
     run = read_run(tmp_path / "frfs.h5")
     assert run.records.force_alignment == "host-timed" and run.records.sync is None
-    frf, _ = run_frfs(run)  # FRFs only
+    frf = run_measurement(run)[0].frf  # FRFs only
     assert frf.H.shape == (12, 1, 257)
     with pytest.raises(InputError, match=r"not identified: .*host timing only"):
-        analyse_run(run)
+        check_identifiable(run)
+    with pytest.raises(InputError, match=r"not identified: .*host timing only"):
+        load(tmp_path / "frfs.h5", fmt=RUN_FILE)

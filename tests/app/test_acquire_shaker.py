@@ -14,14 +14,16 @@ import pytest
 from numpy.testing import assert_allclose
 
 from app.acquire import Listener, RunState, load_plan
-from app.acquire.analysis import analyse_run
+from app.acquire.analysis import run_measurement
 from app.acquire.shaker import ShakerProcedure
 from app.acquire.shaker_io import BURST_PRE
 from app.cli.main import main
 from app.io.runfile import read_run
 from app.mockbench.bench import InProcessBench, plan_for_bench
+from app.pipeline import RUN_FILE, load
 from hardware_mocks.benches import get_bench
 from hardware_mocks.operator import MockShakerOperator
+from processing.identify import fit
 from processing.inertia import inertia_properties
 from tests.app.bench_checks import assert_identifies
 
@@ -112,10 +114,12 @@ def test_chirp_run_identifies_the_engine_and_replay_is_identical(tmp_path: Path)
     assert run.records.data.shape == (len(POINTS), 13, 512)
     assert run.records.accepted.all() and run.records.point.tolist() == list(range(len(POINTS)))
     assert np.abs(run.records.data[:, 0]).max() < 2000  # force within the sensor's range
-    assert run.frf is not None and run.frf.meta["n_averages"] == [1] * len(POINTS)
-    frf, result, _ = analyse_run(run)
+    stored = run.measurement
+    assert stored is not None and stored.frf.meta["n_averages"] == [1] * len(POINTS)
+    frf = run_measurement(run)[0].frf  # the whole band, as the live run stored it
+    result = fit(load(path, fmt=RUN_FILE))  # what every view identifies from the run file
     assert np.isfinite(proc.frf.H).all()  # 0 Hz too: blocks are not detrended
-    assert np.array_equal(frf.H, proc.frf.H) and np.array_equal(frf.H, run.frf.H)
+    assert np.array_equal(frf.H, proc.frf.H) and np.array_equal(frf.H, stored.frf.H)
     assert np.array_equal(frf.coherence, proc.frf.coherence, equal_nan=True)
     assert np.array_equal(result.theta, proc.result.theta)
     assert main(["replay", str(path)]) == 0
@@ -220,10 +224,13 @@ def test_burst_random_plan_acquired_and_identified_from_the_command_line(
     on = np.abs(force) > 1e-9
     assert_allclose(on.sum(axis=1), burst, atol=3)
     assert not on[:, BURST_PRE + burst + 3:].any()
-    assert run.frf is not None and run.frf.meta["n_averages"] == [2] * n_pts
-    band = (run.frf.freq >= 5.0) & (run.frf.freq <= 150.0)
+    assert run.measurement is not None
+    stored = run.measurement.frf
+    assert stored.meta["n_averages"] == [2] * n_pts
+    band = (stored.freq >= 5.0) & (stored.freq <= 150.0)
     # two bursts of a random multisine per point: coherence 1 but for leakage (none seen)
-    assert np.median(run.frf.coherence[..., band]) > 0.999
+    assert stored.coherence is not None
+    assert np.median(stored.coherence[..., band]) > 0.999
 
     model = get_bench("engine-rigid").model
     res = json.loads(out.read_text())

@@ -1,4 +1,5 @@
-"""``app.pipeline.open_frfs``: one call for the four input formats, reports returned."""
+"""``app.pipeline.load``: one call for the four input formats, reports in the measurement's
+provenance."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from app.acquire.analysis import margin_samples, run_frfs
+from app.acquire.analysis import margin_samples, run_measurement
 from app.io.frf_h5 import write_frf_h5
 from app.io.runfile import RunWriter, read_run
 from app.io.uff import write_frf_uff
@@ -22,8 +23,8 @@ from app.pipeline import (
     OpenError,
     Settings,
     detect_format,
+    load,
     n_skipped,
-    open_frfs,
 )
 from drivers.base import ChannelConfig
 from hardware_mocks.benches import get_bench
@@ -43,9 +44,9 @@ def test_frf_files_open_as_written(tmp_path: Path) -> None:
     write_frf_h5(h5, type(frf)(frf.freq, frf.H, frf.resp_nodes, frf.resp_dirs, frf.exc_nodes,
                                frf.exc_dirs, frf.geometry, coh))
     assert detect_format(uff) == FRF_UFF and detect_format(h5) == FRF_H5
-    got_uff, rep_uff = open_frfs(uff)
-    got_h5, rep_h5 = open_frfs(h5)
-    assert rep_uff == [] and rep_h5 == []
+    m_uff, m_h5 = load(uff), load(h5)
+    got_uff, got_h5 = m_uff.frf, m_h5.frf
+    assert m_uff.provenance.reports == () and m_h5.provenance.reports == ()
     assert_allclose(got_uff.H, frf.H, rtol=1e-6)  # UFF stores 7 significant digits or more
     assert_array_equal(got_h5.H, frf.H)
     assert got_h5.coherence is not None
@@ -71,12 +72,13 @@ def test_time_uff_gives_the_model_frfs_and_reports(tmp_path: Path) -> None:
     path = tmp_path / "time.uff"
     _time_uff(path)
     assert detect_format(path) == TIME_UFF
-    frf, reports = open_frfs(path, Settings(nperseg=1024))
+    m = load(path, Settings(nperseg=1024))
+    frf, reports = m.frf, m.provenance.reports
     # from the first line whose median coherence reaches the gate's 0.8 (a line says so)
     k = round(frf.freq[0] / (FS / 1024))
     assert frf.freq[0] == pytest.approx(k * FS / 1024) and 1 <= k <= 4
     assert frf.freq[-1] <= FS / 2.56
-    assert frf.H.shape[:2] == (12, 3) and n_skipped(reports) == 0
+    assert frf.H.shape[:2] == (12, 3) and n_skipped(reports) == 0 == m.provenance.skipped
     assert (reports[0].message.startswith(f"FRFs from {frf.freq[0]:.4g} Hz")) == (k > 1)
     lines = [r.message for r in reports if not r.message.startswith("FRFs from")]
     assert lines[0].startswith("excitation random (force not impulsive in 3 of 3 runs")
@@ -97,12 +99,13 @@ def test_time_uff_gives_the_model_frfs_and_reports(tmp_path: Path) -> None:
 def test_bad_run_is_reported_and_left_out(tmp_path: Path) -> None:
     path = tmp_path / "time.uff"
     _time_uff(path, zero_force=1)
-    frf, reports = open_frfs(path, Settings(nperseg=1024))
-    assert frf.H.shape[1] == 2 and n_skipped(reports) == 1
+    m = load(path, Settings(nperseg=1024))
+    frf, reports = m.frf, m.provenance.reports
+    assert frf.H.shape[1] == 2 and n_skipped(reports) == 1 == m.provenance.skipped
     bad = next(r for r in reports if r.skipped)
     assert bad.message.startswith("load case 2: the force channel is zero throughout")
     with pytest.raises(OpenError, match="no usable time run") as err:
-        open_frfs(path, Settings(nperseg=1024, excitation="impact", level=1e6))
+        load(path, Settings(nperseg=1024, excitation="impact", level=1e6))
     assert n_skipped(err.value.reports) == 3  # every run's line comes with the error
 
 
@@ -138,22 +141,24 @@ def _run_file(path: Path, points: list[int]) -> Path:
 def test_run_file_every_point_or_usable_points(tmp_path: Path) -> None:
     whole = _run_file(tmp_path / "whole.h5", [0, 1, 2])
     assert detect_format(whole) == RUN_FILE
-    frf, reports = open_frfs(whole)
-    assert reports == [] and frf.meta["file"] == "whole.h5"
+    m = load(whole)
+    frf, reports = m.frf, m.provenance.reports
+    assert reports == () and frf.meta["file"] == "whole.h5"
     assert frf.meta["run_state"] == "stopped"
-    full = run_frfs(read_run(whole))[0]  # the acquisition's own FRFs, cut to fs / 2.56
+    full = run_measurement(read_run(whole))[0].frf  # the acquisition's own FRFs, cut to fs / 2.56
     keep = (full.freq > 0) & (full.freq <= FS / 2.56)
     assert_array_equal(frf.freq, full.freq[keep])
     assert_array_equal(frf.H, full.H[..., keep])
 
     partial = _run_file(tmp_path / "partial.h5", [0, 2])
     with pytest.raises(InputError, match="has no accepted hit"):
-        open_frfs(partial)
-    frf, reports = open_frfs(partial, Settings(run_points="usable"))
-    assert frf.H.shape[1] == 2 and n_skipped(reports) == 1
+        load(partial)
+    m = load(partial, Settings(run_points="usable"))
+    frf, reports = m.frf, m.provenance.reports
+    assert frf.H.shape[1] == 2 and n_skipped(reports) == 1 == m.provenance.skipped
     assert next(r.message for r in reports if r.skipped).endswith(
         "no hit recorded: hit it again (insitu acquire --resume)")
-    assert_array_equal(frf.H, open_frfs(whole, Settings(run_points="usable"))[0].H[:, [0, 2]])
+    assert_array_equal(frf.H, load(whole, Settings(run_points="usable")).frf.H[:, [0, 2]])
 
 
 def test_no_function_over_80_lines() -> None:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from app.acquire.analysis import run_frfs
+from app.acquire.analysis import run_measurement
 from app.acquire.plan import PlanError, TestPlan, load_plan, parse_plan
 from app.acquire.shaker import ShakerProcedure
 from app.cli.main import main
@@ -112,7 +112,7 @@ def test_two_correlated_shakers_identify_the_engine(tmp_path: Path) -> None:
     physics = _write_run(path, plan)
     model = physics.bench.model
     run = read_run(path)
-    frfs, _ = run_frfs(run)
+    frfs = run_measurement(run)[0].frf
     assert frfs.H.shape[:2] == (12, len(POINTS))
     assert_allclose(frfs.exc_nodes, plan.exc_nodes)
     assert frfs.meta["n_averages"] == [BLOCKS] * len(POINTS) and frfs.meta["shakers"] == 2
@@ -170,7 +170,7 @@ def test_two_shakers_acquired_on_the_mock_bench_and_identified(tmp_path: Path) -
     f1, f2 = run.records.data[:, 0], run.records.data[:, 1]
     assert (np.abs(f1).max(axis=1) > 20).all() and (np.abs(f2).max(axis=1) > 20).all()
     assert abs(np.corrcoef(f1.ravel(), f2.ravel())[0, 1]) < 0.2  # two signals
-    assert run.frf is not None and run.frf.H.shape[1] == len(POINTS)
+    assert run.measurement is not None and run.measurement.frf.H.shape[1] == len(POINTS)
     model = get_bench("engine-rigid").model
     res = json.loads(out.read_text())
     # measured (two runs): mass 0.011 %, CoG 0.008-0.026 mm, inertia 0.005 % of the

@@ -132,19 +132,20 @@ def test_report_with_mounts(tmp_path: Path, qapp, capsys: pytest.CaptureFixture[
 def test_run_file_mounts_are_loaded_with_the_run(qtbot, make_window, choose_file,
                                                  tmp_path: Path) -> None:
     """A run file that carries a mounts table brings it into the plan view and the results."""
+    from app.acquire import HammerProcedure, RunState
     from app.io.mounts import load_mounts
-    from app.io.runfile import RunWriter, write_mounts
-    from app.mockbench.bench import plan_for_bench
-    from drivers.base import ChannelConfig
+    from app.io.runfile import write_mounts
+    from app.mockbench.bench import InProcessBench, plan_for_bench
 
     _, toml = _files(tmp_path)
-    bench = get_bench("engine-rigid")
-    plan = plan_for_bench("engine-rigid", points=[0, 1, 3, 4, 6, 8])
+    # six well-conditioned excitations (the GUI acquisition test's)
+    plan = plan_for_bench("engine-rigid", points=[0, 4, 8, 9, 13, 17])
     path = tmp_path / "run.h5"
-    w = RunWriter.create(path, plan_data=plan.to_dict(), station_data={},
-                         channels=[ChannelConfig("F", 0, "force", 2.25)], devices=["fe"],
-                         geometry=bench.geometry, fs=256.0, n_samples=8, method="hammer")
-    w.finish("finished", frf=bench.frfset())
+    # a run file is opened from its records (always recomputed): a run recorded on the bench
+    with InProcessBench("engine-rigid") as bench:
+        proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
+        proc.start()
+        assert proc.wait(60) is RunState.FINISHED, proc.message
     write_mounts(path, load_mounts(toml))
     window: MainWindow = make_window()
     choose_file(path)
