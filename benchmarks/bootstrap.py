@@ -5,13 +5,13 @@ viscous mounts, 6 excitation points, 3 triaxial sensors) is measured many times 
 by the independent generator (``hardware_mocks/reference/timedata.py``): a hammer test (5 hits
 a point) or a continuous-random shaker test, each seed a new test (new hits, new noise). Each
 test is processed with fixed settings (trigger, record, Welch segments), identified in fixed
-bands (those the first test chooses), and bootstrapped (:func:`processing.bootstrap.
+bands (those the first test chooses), and bootstrapped (:func:`processing.identify.
 bootstrap_identify`). For each number (mass, CoG, moments about the CoG, K's diagonal) the
 ratio of a test's bootstrap std to the std of the estimate over all the tests says whether
 the bootstrap measures the real spread: median and quartiles of the ratio over tests. The
-fit's covariance std (``identify``'s uncertainty without the bootstrap) is given beside it.
+fit's covariance std (``fit``'s uncertainty without the bootstrap) is given beside it.
 
-Cost: ``identify`` with the default uncertainty (covariance part) against the same with the
+Cost: ``fit`` with the default uncertainty (covariance part) against the same with the
 bootstrap of 200 resamples, best of repeats, on the first test of each kind.
 
 Run: ``.venv/bin/python benchmarks/bootstrap.py [--tests 40] [--kind hammer|shaker|both]``.
@@ -38,10 +38,11 @@ from hardware_mocks.reference.timedata import (  # noqa: E402
     hammer_test,
     shaker_test,
 )
-from processing.bootstrap import Bootstrap, bootstrap_identify  # noqa: E402
+from processing.bootstrap import Bootstrap  # noqa: E402
 from processing.data import FRFSet, Geometry  # noqa: E402
-from processing.identify import IdentifyOptions, identify  # noqa: E402
+from processing.identify import IdentifyOptions, bootstrap_identify, fit  # noqa: E402
 from processing.impact import ImpactSettings, merge_results, process_impacts  # noqa: E402
+from processing.measurement import Measurement, Provenance  # noqa: E402
 from processing.spectral import SpectralAccumulator, frf  # noqa: E402
 from processing.uncertainty import derived_of_draws  # noqa: E402
 from processing.units import TimeUnits, welch_units  # noqa: E402
@@ -61,17 +62,19 @@ def scenario() -> Scenario:
                                        damping="viscous"))
 
 
-def _frfset(sc: Scenario, freq: np.ndarray, H: list[np.ndarray], coh: list[np.ndarray],
-            units: TimeUnits, tau: float | None) -> FRFSet:
+def _measurement(sc: Scenario, freq: np.ndarray, H: list[np.ndarray], coh: list[np.ndarray],
+                 units: TimeUnits, tau: float | None) -> Measurement:
+    """The FRFs estimated from time records, with their per-hit or per-block spectra."""
     ids, xyz = sc.geometry()
     keep = freq > 0
-    return FRFSet(freq[keep], np.concatenate(H, axis=1)[..., keep], sc.sensors.ids,
-                  sc.sensors.reported_dirs, sc.forces.ids, sc.forces.reported_dirs,
-                  Geometry(ids, xyz), np.concatenate(coh, axis=1)[..., keep],
-                  {"time_units": units, "exponential_tau": tau})
+    frf = FRFSet(freq[keep], np.concatenate(H, axis=1)[..., keep], sc.sensors.ids,
+                 sc.sensors.reported_dirs, sc.forces.ids, sc.forces.reported_dirs,
+                 Geometry(ids, xyz), np.concatenate(coh, axis=1)[..., keep])
+    return Measurement(frf, Provenance(origin="estimated", units=units, exponential_tau=tau))
 
 
-def hammer_frfs(sc: Scenario, seed: int, hits: int = 5, clean: bool = False) -> FRFSet:
+def hammer_frfs(sc: Scenario, seed: int, hits: int = 5, clean: bool = False,
+                ) -> Measurement:
     """A hammer test of ``sc`` (seed ``seed``) processed with fixed settings: trigger 20 N,
     2 s records, 10 ms pre-trigger, no exponential window (mounts damped x3: the responses
     have decayed), H1 over the accepted hits, per-hit spectra kept. ``clean``: no force
@@ -89,12 +92,12 @@ def hammer_frfs(sc: Scenario, seed: int, hits: int = 5, clean: bool = False) -> 
         cols.append(res)
     units = TimeUnits("hit", tuple(c.units for c in cols if c.units is not None),
                       sc.forces.ids, sc.forces.reported_dirs)
-    return _frfset(sc, cols[0].freq, [c.H for c in cols if c.H is not None],
+    return _measurement(sc, cols[0].freq, [c.H for c in cols if c.H is not None],
                    [c.coherence for c in cols if c.coherence is not None], units, None)
 
 
 def shaker_frfs(sc: Scenario, seed: int, duration: float = 40.0, clean: bool = False,
-                ) -> FRFSet:
+                ) -> Measurement:
     """A continuous-random shaker test of ``sc`` processed by Welch (1024-sample Hann
     segments, half overlap), H1, blocks of segments kept (:func:`welch_units`). ``clean``:
     as :func:`hammer_frfs`."""
@@ -110,7 +113,7 @@ def shaker_frfs(sc: Scenario, seed: int, duration: float = 40.0, clean: bool = F
         coh.append(c)
         parts.append(u)
     units = TimeUnits("block", tuple(parts), sc.forces.ids, sc.forces.reported_dirs)
-    return _frfset(sc, sp.freq, H, coh, units, None)
+    return _measurement(sc, sp.freq, H, coh, units, None)
 
 
 def _value(v: dict[str, np.ndarray], key: str, idx: tuple[int, ...]) -> np.ndarray:
@@ -123,10 +126,10 @@ def calibrate(kind: str, tests: int, resamples: int = 200, clean: bool = False,
     and quartiles over tests of (bootstrap std / that std) and (covariance std / that std)."""
     sc = scenario()
 
-    def make(s: int) -> FRFSet:
+    def make(s: int) -> Measurement:
         return (hammer_frfs if kind == "hammer" else shaker_frfs)(sc, s, clean=clean)
 
-    first = identify(make(0), IdentifyOptions(bootstrap=0))
+    first = fit(make(0), IdentifyOptions(bootstrap=0))
     opt = IdentifyOptions(mass_band=first.mass_band, stiffness_band=first.stiffness_band)
     est, boot, cov = [], [], []
     for s in range(tests):
@@ -136,7 +139,7 @@ def calibrate(kind: str, tests: int, resamples: int = 200, clean: bool = False,
         est.append(derived_of_draws(fitted.theta[None], fitted.K[None], fitted.C[None]))
         bv = b.values()
         boot.append({k: np.std(v, axis=0, ddof=1) for k, v in bv.items()})
-        u = identify(frfs, dataclasses.replace(opt, bootstrap=0)).uncertainty
+        u = fit(frfs, dataclasses.replace(opt, bootstrap=0)).uncertainty
         assert u is not None
         cov.append(u.std)
     out: dict[str, Any] = {"kind": kind, "tests": tests, "bands": [first.mass_band,
@@ -154,7 +157,7 @@ def calibrate(kind: str, tests: int, resamples: int = 200, clean: bool = False,
 
 def cost(kind: str, repeats: int = 5) -> dict[str, float]:
     """CPU seconds of this process (best of ``repeats``; the machine is shared, so the wall
-    clock is not the figure) of identify without uncertainty, with the covariance part,
+    clock is not the figure) of the fit without uncertainty, with the covariance part,
     and with the covariance part and 200 resamples."""
     frfs = (hammer_frfs if kind == "hammer" else shaker_frfs)(scenario(), 0)
     times = {}
@@ -164,7 +167,7 @@ def cost(kind: str, repeats: int = 5) -> dict[str, float]:
         best = np.inf
         for _ in range(repeats):
             t0 = time.process_time()
-            identify(frfs, opt)
+            fit(frfs, opt)
             best = min(best, time.process_time() - t0)
         times[name] = best
     times["bootstrap / identify"] = (times["bootstrap 200"] - times["covariance"]) / times[

@@ -51,7 +51,7 @@ import numpy as np  # noqa: E402
 
 from app.cli.main import main as insitu_main  # noqa: E402
 from app.io.uff import write_frf_uff  # noqa: E402
-from app.pipeline import Settings, open_frfs  # noqa: E402
+from app.pipeline import Settings, load  # noqa: E402
 from hardware_mocks.reference.metrics import errors  # noqa: E402
 from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario  # noqa: E402
 from hardware_mocks.reference.timedata import (  # noqa: E402
@@ -151,14 +151,14 @@ def evaluate(i: int, kind: str) -> dict[str, Any]:
             row["hits"] = _hit_counts(t, out)
         # the exact FRFs on the lines the time data gave, identified the same way
         try:
-            frf, _ = open_frfs(path, Settings())
+            frf = load(path, Settings()).frf
             fc = t.scenario.forces  # the columns the time data kept (a run may be left out)
             cols = [int(np.flatnonzero((fc.ids == n) & np.all(np.isclose(fc.reported_dirs, d),
                                                                axis=1))[0])
                     for n, d in zip(frf.exc_nodes, frf.exc_dirs, strict=True)]
+            # no window's tau: it lives in the measurement's provenance, not written
             exact = dataclasses.replace(frf, H=t.exact_frf(frf.freq)[:, cols],
-                                        coherence=np.ones(frf.H.shape),
-                                        meta={**frf.meta, "exponential_tau": None})
+                                        coherence=np.ones(frf.H.shape))
             epath = Path(tmp) / "exact.uff"
             write_frf_uff(epath, exact, binary=True, coherence=True)
             res2, why2, _ = identify_cli(epath)

@@ -30,8 +30,10 @@ from hardware_mocks.benches import get_bench  # noqa: E402
 from hardware_mocks.reference.scenarios import Scenario, build_scenario, suite  # noqa: E402
 from processing import identify as idm  # noqa: E402
 from processing.data import FRFSet, Geometry, InputError  # noqa: E402
+from processing.measurement import Measurement  # noqa: E402
 from processing.montecarlo import StatedUncertainty, simulate  # noqa: E402
-from processing.problem import IdentifyOptions, prepare  # noqa: E402
+from processing.problem import IdentifyOptions  # noqa: E402
+from processing.stages import monte_carlo_model  # noqa: E402
 
 
 def frfset_of(sc: Scenario) -> FRFSet:
@@ -75,17 +77,11 @@ def cases() -> list[tuple[str, FRFSet]]:
 
 def draws_time(frf: FRFSet, stated: StatedUncertainty, repeat: int) -> float:
     """Median seconds of building the Monte Carlo model of the fit and running the draws."""
-    opt = IdentifyOptions(uncertainty=False)
-    top, fallback, _ = idm._rigid_band_tops(frf)
-    pb = prepare(frf.freq, frf.H, frf.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
-                 coherence=frf.coherence, options=opt, exponential_tau=None)
-    bands = idm.choose_bands(pb, top, fallback)
-    weights = idm.weigh_lines(pb, bands)
-    fitted = idm.fit(pb, bands, weights)
+    st = idm.stages(Measurement(frf), IdentifyOptions(uncertainty=False))  # the fit's stages
 
     def run() -> None:
-        simulate(idm.monte_carlo_model(pb, weights, fitted, (frf.resp_nodes, frf.exc_nodes)),
-                 stated)
+        simulate(monte_carlo_model(st.problem, st.weights, st.fitted,
+                                   (frf.resp_nodes, frf.exc_nodes)), stated)
 
     return _median_time(run, repeat)
 

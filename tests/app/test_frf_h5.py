@@ -12,14 +12,21 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from app.cli.main import main
-from app.io.frf_h5 import FRFFileError, h5_format, read_frf_h5, write_frf_h5
+from app.io.frf_h5 import (
+    FRFFileError,
+    h5_format,
+    read_frf_h5,
+    read_frf_measurement,
+    write_frf_h5,
+)
 from hardware_mocks.benches import get_bench
-from processing.data import FRFSet
+from processing.measurement import Measurement, Provenance
 
 
 @pytest.fixture(scope="module")
-def engine() -> tuple[FRFSet, tuple[float, float]]:
-    """Engine-rigid FRFs (1 % noise) with coherence below 0.8 in one range of the mass band."""
+def engine() -> tuple[Measurement, tuple[float, float]]:
+    """Engine-rigid FRFs (1 % noise) with coherence below 0.8 in one range of the mass band,
+    estimated from hits under an exponential window (tau 0.5 s)."""
     b = get_bench("engine-rigid")
     frf = b.frfset(noise=0.01)
     coh = 1.0 - 0.05 * np.random.default_rng(3).random(frf.H.shape)
@@ -27,22 +34,28 @@ def engine() -> tuple[FRFSet, tuple[float, float]]:
     low = np.flatnonzero((frf.freq >= lo) & (frf.freq <= hi))[5:9]  # 4 lines in the mass band
     coh[2, 4, low] = 0.5
     coh[0, 0, -3:] = 0.1  # outside both bands: no effect on the identification
-    meta = {"estimator": "H1", "excitation": "impact", "exponential_tau": 0.5,
+    meta = {"estimator": "H1", "excitation": "impact",
             "n_averages": list(range(frf.H.shape[1]))}
-    return (replace(frf, coherence=coh, meta=meta),
+    prov = Provenance(origin="estimated", excitation="impact", exponential_tau=0.5)
+    return (Measurement(replace(frf, coherence=coh, meta=meta), prov),
             (float(frf.freq[low[0]]), float(frf.freq[low[-1]])))
 
 
-def test_round_trip_and_layout(tmp_path: Path, engine: tuple[FRFSet, object]) -> None:
-    frf, _ = engine
+def test_round_trip_and_layout(tmp_path: Path, engine: tuple[Measurement, object]) -> None:
+    m, _ = engine
+    frf = m.frf
     path = tmp_path / "frf.h5"
-    write_frf_h5(path, frf, source="time.uff")
+    write_frf_h5(path, m, source="time.uff")
     back = read_frf_h5(path)
     for name in ("freq", "H", "coherence", "resp_nodes", "resp_dirs", "exc_nodes", "exc_dirs"):
         assert_array_equal(getattr(back, name), getattr(frf, name), err_msg=name)
     assert_array_equal(back.geometry.node_ids, frf.geometry.node_ids)
     assert_array_equal(back.geometry.xyz, frf.geometry.xyz)
     assert back.meta == frf.meta
+    kept = read_frf_measurement(path)
+    assert kept.provenance == m.provenance and kept.provenance.exponential_tau == 0.5
+    assert kept.source == "frf.h5"
+    assert_array_equal(kept.frf.H, frf.H)
     with h5py.File(path, "r") as f:
         assert f.attrs["format"] == "insitu-frf" and f.attrs["schema_version"] == 1
         assert f.attrs["source"] == "time.uff" and f.attrs["estimator"] == "H1"
@@ -58,10 +71,11 @@ def test_round_trip_and_layout(tmp_path: Path, engine: tuple[FRFSet, object]) ->
     write_frf_h5(path, bare)
     again = read_frf_h5(path)
     assert again.coherence is None and again.meta == {"tau": 0.25, "n": [0, 1, 2]}
+    assert read_frf_measurement(path).provenance == Provenance()  # FRFs given
 
 
-def test_bad_files_are_one_line(tmp_path: Path, engine: tuple[FRFSet, object]) -> None:
-    frf, _ = engine
+def test_bad_files_are_one_line(tmp_path: Path, engine: tuple[Measurement, object]) -> None:
+    frf = engine[0].frf
     with pytest.raises(FRFFileError, match="no such FRF file"):
         read_frf_h5(tmp_path / "missing.h5")
     (tmp_path / "text.h5").write_text("not hdf5")
@@ -87,7 +101,7 @@ def test_bad_files_are_one_line(tmp_path: Path, engine: tuple[FRFSet, object]) -
 
 
 def test_identify_reads_frf_file_and_reports_low_coherence(
-        tmp_path: Path, engine: tuple[FRFSet, tuple[float, float]],
+        tmp_path: Path, engine: tuple[Measurement, tuple[float, float]],
         capsys: pytest.CaptureFixture[str]) -> None:
     frf, (lo, hi) = engine
     b = get_bench("engine-rigid")

@@ -14,29 +14,28 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from app.pipeline import Settings, open_frfs
+from app.pipeline import Settings, load
 from benchmarks.timedata import case
 from hardware_mocks.reference.metrics import errors
 from hardware_mocks.reference.timedata import write_uff
-from processing.identify import IdentifyOptions, identify
-from processing.impact import FORCE_BAND_TOP
+from processing.identify import IdentifyOptions, fit
 
 
 def test_no_elastic_mode_read_from_the_force_s_spectral_zero(tmp_path: Path) -> None:
     t = case(20, "hammer", tip=2.0)
     path = tmp_path / "soft.uff"
     write_uff(t, path)
-    frf, _ = open_frfs(path, Settings())
-    top = frf.meta[FORCE_BAND_TOP]
+    m = load(path, Settings())
+    top = m.provenance.force_band_top
     assert isinstance(top, float) and 55.0 < top < 70.0  # half-sine: 1.3 / width = 0.25 fs
     opt = IdentifyOptions(uncertainty=False)
-    r = identify(frf, opt)
+    r = fit(m, opt)
     assert r.elastic_modes == ()
     assert any("20 dB or more under its peak above" in w for w in r.warnings)
     p = r.properties
     e = errors(t.truth, p.mass, p.cog, p.inertia_origin, p.inertia_cog, r.K)
     assert e["mass"] < 1.0 and e["cog"] < 3.0 and e["inertia"] < 4.0, e
     # the same FRFs without the band read from the force: the spike counts as a mode
-    bare = dataclasses.replace(frf, meta={k: v for k, v in frf.meta.items()
-                                          if k != FORCE_BAND_TOP})
-    assert [round(m.frequency) for m in identify(bare, opt).elastic_modes] == [88]
+    bare = dataclasses.replace(m, provenance=dataclasses.replace(m.provenance,
+                                                                 force_band_top=None))
+    assert [round(e.frequency) for e in fit(bare, opt).elastic_modes] == [88]

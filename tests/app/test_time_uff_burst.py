@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.pipeline import Settings, open_frfs
+from app.pipeline import Settings, load
 from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
 from hardware_mocks.reference.timedata import ShakerSpec, shaker_test, write_uff
 
@@ -29,8 +29,9 @@ def test_burst_records_leave_out_the_sensors_settling(seed: int, tmp_path: Path)
     t = shaker_test(sc, ShakerSpec(seed=seed, kind="burst", duration=20.0))
     src = tmp_path / "time.uff"
     write_uff(t, src)
-    frf, reports = open_frfs(src, Settings(coherence=0.0))
-    text = "\n".join(r.message for r in reports)
+    m = load(src, Settings(coherence=0.0))
+    frf = m.frf
+    text = "\n".join(r.message for r in m.provenance.reports)
     assert "shaker force in bursts" in text
     assert "4 averages" in text  # the bursts at 4, 8, 12 and 16 s
     fc = sc.forces
@@ -42,7 +43,7 @@ def test_burst_records_leave_out_the_sensors_settling(seed: int, tmp_path: Path)
     err = (np.linalg.norm(frf.H[..., low] - exact[..., low], axis=(0, 1))
            / np.linalg.norm(exact[..., low], axis=(0, 1)))
     assert np.max(err) < 0.7 and np.median(err) < 0.2, err  # were 2-12 and 0.5-1.2
-    done, _ = open_frfs(src, Settings(coherence=0.0, carryover=True))
+    done = load(src, Settings(coherence=0.0, carryover=True)).frf
     err = (np.linalg.norm(done.H[..., low] - exact[..., low], axis=(0, 1))
            / np.linalg.norm(exact[..., low], axis=(0, 1)))
     assert np.max(err) < 0.55 and np.median(err) < 0.15, err

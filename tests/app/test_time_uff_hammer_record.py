@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from numpy.testing import assert_array_less
 
-from app.pipeline import Settings, open_frfs
+from app.pipeline import Settings, load
 from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
 from hardware_mocks.reference.timedata import HammerSpec, hammer_test, write_uff
 from processing.impact import TAIL_FACTOR, impact_defaults
@@ -23,7 +23,8 @@ def _column_errors(tmp_path: Path, seed: int, damping: float,
     t = hammer_test(sc, HammerSpec(seed=seed, hits=4, spacing=3.5, damping=damping))
     src = tmp_path / "time.uff"
     write_uff(t, src)
-    frf, reports = open_frfs(src, Settings())
+    m = load(src, Settings())
+    frf, reports = m.frf, m.provenance.reports
     exact = t.exact_frf(frf.freq)
     err = np.linalg.norm(frf.H - exact, axis=0) / np.linalg.norm(exact, axis=0)
     decay = float(np.median([impact_defaults(r.forces[0], r.responses, t.fs).decay

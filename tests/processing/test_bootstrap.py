@@ -24,7 +24,8 @@ from processing import bootstrap as bsm
 from processing import identify as idm
 from processing.data import FRFSet, Geometry
 from processing.impact import ImpactSettings, merge_results, process_impacts
-from processing.problem import IdentifyOptions
+from processing.measurement import Measurement, Provenance
+from processing.problem import IdentifyOptions, SolverSettings
 from processing.results import UNCERTAIN_KEYS
 from processing.spectral import SpectralAccumulator, frf, record_spectra
 from processing.uncertainty import combine
@@ -77,17 +78,18 @@ def test_kept_hits_give_the_averaged_column() -> None:
     assert process_impacts(x, fs, settings).units is None  # not kept unless asked
 
 
-def _with_copies(frf: FRFSet, copies: int = 3) -> FRFSet:
-    """``frf`` with per-unit spectra of ``copies`` identical units a column (Sff = 1, Sfx = H,
-    Sxx = |H|^2 / coherence): every resample is the data itself."""
+def _with_copies(frf: FRFSet, copies: int = 3, tau: float | None = None) -> Measurement:
+    """``frf`` estimated from time records (window ``tau``) with per-unit spectra of
+    ``copies`` identical units a column (Sff = 1, Sfx = H, Sxx = |H|^2 / coherence): every
+    resample is the data itself."""
     assert frf.coherence is not None
     cols = tuple(UnitSpectra(frf.freq, np.ones((copies, frf.freq.size)),
                              np.repeat(frf.H[None, :, j], copies, axis=0),
                              np.repeat((np.abs(frf.H[:, j]) ** 2 / frf.coherence[:, j])[None],
                                        copies, axis=0), np.ones(copies))
                  for j in range(frf.H.shape[1]))
-    return dataclasses.replace(frf, meta={"time_units": TimeUnits(
-        "hit", cols, frf.exc_nodes, frf.exc_dirs)})
+    return Measurement(frf, Provenance(origin="estimated", units=TimeUnits(
+        "hit", cols, frf.exc_nodes, frf.exc_dirs), exponential_tau=tau))
 
 
 def _scenario_frfs(**spec: object) -> FRFSet:
@@ -97,20 +99,22 @@ def _scenario_frfs(**spec: object) -> FRFSet:
                   sc.forces.reported_dirs, Geometry(ids, xyz), sc.coherence)
 
 
-@pytest.mark.parametrize(("spec", "options"), [
-    ({"seed": 31, "noise": 0.01, "elastic_ratio": None}, IdentifyOptions()),
+@pytest.mark.parametrize(("spec", "options", "solver"), [
+    ({"seed": 31, "noise": 0.01, "elastic_ratio": None}, IdentifyOptions(), None),
     ({"seed": 32, "noise": 0.01, "elastic_ratio": None, "damping": "viscous"},
-     IdentifyOptions(damping="viscous", physical=True)),
-    ({"seed": 33, "noise": 0.01, "elastic_ratio": None}, IdentifyOptions(method="plain")),
-    ({"seed": 34, "noise": 0.0, "elastic_ratio": 6.0}, IdentifyOptions()),  # leakage shapes
-    ({"seed": 35, "noise": 0.01, "elastic_ratio": None}, IdentifyOptions(symmetric=False)),
+     IdentifyOptions(damping="viscous", physical=True), None),
+    ({"seed": 33, "noise": 0.01, "elastic_ratio": None}, IdentifyOptions(method="plain"), None),
+    ({"seed": 34, "noise": 0.0, "elastic_ratio": 6.0}, IdentifyOptions(), None),  # leakage shapes
+    ({"seed": 35, "noise": 0.01, "elastic_ratio": None}, IdentifyOptions(),
+     SolverSettings(symmetric=False)),
 ])
 def test_resamples_of_the_data_itself_give_the_fit(spec: dict[str, object],
-                                                   options: IdentifyOptions) -> None:
+                                                   options: IdentifyOptions,
+                                                   solver: SolverSettings | None) -> None:
     """Identical units: each resample's FRFs are the data, so the vectorised re-solve (or the
     iteration, with leakage shapes) must give the main fit on every path."""
-    frf = _with_copies(_scenario_frfs(n_sensors=3, n_forces=8, **spec))
-    fitted, boot = bsm.bootstrap_identify(frf, options, n=4)
+    m = _with_copies(_scenario_frfs(n_sensors=3, n_forces=8, **spec))
+    fitted, boot = idm.bootstrap_identify(m, options, n=4, solver=solver)
     assert isinstance(boot, bsm.Bootstrap), boot
     scale = np.abs(fitted.theta[0])
     assert_allclose(boot.theta, np.broadcast_to(fitted.theta, boot.theta.shape), rtol=1e-7,
@@ -121,10 +125,9 @@ def test_resamples_of_the_data_itself_give_the_fit(spec: dict[str, object],
 
 
 def test_the_same_with_an_exponential_window() -> None:
-    frf = _with_copies(_scenario_frfs(seed=36, n_sensors=3, n_forces=8, noise=0.01,
-                                      elastic_ratio=None, damping="viscous"))
-    frf.meta["exponential_tau"] = 0.8
-    fitted, boot = bsm.bootstrap_identify(frf, IdentifyOptions(), n=3)
+    m = _with_copies(_scenario_frfs(seed=36, n_sensors=3, n_forces=8, noise=0.01,
+                                    elastic_ratio=None, damping="viscous"), tau=0.8)
+    fitted, boot = idm.bootstrap_identify(m, IdentifyOptions(), n=3)
     assert isinstance(boot, bsm.Bootstrap), boot
     assert_allclose(boot.theta, np.broadcast_to(fitted.theta, boot.theta.shape), rtol=1e-7,
                     atol=1e-9 * np.abs(fitted.theta).max())
@@ -133,13 +136,13 @@ def test_the_same_with_an_exponential_window() -> None:
 
 
 def test_units_that_do_not_give_the_frfs_are_refused_in_words() -> None:
-    frf = _with_copies(_scenario_frfs(seed=37, n_sensors=3, n_forces=8, noise=0.01,
-                                      elastic_ratio=None))
-    units = frf.meta["time_units"]
+    m = _with_copies(_scenario_frfs(seed=37, n_sensors=3, n_forces=8, noise=0.01,
+                                    elastic_ratio=None))
+    units = m.provenance.units
     assert isinstance(units, TimeUnits)
     wrong = dataclasses.replace(units, columns=(units.columns[1], *units.columns[1:]))
-    frf.meta["time_units"] = wrong
-    _, boot = bsm.bootstrap_identify(frf, IdentifyOptions(), n=3)
+    m = dataclasses.replace(m, provenance=dataclasses.replace(m.provenance, units=wrong))
+    _, boot = idm.bootstrap_identify(m, IdentifyOptions(), n=3)
     assert boot == "no bootstrap over hits: their spectra do not give the FRFs identified"
 
 
@@ -158,18 +161,18 @@ def test_resampled_source_replaces_the_fit_where_larger() -> None:
 
 
 def test_identify_reports_the_bootstrap_with_intervals() -> None:
-    frf = hammer_frfs(scenario(), seed=5, hits=4)
-    r = idm.identify(frf, IdentifyOptions(bootstrap=50))
+    m = hammer_frfs(scenario(), seed=5, hits=4)
+    r = idm.fit(m, IdentifyOptions(bootstrap=50))
     u = r.uncertainty
     assert u is not None
     assert any(s.startswith("bootstrap over hits (50 resamples; 4-4 hits a point")
                for s in u.sources)
     lo, hi = u.ci95["mass"]
     assert lo <= r.properties.mass <= hi and hi - lo >= 2 * 1.96 * u.std["mass"] * 0.3
-    none = idm.identify(frf, IdentifyOptions(bootstrap=0)).uncertainty
+    none = idm.fit(m, IdentifyOptions(bootstrap=0)).uncertainty
     assert none is not None and not none.ci95
     assert not any("bootstrap" in s for s in none.sources)
-    few = idm.identify(hammer_frfs(scenario(), seed=5, hits=2), IdentifyOptions()).uncertainty
+    few = idm.fit(hammer_frfs(scenario(), seed=5, hits=2), IdentifyOptions()).uncertainty
     assert few is not None and any(s.startswith("no bootstrap over hits: a point has 2")
                                    for s in few.sources)
 
@@ -230,10 +233,10 @@ def test_bootstrap_std_matches_the_scatter_of_independent_shaker_tests() -> None
 
 def test_resamples_in_chunks_are_the_same(monkeypatch: pytest.MonkeyPatch) -> None:
     """Memory is bounded by forming the resamples in chunks; the chunks change nothing."""
-    frf = hammer_frfs(scenario(), seed=1, hits=3)
-    _, whole = bsm.bootstrap_identify(frf, IdentifyOptions(), 40, seed=3)
+    m = hammer_frfs(scenario(), seed=1, hits=3)
+    _, whole = idm.bootstrap_identify(m, IdentifyOptions(), 40, seed=3)
     monkeypatch.setattr(bsm, "CHUNK_VALUES", 60_000)
-    _, parts = bsm.bootstrap_identify(frf, IdentifyOptions(), 40, seed=3)
+    _, parts = idm.bootstrap_identify(m, IdentifyOptions(), 40, seed=3)
     assert isinstance(whole, bsm.Bootstrap) and isinstance(parts, bsm.Bootstrap)
     assert_allclose(parts.theta, whole.theta, rtol=1e-12, atol=1e-12 * np.abs(whole.theta).max())
     assert_allclose(parts.K, whole.K, rtol=1e-12, atol=1e-12 * np.abs(whole.K).max())

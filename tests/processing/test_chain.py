@@ -15,8 +15,9 @@ from hardware_mocks.benches import get_bench
 from hardware_mocks.signals import ImpulseResponse, half_sine, impulse_response, simulate
 from processing.data import FRFSet
 from processing.excitation import continuous_random
-from processing.identify import identify
-from processing.impact import ImpactSettings, impact_frfset, process_impacts
+from processing.identify import fit, identify
+from processing.impact import ImpactSettings, impact_measurement, process_impacts
+from processing.measurement import Measurement
 from processing.spectral import SpectralAccumulator, frf
 
 FS = 256.0
@@ -85,11 +86,11 @@ def test_hammer_chain_removes_exponential_window_damping(tau: float) -> None:
         s = ImpactSettings(level=30.0, record_length=int(record * FS), pretrigger=int(0.1 * FS),
                            exp_tau=tau)
         results.append(process_impacts(np.vstack([f, x]), FS, s))
-    frfs = _band_limited(impact_frfset(results, BENCH.geometry, BENCH.resp_nodes,
-                                       BENCH.resp_dirs, BENCH.exc_nodes, BENCH.exc_dirs),
-                         0.0, 0.0)
-    assert frfs.meta["exponential_tau"] == tau
-    r = identify(frfs)
+    m = impact_measurement(results, BENCH.geometry, BENCH.resp_nodes, BENCH.resp_dirs,
+                           BENCH.exc_nodes, BENCH.exc_dirs)
+    frfs = _band_limited(m.frf, 0.0, 0.0)
+    assert m.provenance.exponential_tau == tau
+    r = fit(Measurement(frfs, m.provenance))
     within(errors(BENCH, r), mass=0.02, cog=0.1, inertia=0.1, stiffness=0.6)
     C = BENCH.model.C
     assert np.max(np.abs(r.C - C)) < 0.002 * np.abs(C).max()

@@ -115,11 +115,11 @@ def test_rigid_band_starts_past_noisy_lowest_lines() -> None:
     line and ends where the clean data's does; when the noise is everywhere it stays none."""
     import dataclasses
 
-    from processing.identify import _rigid_band_tops
     from processing.rigidity import rigidity_check
+    from processing.stages import rigid_band_tops
 
     frf = get_bench("engine").frfset()
-    clean_top = _rigid_band_tops(frf)[0]
+    clean_top = rigid_band_tops(frf)[0]
     assert clean_top is not None and 95.0 < clean_top < 118.5
     rng = np.random.default_rng(1)
     H = frf.H.copy()
@@ -127,10 +127,10 @@ def test_rigid_band_starts_past_noisy_lowest_lines() -> None:
                              + 1j * rng.standard_normal(H[..., :6].shape))
     noisy = dataclasses.replace(frf, H=H)
     assert rigidity_check(noisy, fmin=float(frf.freq[frf.freq > 0][0])).band is None
-    top, _, notes = _rigid_band_tops(noisy)
+    top, _, notes = rigid_band_tops(noisy)
     assert top == clean_top and not notes
     H = frf.H * (1 + 0.5 * rng.standard_normal(frf.H.shape))
-    assert _rigid_band_tops(dataclasses.replace(frf, H=H))[0] is None
+    assert rigid_band_tops(dataclasses.replace(frf, H=H))[0] is None
 
 
 def test_rigid_band_past_noisy_lowest_lines_on_a_flexible_body() -> None:
@@ -139,11 +139,11 @@ def test_rigid_band_past_noisy_lowest_lines_on_a_flexible_body() -> None:
     from the lowest one to the band's top are mostly rigid."""
     import dataclasses
 
-    from processing.identify import _rigid_band_tops
     from processing.rigidity import rigidity_check
+    from processing.stages import rigid_band_tops
 
     frf = get_bench("block-flexible").frfset()
-    clean_top, clean_raised, _ = _rigid_band_tops(frf)
+    clean_top, clean_raised, _ = rigid_band_tops(frf)
     fmin = float(frf.freq[frf.freq > 0][0])
     assert clean_top is not None and rigidity_check(frf, fmin=fmin).error_floor(fmin) > 0.2
     rng = np.random.default_rng(1)
@@ -152,7 +152,7 @@ def test_rigid_band_past_noisy_lowest_lines_on_a_flexible_body() -> None:
                              + 1j * rng.standard_normal(H[..., :4].shape))
     noisy = dataclasses.replace(frf, H=H)
     assert rigidity_check(noisy, fmin=fmin).band is None
-    top, raised, notes = _rigid_band_tops(noisy)
+    top, raised, notes = rigid_band_tops(noisy)
     assert top == clean_top and not notes
     # the raised threshold's band starts past them too (its error floor read from there)
     assert clean_raised is not None and raised is not None
@@ -167,7 +167,7 @@ def test_rigid_band_past_noisy_lowest_lines_on_a_short_rigid_band() -> None:
     error); a quiet moment after more noisy lines than it holds is no rigid band."""
     import dataclasses
 
-    from processing.identify import _rigid_band_tops
+    from processing.stages import rigid_band_tops
 
     frf = get_bench("engine").frfset()
     rng = np.random.default_rng(2)
@@ -180,14 +180,14 @@ def test_rigid_band_past_noisy_lowest_lines_on_a_short_rigid_band() -> None:
         return H
 
     H = noisy(frf.H, elastic, 1.0)
-    clean_top = _rigid_band_tops(dataclasses.replace(frf, H=H))[0]
+    clean_top = rigid_band_tops(dataclasses.replace(frf, H=H))[0]
     assert clean_top is not None and 29.0 < clean_top <= 30.0
     low = np.zeros(frf.freq.size, bool)
     low[:6] = True
-    top, _, notes = _rigid_band_tops(dataclasses.replace(frf, H=noisy(H, low, 0.5)))
+    top, _, notes = rigid_band_tops(dataclasses.replace(frf, H=noisy(H, low, 0.5)))
     assert top == clean_top and not notes
     low[:150] = True  # noisy up to 18.8 Hz: more lines than the quiet ones after them
-    assert _rigid_band_tops(dataclasses.replace(frf, H=noisy(H, low, 0.5)))[0] is None
+    assert rigid_band_tops(dataclasses.replace(frf, H=noisy(H, low, 0.5)))[0] is None
 
 
 def test_stiffness_band_when_the_first_line_is_above_the_rigid_modes() -> None:
@@ -235,15 +235,15 @@ def test_an_impossible_mass_is_refused_not_reported() -> None:
     by itself is refused with one line; the bench's own fit passes."""
     from dataclasses import replace
 
-    from processing.identify import (
+    from processing.problem import prepare
+    from processing.stages import (
         choose_bands,
-        fit,
         mass_line_reading,
         refuse_implausible_mass,
         settle_mass_band,
+        solve,
         weigh_lines,
     )
-    from processing.problem import prepare
 
     b = get_bench("engine-rigid")
     frf = b.frfset(noise=0.002)
@@ -251,7 +251,7 @@ def test_an_impossible_mass_is_refused_not_reported() -> None:
                       coherence=None, options=IdentifyOptions(), exponential_tau=None)
     bands = choose_bands(problem)
     bands, weights = settle_mass_band(problem, bands, weigh_lines(problem, bands))
-    fitted = fit(problem, bands, weights)
+    fitted = solve(problem, bands, weights)
     reading = mass_line_reading(problem, weights)
     assert abs(reading / b.model.mass - 1) < 0.1  # M - K/w^2 on the mass line
     refuse_implausible_mass(problem, bands, weights, fitted)  # a good fit passes

@@ -13,6 +13,7 @@ from processing.impact import (
     ImpactSettings,
     find_triggers,
     impact_frfset,
+    impact_measurement,
     merge_results,
     process_impacts,
 )
@@ -138,11 +139,16 @@ def test_merge_and_frfset(engine, recording):
     assert merged.n_accepted == whole.n_accepted
     assert merged.H is not None and whole.H is not None
     assert_allclose(merged.H, whole.H, rtol=1e-10)
-    fs_set = impact_frfset([merged, merged], bench.geometry, bench.resp_nodes, bench.resp_dirs,
-                           bench.exc_nodes[:2], bench.exc_dirs[:2])
+    m = impact_measurement([merged, merged], bench.geometry, bench.resp_nodes,
+                           bench.resp_dirs, bench.exc_nodes[:2], bench.exc_dirs[:2])
+    fs_set = m.frf
     assert isinstance(fs_set, FRFSet)
     assert fs_set.H.shape == (12, 2, L // 2 + 1)
-    assert fs_set.meta["exponential_tau"] == TAU
+    assert m.provenance.exponential_tau == TAU
+    assert m.provenance.estimated
+    same = impact_frfset([merged, merged], bench.geometry, bench.resp_nodes, bench.resp_dirs,
+                         bench.exc_nodes[:2], bench.exc_dirs[:2])
+    assert_allclose(same.H, fs_set.H, rtol=0)
     assert fs_set.coherence is not None
 
 

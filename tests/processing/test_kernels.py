@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hardware_mocks.benches import get_bench
 from processing._kernels import real_times_complex, sumsq_columns, sumsq_rows
 from processing.geometry import excitation_matrix, response_matrix
-from processing.identify import IdentifyOptions, identify
+from processing.identify import IdentifyOptions, SolverSettings, identify
 from processing.inertia import mass_matrix
 from processing.massline import MassLineProblem
 from processing.selection import reconstruction_error
@@ -80,9 +80,8 @@ def test_line_operators_match_eq14() -> None:
 def test_plain_fixed_point_is_the_limit_of_the_article_iteration() -> None:
     """The direct affine solve equals iterating section 2.2 to convergence."""
     frf = get_bench("engine-rigid").frfset(noise=0.02, location_error=0.003, seed=5)
-    opt = IdentifyOptions(method="plain", mass_band=(40.0, 60.0), stiffness_band=(1.0, 35.0),
-                          level=1e9)
-    r = identify(frf, opt)
+    opt = IdentifyOptions(method="plain", mass_band=(40.0, 60.0), stiffness_band=(1.0, 35.0))
+    r = identify(frf, opt, SolverSettings(level=1e9))
     E = response_matrix(frf.resp_xyz, frf.resp_dirs)
     T = excitation_matrix(frf.exc_xyz, frf.exc_dirs)
     X = np.einsum("ar,ref->aef", np.linalg.pinv(E), frf.H)

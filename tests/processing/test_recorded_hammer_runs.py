@@ -21,26 +21,26 @@ import numpy as np
 import pytest
 
 from processing.data import FRFSet, Geometry
-from processing.identify import IdentifyOptions, identify
-from processing.impact import FORCE_BAND_TOP
+from processing.identify import IdentifyOptions, fit
+from processing.measurement import Measurement, Provenance
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "serial_hammer_frfs.npz"
 MASS = 110.0  # kg, the bench model's
 
 
-def _frfs(key: str, with_band: bool = True) -> FRFSet:
+def _frfs(key: str, with_band: bool = True) -> Measurement:
     d = np.load(DATA)
     meta: dict[str, object] = {"estimator": "H1", "excitation": "impact"}
-    if with_band:
-        meta[FORCE_BAND_TOP] = float(d[f"force_band_top_{key}"])
-    return FRFSet(d["freq"], d[f"H_{key}"].astype(complex), d["resp_nodes"], d["resp_dirs"],
-                  d["exc_nodes"], d["exc_dirs"], Geometry(d["node_ids"], d["xyz"]),
-                  np.ones(d[f"H_{key}"].shape), meta)
+    top = float(d[f"force_band_top_{key}"]) if with_band else None
+    frf = FRFSet(d["freq"], d[f"H_{key}"].astype(complex), d["resp_nodes"], d["resp_dirs"],
+                 d["exc_nodes"], d["exc_dirs"], Geometry(d["node_ids"], d["xyz"]),
+                 np.ones(d[f"H_{key}"].shape), meta)
+    return Measurement(frf, Provenance(excitation="impact", force_band_top=top))
 
 
 @pytest.mark.parametrize("key", ["model", "spike"])
 def test_recorded_runs_give_the_mass(key: str) -> None:
-    r = identify(_frfs(key), IdentifyOptions(uncertainty=False))
+    r = fit(_frfs(key), IdentifyOptions(uncertainty=False))
     # measured: 110.17 kg (model), 110.09 kg (spike)
     assert r.properties.mass == pytest.approx(MASS, rel=0.003)
     assert r.elastic_modes == ()
@@ -48,5 +48,5 @@ def test_recorded_runs_give_the_mass(key: str) -> None:
 
 
 def test_the_spike_at_the_force_s_zero_is_a_mode_without_the_force_band() -> None:
-    r = identify(_frfs("spike", with_band=False), IdentifyOptions(uncertainty=False))
+    r = fit(_frfs("spike", with_band=False), IdentifyOptions(uncertainty=False))
     assert [round(m.frequency) for m in r.elastic_modes] == [375]

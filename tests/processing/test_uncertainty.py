@@ -219,7 +219,7 @@ def test_draws_match_a_full_refit() -> None:
     pb = prepare(*args, coherence=frf.coherence, options=opt, exponential_tau=None)
     bands = idm.choose_bands(pb)
     weights = idm.weigh_lines(pb, bands)
-    fitted = idm.fit(pb, bands, weights)
+    fitted = idm.solve(pb, bands, weights)
     model = idm.monte_carlo_model(pb, weights, fitted, (frf.resp_nodes, frf.exc_nodes))
     stated = StatedUncertainty(location=0.003, angle=0.02, gain=0.02, draws=2, seed=4)
     d = simulate(model, stated)
@@ -238,7 +238,7 @@ def test_draws_match_a_full_refit() -> None:
     pb2 = prepare(frf.freq, H, frf.resp_xyz + dP[model.resp_point], dirs,
                   frf.exc_xyz + dP[model.exc_point], frf.exc_dirs, coherence=frf.coherence,
                   options=opt, exponential_tau=None)
-    full = idm.fit(pb2, bands, weights)
+    full = idm.solve(pb2, bands, weights)
     scale = abs(fitted.theta[0])
     moved = np.abs(full.theta - fitted.theta) / scale
     miss = np.abs(d.theta[0] - full.theta) / scale
@@ -258,7 +258,7 @@ def test_draws_split_over_seeds_are_the_same_draws() -> None:
                  coherence=frf.coherence, options=opt, exponential_tau=None)
     bands = idm.choose_bands(pb)
     weights = idm.weigh_lines(pb, bands)
-    model = idm.monte_carlo_model(pb, weights, idm.fit(pb, bands, weights))
+    model = idm.monte_carlo_model(pb, weights, idm.solve(pb, bands, weights))
     stated = StatedUncertainty(location=0.002, draws=6)
     whole = simulate(model, stated, seeds=list(range(6)))
     parts = [simulate(model, stated, seeds=s) for s in ([0, 1, 2], [3, 4, 5])]
