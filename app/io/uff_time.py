@@ -41,7 +41,8 @@ from app.io._uff_write import AxisInfo, open_for_writing
 from app.io.uff_geometry import assign_node_frames, read_geometry
 from processing.data import Geometry, InputError
 
-__all__ = ["TimeRun", "read_time_uff", "uff_holds_time_data", "write_time_uff"]
+__all__ = ["TimeFile", "TimeRun", "read_time_file", "read_time_uff", "uff_holds_time_data",
+           "write_time_uff"]
 
 log = logging.getLogger(__name__)
 
@@ -250,7 +251,41 @@ def read_time_uff(
         sample rates or lengths, with NaN values or an unknown ordinate type. The
         message names the load case.
     """
-    p = Path(path)
+    runs, problems, _ = _read(Path(path))
+    if strict:
+        if problems:
+            more = f" ({len(problems) - 1} more run(s) with problems)" if len(problems) > 1 else ""
+            raise InputError(problems[0][1] + more)
+        return runs
+    return runs, problems
+
+
+@dataclass(frozen=True)
+class TimeFile:
+    """A time-data UFF file read in one pass: its good runs, the problems of the others
+    (``(load_case, message)``) and its node geometry (m)."""
+
+    runs: list[TimeRun]
+    problems: list[Problem]
+    geometry: Geometry
+
+
+def read_time_file(path: str | Path) -> TimeFile:
+    """The runs, their problems and the geometry of a time-data UFF file, parsed once
+    (:func:`read_time_uff` with ``strict=False``, and the nodes of
+    :func:`app.io.uff_geometry.read_geometry_uff`).
+
+    Raises
+    ------
+    InputError
+        As :func:`read_time_uff`.
+    """
+    runs, problems, sets = _read(Path(path))
+    return TimeFile(runs, problems, read_geometry(sets)[0])
+
+
+def _read(p: Path) -> tuple[list[TimeRun], list[Problem], list[Dataset]]:
+    """The good runs of ``p``, the problems of the others, and its datasets."""
     sets = load_sets(p)
     units = read_units(sets)
     has_nodes = any(ds.get("type") in (15, 2411) for ds in sets)
@@ -277,12 +312,7 @@ def read_time_uff(
             problems.append((load_case, str(err)))
     for _, message in problems:  # the caller gets them (strict=False) or the first raises
         log.info("%s: %s", p.name, message)
-    if strict:
-        if problems:
-            more = f" ({len(problems) - 1} more run(s) with problems)" if len(problems) > 1 else ""
-            raise InputError(problems[0][1] + more)
-        return runs
-    return runs, problems
+    return runs, problems, sets
 
 
 def write_time_uff(
@@ -359,7 +389,19 @@ def write_time_uff(
 
 
 def uff_holds_time_data(path: str | Path) -> bool:
-    """True when the file's dataset-58 records are time records (function type 1) and it
-    holds no FRF (type 4): such a file needs FRFs computed before identification."""
-    kinds = {int(ds.get("func_type", 0)) for ds in load_sets(path, only=(58,))}
-    return _TIME in kinds and 4 not in kinds
+    """True when the file's first dataset-58 record is a time record (function type 1):
+    such a file needs FRFs computed before identification. Reads the headers only, up to
+    that record's record 6 (its data are not parsed); False for a file that cannot be read
+    (its reader then says why)."""
+    try:
+        with Path(path).open("rb") as f:
+            prev = b""
+            for line in f:
+                s = line.strip()
+                if prev == b"-1" and (s == b"58" or s.startswith(b"58b")):
+                    fields = [next(f, b"") for _ in range(6)][5].split()
+                    return bool(fields) and fields[0].isdigit() and int(fields[0]) == _TIME
+                prev = s
+    except OSError:
+        return False
+    return False

@@ -17,9 +17,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from app.io.uff import read_time_uff
-from app.io.uff_geometry import read_geometry_uff
-from app.io.uff_time import TimeRun
+from app.io.uff_time import TimeRun, read_time_file
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
@@ -443,8 +441,9 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
     rigidity check. Raises :class:`OpenError` (one line) when no run is usable or a setting
     fits no run.
     """
-    runs, problems = read_time_uff(path, strict=False)
-    reports = [RunReport(msg, skipped=True) for _, msg in problems]
+    data = read_time_file(path)  # parsed once: runs, their problems, the geometry
+    runs = data.runs
+    reports = [RunReport(msg, skipped=True) for _, msg in data.problems]
     levels: dict[int, float] = {}
     if runs:  # options that depend on the data: once for the file, not once per run
         try:
@@ -468,7 +467,7 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
         raise OpenError(f"{path}: no usable time run ({n_skipped(reports)} bad run(s), see "
                         "above)", reports)
     first = runs[0]
-    geometry, _ = read_geometry_uff(path)
+    geometry = data.geometry
     keys = list(cols)
     fmax = s.fmax if s.fmax is not None else first.fs / 2.56
     out = assemble(cols[keys[0]][2], [cols[k][0] for k in keys], [cols[k][1] for k in keys],
