@@ -112,3 +112,26 @@ def test_shaker_run_same_result_in_every_view(tmp_path: Path, qtbot: Any) -> Non
         assert proc.wait(120) is RunState.FINISHED, proc.message
     assert proc.measurement is not None
     _assert_same(_every_view(path, tmp_path, proc, qtbot))
+
+
+def test_time_uff_same_result_in_identify_gui_report_and_batch(tmp_path: Path,
+                                                                qtbot: Any) -> None:
+    from benchmarks.timedata import case
+    from hardware_mocks.reference.timedata import write_uff
+
+    path = tmp_path / "hits.uff"
+    write_uff(case(9001, "hammer"), path)  # a seed of the tests' own, in no published suite
+    assert main(["identify", str(path), "--out", str(tmp_path / "identify.json")]) in (0, 2)
+    ident = json.loads((tmp_path / "identify.json").read_text())
+    m, _ = open_source(path)  # as insitu report does
+    report = _json(analyse(m, IdentifyOptions(), path.name).result)
+    views = {"report": report, "identify": {k: ident[k] for k in report},
+             "gui opening the file": _json(_gui_session(qtbot, path=path))}
+    assert m.provenance.units is not None  # the bootstrap's hits, in every view alike
+    row = identify_file(str(path), Settings(), IdentifyOptions())
+    assert row["status"] == "ok", row["error"]
+    assert row["mass_kg"] == report["mass"]
+    first = views["report"]
+    for name, got in views.items():
+        differ = sorted(k for k in first if got.get(k) != first[k])
+        assert not differ, f"{name} differs from the report's result in {differ}"
