@@ -91,7 +91,6 @@ class Bench:
             exc_nodes=self.exc_nodes,
             exc_dirs=self.exc_dirs,
             geometry=Geometry(self.node_ids, xyz),
-            meta={"bench": self.name, "noise": noise, "location_error": location_error},
         )
 
 

@@ -6,7 +6,7 @@ All values are SI. Frequency is the last axis. FRFs are accelerances
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,6 +66,10 @@ class FRFSet:
     resp_dirs, exc_dirs : (n, 3) unit vectors in the global frame
     geometry : node coordinates
     coherence : optional (n_resp, n_exc, n_f) ordinary (or multiple) coherence
+
+    How the FRFs were obtained (given or estimated here, windows, averages, the hammer's
+    band) is not theirs to carry: it is the :class:`processing.measurement.Provenance` of
+    the :class:`processing.measurement.Measurement` that holds them.
     """
 
     freq: NDArray[np.float64]
@@ -76,7 +80,6 @@ class FRFSet:
     exc_dirs: NDArray[np.float64]
     geometry: Geometry
     coherence: NDArray[np.float64] | None = None
-    meta: dict[str, object] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         freq = np.asarray(self.freq, dtype=float).ravel()
@@ -128,7 +131,7 @@ class FRFSet:
         if coh is not None:
             coh = np.nan_to_num(coh[..., keep])
         return FRFSet(self.freq[keep], self.H[..., keep], self.resp_nodes, self.resp_dirs,
-                      self.exc_nodes, self.exc_dirs, self.geometry, coh, dict(self.meta))
+                      self.exc_nodes, self.exc_dirs, self.geometry, coh)
 
     def anti_alias_fmax(self) -> float:
         """fs / 2.56, Hz, for a set whose last line is the Nyquist frequency fs / 2 (a

@@ -604,13 +604,12 @@ def impact_measurement(
         exc_dirs=np.asarray(exc_dirs),
         geometry=geometry,
         coherence=np.concatenate(cohs, axis=1),
-        meta={"estimator": estimator, "excitation": "impact",
-              "n_averages": [r.n_accepted for r in results]},
     )
     return Measurement(frf, Provenance(
         origin="estimated", excitation="impact", estimator=estimator, units=units,
         exponential_tau=taus.pop() if len(taus) == 1 else None,
-        force_band_top=force_band_top(results[0].freq, np.stack(forces))))
+        force_band_top=force_band_top(results[0].freq, np.stack(forces)),
+        n_averages=tuple(r.n_accepted for r in results)))
 
 
 def impact_frfset(

@@ -55,6 +55,10 @@ def _positive_or_none(name: str, value: float | None) -> float | None:
     return v if v > 0 else None
 
 
+def _text(v: object) -> str:
+    return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+
+
 @dataclass(frozen=True)
 class Provenance:
     """How a measurement's FRFs were obtained (see the module's docstring).
@@ -63,12 +67,17 @@ class Provenance:
     ----------
     origin : ``"given"`` or ``"estimated"`` (here, from time records)
     excitation : what excited the structure, in words (``"impact"``, ``"random"``,
-        ``"shaker periodic-chirp"``, ...), or ``""`` when unknown
+        ``"shaker chirp"``, ...), or ``""`` when unknown
     estimator : the FRF estimator (``"H1"``, ...)
     units : per-hit or per-block spectra of each column (time data only), or None
     exponential_tau : time constant of the exponential window on the records, s, or None
     force_band_top : Hz, the hammer's force is 20 dB or more under its peak above it, or None
     anti_alias_fmax : Hz, the lines were cut there (fs / 2.56), or None
+    n_averages : records (hits, blocks, segments) each excitation column averages, or ()
+    window : the records' window (``"hann"``, ``"boxcar"``), or ``""`` when not known
+    references : forces driven at once (several shakers: multiple-reference H1)
+    run_state : a run file's state (``"finished"``, ``"stopped"``, ...), or ``""``
+    notes : what the file said about its FRFs, in words (coherence, units, ordinates)
     reports : what was found on the way, in order (bad runs or points left out: ``skipped``)
     """
 
@@ -79,6 +88,11 @@ class Provenance:
     exponential_tau: float | None = None
     force_band_top: float | None = None
     anti_alias_fmax: float | None = None
+    n_averages: tuple[int, ...] = ()
+    window: str = ""
+    references: int = 1
+    run_state: str = ""
+    notes: tuple[str, ...] = ()
     reports: tuple[Report, ...] = ()
 
     def __post_init__(self) -> None:
@@ -89,6 +103,10 @@ class Provenance:
         if self.units is not None and self.origin != "estimated":
             raise InputError("per-hit or per-block spectra come with FRFs estimated from time "
                              "records (origin 'estimated')")
+        object.__setattr__(self, "n_averages", tuple(int(n) for n in self.n_averages))
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        if not (isinstance(self.references, int) and self.references >= 1):
+            raise InputError(f"references must be a whole number >= 1, got {self.references!r}")
 
     @property
     def estimated(self) -> bool:
@@ -100,13 +118,19 @@ class Provenance:
         """How many runs, points or columns the reports leave out."""
         return sum(1 for r in self.reports if r.skipped)
 
-    def stored(self) -> dict[str, str | float]:
-        """The fields a file keeps (``units`` are not: they are recomputed from records)."""
-        out: dict[str, str | float] = {"origin": self.origin, "excitation": self.excitation,
-                                       "estimator": self.estimator}
+    def stored(self) -> dict[str, object]:
+        """The fields a file keeps, as HDF5 attributes (the per-unit spectra are not kept:
+        a run file recomputes them from its records; nor are the reports)."""
+        out: dict[str, object] = {"origin": self.origin, "excitation": self.excitation,
+                                  "estimator": self.estimator, "window": self.window,
+                                  "references": self.references, "run_state": self.run_state}
         for name in ("exponential_tau", "force_band_top", "anti_alias_fmax"):
             if (v := getattr(self, name)) is not None:
                 out[name] = float(v)
+        if self.n_averages:
+            out["n_averages"] = list(self.n_averages)
+        if self.notes:
+            out["notes"] = list(self.notes)
         return out
 
     @classmethod
@@ -118,17 +142,32 @@ class Provenance:
             if v is None:
                 return None
             try:
-                return float(str(v))
+                return float(_text(v))
             except ValueError as err:
                 raise InputError(f"provenance field {name} is not a number: {v!r}") from err
 
-        kept = str(attrs.get("origin", origin))
+        def sequence(name: str) -> list[object]:
+            v = attrs.get(name)
+            if v is None:
+                return []
+            return [v] if isinstance(v, str | bytes) or not hasattr(v, "__iter__") else list(v)
+
+        try:
+            n_avg = tuple(int(float(_text(n))) for n in sequence("n_averages"))
+            refs = int(float(_text(attrs.get("references", 1))))
+        except ValueError as err:
+            raise InputError(f"provenance field n_averages or references is not a whole "
+                             f"number: {err}") from err
+        kept = _text(attrs.get("origin", origin))
         return cls(origin="estimated" if kept == "estimated" else "given",
-                   excitation=str(attrs.get("excitation", "")),
-                   estimator=str(attrs.get("estimator", "H1")),
+                   excitation=_text(attrs.get("excitation", "")),
+                   estimator=_text(attrs.get("estimator", "H1")),
                    exponential_tau=number("exponential_tau"),
                    force_band_top=number("force_band_top"),
-                   anti_alias_fmax=number("anti_alias_fmax"))
+                   anti_alias_fmax=number("anti_alias_fmax"), n_averages=n_avg,
+                   window=_text(attrs.get("window", "")), references=refs,
+                   run_state=_text(attrs.get("run_state", "")),
+                   notes=tuple(_text(n) for n in sequence("notes")))
 
 
 @dataclass(frozen=True)
@@ -148,10 +187,3 @@ class Measurement:
         none)."""
         units = self.provenance.units
         return None if units is None else units.aligned(self.frf.exc_nodes, self.frf.exc_dirs)
-
-    def with_reports(self, *reports: Report) -> Measurement:
-        """The same measurement with ``reports`` added after its own."""
-        p = self.provenance
-        return Measurement(self.frf, Provenance(
-            p.origin, p.excitation, p.estimator, p.units, p.exponential_tau, p.force_band_top,
-            p.anti_alias_fmax, (*p.reports, *reports)), self.source)

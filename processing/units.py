@@ -4,9 +4,10 @@ A point's FRF column from time data is a ratio of averaged spectra: H1 is
 ``sum_u S_fx,u / sum_u S_ff,u`` over the point's units ``u`` (the accepted hits of a hammer
 test, the blocks of a shaker test). Keeping them unit by unit lets the FRFs be formed again
 from any resample of the units (:mod:`processing.bootstrap`). The pipeline attaches a test's
-:class:`TimeUnits` to ``FRFSet.meta["time_units"]``. Continuous random records (Welch,
-overlapping segments) are cut into contiguous blocks of segments (:func:`welch_units`), so
-that neighbouring units share at most one overlapping segment (a block bootstrap).
+:class:`TimeUnits` to the measurement's provenance (``Provenance.units``). Continuous random
+records (Welch, overlapping segments) are cut into contiguous blocks of segments
+(:func:`welch_units`), so that neighbouring units share at most one overlapping segment (a
+block bootstrap).
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ class UnitSpectra:
         if np.shape(self.weight) != (n_u,) or np.size(self.freq) != n_f:
             raise InputError("unit spectra: one weight per unit and one frequency per line")
 
-    def __repr__(self) -> str:  # short: the FRF file writes meta values as text
+    def __repr__(self) -> str:  # short: a provenance shown is one line
         return f"UnitSpectra({self.n_units} units, {self.Sfx.shape[1]} responses)"
 
     @property
@@ -118,7 +119,7 @@ class TimeUnits:
     exc_dirs: NDArray[np.float64]
     estimator: str = "H1"
 
-    def __repr__(self) -> str:  # short: the FRF file writes meta values as text
+    def __repr__(self) -> str:  # short: a provenance shown is one line
         n = [c.n_units for c in self.columns]
         return f"TimeUnits({len(n)} columns, {min(n, default=0)}-{max(n, default=0)} {self.kind}s)"
 

@@ -285,15 +285,12 @@ def shaker_measurement(plan: TestPlan, points: Sequence[BlockResult | None],
         cohs.append(r.coherence)
         n_avg += [r.n_accepted] * r.H.shape[1]
     first = next(r for r in points if r is not None)
-    excitation = f"shaker {plan.shaker.waveform}"
-    meta: dict[str, object] = {"estimator": plan.record.estimator, "excitation": excitation,
-                               "window": WINDOWS[plan.shaker.waveform], "n_averages": n_avg}
-    if plan.n_references > 1:
-        meta["shakers"] = plan.n_references
     frf = FRFSet(first.freq, np.concatenate(cols, axis=1), resp_nodes, resp_dirs,
-                 plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1), meta)
-    return Measurement(frf, Provenance(origin="estimated", excitation=excitation,
-                                       estimator=plan.record.estimator, units=units))
+                 plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1))
+    return Measurement(frf, Provenance(
+        origin="estimated", excitation=f"shaker {plan.shaker.waveform}",
+        estimator=plan.record.estimator, units=units, n_averages=tuple(n_avg),
+        window=WINDOWS[plan.shaker.waveform], references=plan.n_references))
 
 
 def shaker_frfset(plan: TestPlan, points: Sequence[BlockResult | None], geometry: Geometry,

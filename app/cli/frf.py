@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
         write_frf_h5(out, m, source=str(args.file))
     else:
         write_frf_uff(out, frfs, binary=args.binary, coherence=True)
-    print(f"{frfs.H.shape[0]} x {frfs.H.shape[1]} FRFs ({frfs.meta.get('estimator', 'H1')}), "
+    print(f"{frfs.H.shape[0]} x {frfs.H.shape[1]} FRFs ({m.provenance.estimator}), "
           f"{frfs.freq.size} lines, written to {out}"
           + (f"; {n_bad} bad run(s) skipped, exit status 2" if n_bad else ""))
     return 2 if n_bad else 0

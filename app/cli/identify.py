@@ -26,7 +26,8 @@ from app.cli.common import UserError
 from app.cli.frf import add_processing_arguments, load_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
-from app.pipeline import TIME_UFF, detect_format
+from app.io.runfile import run_mounts
+from app.pipeline import RUN_FILE, TIME_UFF, detect_format
 from app.pipeline.settings import TestUncertaintySettings
 from app.report.mount_system import mount_system
 from processing.data import FRFSet
@@ -177,8 +178,8 @@ def run(args: argparse.Namespace) -> int:
         how = f"{args.excitation} excitation" if args.excitation else "settings from the data"
         print(f"{args.file}: time records; computing FRFs ({how})")
     m = load_and_show(args.file, args, settings, fmt)
-    stored = m.frf.meta.get("mounts")
-    if mounts.table is None and isinstance(stored, MountsFile):
+    stored = run_mounts(args.file) if fmt == RUN_FILE and mounts.table is None else None
+    if stored is not None:
         print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")
         check_mounts(stored.mounts)
         mounts = dataclasses.replace(mounts, table=stored)

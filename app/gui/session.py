@@ -15,7 +15,9 @@ from PySide6 import QtCore
 
 from app.gui.worker import TaskRunner
 from app.io.mounts import MountsFile
+from app.io.runfile import run_mounts
 from app.pipeline import FORMATS, RunReport
+from app.pipeline.formats import H5_SUFFIXES
 from app.report.analysis import Analysis, analyse
 from app.report.sources import open_source
 from processing.data import FRFSet
@@ -68,7 +70,8 @@ class Session(QtCore.QObject):
         follows."""
         p = Path(path)
         self.message.emit("info", f"opening {p.name} …")
-        self.runner.submit("session.load", lambda: (p, *open_source(p)))
+        self.runner.submit("session.load", lambda: (p, *open_source(p), (
+            run_mounts(p) if p.suffix.lower() in H5_SUFFIXES else None)))
 
     def set_measurement(self, measurement: Measurement, source: str, path: Path | None = None,
                         fmt: str | None = None) -> None:
@@ -107,9 +110,9 @@ class Session(QtCore.QObject):
     def _on_done(self, key: str, result: object) -> None:
         if key == "session.load":
             assert isinstance(result, tuple)
-            path, m, fmt = result
+            path, m, fmt, mounts = result
             self.message.emit(*_opened(path, m.provenance.reports, fmt))
-            if isinstance(mounts := m.frf.meta.get("mounts"), MountsFile):  # a run file's
+            if mounts is not None:  # a run file's mounts table
                 self.set_mounts(mounts)
             self.set_measurement(m, path.name, path, fmt)
         elif key == "session.analysis":

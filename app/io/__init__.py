@@ -1,6 +1,7 @@
 """File input and output: Universal File Format (UFF) FRF and time-data files.
 
-Public API (see :mod:`app.io.uff`): :func:`read_frf_uff`, :func:`write_frf_uff`,
+Public API (see :mod:`app.io.uff`): :func:`read_frf_uff`, :func:`read_frf_measurement_uff`,
+:func:`write_frf_uff`,
 :func:`read_time_uff`, :func:`write_time_uff`, :class:`TimeRun`, :func:`read_units`,
 :class:`UnitFactors`, :func:`read_geometry`, :func:`read_geometry_uff`.
 """
@@ -8,6 +9,7 @@ Public API (see :mod:`app.io.uff`): :func:`read_frf_uff`, :func:`write_frf_uff`,
 from app.io.uff import (
     TimeRun,
     UnitFactors,
+    read_frf_measurement_uff,
     read_frf_uff,
     read_geometry,
     read_geometry_uff,
@@ -20,6 +22,7 @@ from app.io.uff import (
 __all__ = [
     "TimeRun",
     "UnitFactors",
+    "read_frf_measurement_uff",
     "read_frf_uff",
     "read_geometry",
     "read_geometry_uff",

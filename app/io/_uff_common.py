@@ -80,13 +80,11 @@ class UnitFactors:
     def is_si(self) -> bool:
         return self.length == 1.0 and self.force == 1.0
 
-    def as_meta(self) -> dict[str, object]:
-        return {
-            "code": self.code,
-            "description": self.description,
-            "length_factor": self.length,
-            "force_factor": self.force,
-        }
+    def describe(self) -> str:
+        """The file's unit system in words, with its factors to SI."""
+        name = self.description or f"code {self.code}"
+        return ("SI" if self.is_si else
+                f"{name} (lengths x {1 / self.length:g}, forces x {1 / self.force:g} to SI)")
 
 
 def as_list(sets: Any) -> list[Dataset]:

@@ -1,4 +1,4 @@
-"""FRF files (HDF5): FRFs, coherence, DOFs, geometry and processing metadata.
+"""FRF files (HDF5): FRFs, coherence, DOFs, geometry and their provenance.
 
 Written by ``insitu frf ... --out FRF.h5`` and read by ``insitu identify FRF.h5``.
 The layout is documented in ``docs/run-file.md`` ("FRF file"), schema version
@@ -22,34 +22,27 @@ from pathlib import Path
 from typing import Any
 
 import h5py
-import numpy as np
 
 from processing.data import FRFSet, Geometry
 from processing.measurement import Measurement, Provenance
 
-__all__ = ["FORMAT", "SCHEMA_VERSION", "FRFFileError", "h5_format", "read_frf_h5",
-           "read_frf_measurement", "write_frf_h5"]
+__all__ = ["FORMAT", "READ_VERSIONS", "SCHEMA_VERSION", "FRFFileError", "h5_format",
+           "read_frf_h5", "read_frf_measurement", "write_frf_h5"]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: versions read: 1 kept the provenance in a JSON ``/meta``, 2 in ``/provenance``
+READ_VERSIONS = (1, 2)
 FORMAT = "insitu-frf"
 
 #: dataset -> units attribute (``/H``: accelerance, response unit per force unit)
 _UNITS = {
     "freq": "Hz", "H": "m/s^2/N", "coherence": "1", "resp_nodes": "1", "resp_dirs": "1",
     "exc_nodes": "1", "exc_dirs": "1", "geometry/node_ids": "1", "geometry/xyz": "m",
-    "meta": "n/a",
 }
 
 
 class FRFFileError(ValueError):
     """The FRF file is missing, foreign, of another schema version or damaged (one line)."""
-
-
-def _jsonable(obj: Any) -> Any:
-    """numpy scalars and arrays as plain JSON values (for ``/meta``)."""
-    if isinstance(obj, np.ndarray | np.generic):
-        return obj.tolist()
-    return str(obj)
 
 
 def _str(v: Any) -> str:
@@ -76,10 +69,9 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
     Parameters
     ----------
     path : output file (``.h5``)
-    frf : FRFs (m/s^2/N) with their DOFs, geometry (m), optional coherence and ``meta``
-        (written as JSON; numpy values become lists, anything else its ``str``); a
+    frf : FRFs (m/s^2/N) with their DOFs, geometry (m), optional coherence; a
         measurement's provenance is kept whole in the attributes of ``/provenance`` (the
-        per-hit or per-block spectra are not kept)
+        per-hit or per-block spectra and the reports are not kept; bare FRFs: given)
     source : what the FRFs were computed from (root attribute ``source``)
 
     Raises
@@ -96,7 +88,7 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
             f.create_group("provenance").attrs.update(prov.stored())
             f.attrs.update({
                 "format": FORMAT, "schema_version": SCHEMA_VERSION, "source": source,
-                "estimator": str(frf.meta.get("estimator", "H1")),
+                "estimator": prov.estimator,
                 "created": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
             })
             values: dict[str, Any] = {
@@ -104,8 +96,6 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
                 "resp_dirs": frf.resp_dirs, "exc_nodes": frf.exc_nodes,
                 "exc_dirs": frf.exc_dirs, "geometry/node_ids": frf.geometry.node_ids,
                 "geometry/xyz": frf.geometry.xyz,
-                # the per-hit spectra of time data (the bootstrap's) are not kept
-                "meta": json.dumps(frf.meta, default=_jsonable),
             }
             if frf.coherence is not None:
                 values["coherence"] = frf.coherence
@@ -117,13 +107,10 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
         raise FRFFileError(f"{p}: cannot write the FRF file: {str(err).splitlines()[0]}") from err
 
 
-def read_frf_h5(path: str | Path) -> FRFSet:
-    """Read an FRF file written by :func:`write_frf_h5`.
-
-    Returns
-    -------
-    FRFSet
-        ``meta`` is the stored JSON object.
+def read_frf_measurement(path: str | Path) -> Measurement:
+    """Read an FRF file written by :func:`write_frf_h5`: the FRFs and the provenance kept
+    with them (``/provenance``; a version-1 file: its ``/meta`` entries ``from_time_records``,
+    ``exponential_tau``, ``force_band_top``, ``n_averages``, ``estimator``, ``excitation``).
 
     Raises
     ------
@@ -143,47 +130,34 @@ def read_frf_h5(path: str | Path) -> FRFSet:
         if _str(f.attrs.get("format", "")) != FORMAT:
             raise FRFFileError(f"{p}: not an insitu FRF file (no format={FORMAT!r} attribute)")
         version = int(f.attrs.get("schema_version", -1))
-        if version != SCHEMA_VERSION:
+        if version not in READ_VERSIONS:
             raise FRFFileError(f"{p}: FRF-file schema version {version}; this insitu reads "
-                               f"version {SCHEMA_VERSION}")
+                               f"versions {', '.join(map(str, READ_VERSIONS))}")
         try:
             geometry = Geometry(f["geometry/node_ids"][()], f["geometry/xyz"][()])
-            meta = json.loads(_str(f["meta"][()]))
-            return FRFSet(
+            frf = FRFSet(
                 f["freq"][()], f["H"][()], f["resp_nodes"][()], f["resp_dirs"][()],
                 f["exc_nodes"][()], f["exc_dirs"][()], geometry,
                 f["coherence"][()] if "coherence" in f else None,
-                meta if isinstance(meta, dict) else {},
             )
+            attrs = (dict(f["provenance"].attrs) if "provenance" in f
+                     else _old_provenance(json.loads(_str(f["meta"][()]))))
+            return Measurement(frf, Provenance.restored(attrs), p.name)
         except (KeyError, ValueError, TypeError) as err:
             raise FRFFileError(f"{p}: damaged FRF file: {str(err).splitlines()[0]}") from err
 
 
-#: keys of ``/meta`` that files written before ``/provenance`` existed used for it
-_OLD_PROVENANCE = ("exponential_tau", "force_band_top")
+def _old_provenance(meta: object) -> dict[str, object]:
+    """The provenance a version-1 file kept in its ``/meta`` JSON object."""
+    meta = meta if isinstance(meta, dict) else {}
+    attrs = {k: v for k in ("exponential_tau", "force_band_top", "n_averages", "estimator",
+                            "excitation") if (v := meta.get(k)) is not None}
+    attrs["origin"] = "estimated" if meta.get("from_time_records") else "given"
+    if isinstance(attrs.get("n_averages"), int):
+        attrs["n_averages"] = [attrs["n_averages"]]
+    return attrs
 
 
-def read_frf_measurement(path: str | Path) -> Measurement:
-    """The measurement of an FRF file: :func:`read_frf_h5` and the provenance kept with
-    the FRFs (``/provenance``; a file written before it: the ``from_time_records``,
-    ``exponential_tau`` and ``force_band_top`` entries of ``/meta``).
-
-    Raises
-    ------
-    FRFFileError
-        As :func:`read_frf_h5`, or a provenance field that is not a number.
-    """
-    p = Path(path)
-    frf = read_frf_h5(p)
-    try:
-        with h5py.File(p, "r") as f:
-            if "provenance" in f:
-                attrs = {k: _str(v) for k, v in f["provenance"].attrs.items()}
-            else:
-                attrs = {k: str(v) for k in _OLD_PROVENANCE
-                         if isinstance(v := frf.meta.get(k), int | float)}
-                attrs["origin"] = "estimated" if frf.meta.get("from_time_records") else "given"
-                attrs["estimator"] = str(frf.meta.get("estimator", "H1"))
-        return Measurement(frf, Provenance.restored(attrs), p.name)
-    except (OSError, ValueError) as err:
-        raise FRFFileError(f"{p}: damaged FRF file: {str(err).splitlines()[0]}") from err
+def read_frf_h5(path: str | Path) -> FRFSet:
+    """The FRFs of an FRF file (:func:`read_frf_measurement` without the provenance)."""
+    return read_frf_measurement(path).frf

@@ -39,7 +39,7 @@ from processing.data import FRFSet, Geometry
 from processing.measurement import Measurement, Provenance
 
 __all__ = ["SCHEMA_VERSION", "ChannelInfo", "RecordTable", "RunData", "RunFileError",
-           "RunWriter", "iter_record_data", "read_run", "repair", "write_mounts"]
+           "RunWriter", "iter_record_data", "read_run", "repair", "run_mounts", "write_mounts"]
 
 SCHEMA_VERSION = 1
 FORMAT = "insitu-run"
@@ -343,7 +343,9 @@ class RunWriter:
             if measurement is not None:
                 frf = measurement.frf
                 g = f.create_group("frf")
-                g.attrs.update(measurement.provenance.stored())  # the per-hit spectra: records
+                attrs = measurement.provenance.stored()  # the per-hit spectra: the records
+                attrs.pop("n_averages", None)  # a dataset of its own
+                g.attrs.update(attrs)
                 _array(g, "freq", frf.freq, "Hz")
                 _array(g, "H", frf.H, "m/s^2/N")
                 if frf.coherence is not None:
@@ -352,7 +354,7 @@ class RunWriter:
                 _array(g, "resp_dirs", frf.resp_dirs, "1")
                 _array(g, "exc_nodes", frf.exc_nodes, "1")
                 _array(g, "exc_dirs", frf.exc_dirs, "1")
-                _array(g, "n_averages", np.asarray(frf.meta.get("n_averages", []), int), "1")
+                _array(g, "n_averages", np.asarray(measurement.provenance.n_averages, int), "1")
             if result is not None:
                 _text(f, "result", dict(result), "SI, see docs/conventions.md")
         self.close()
@@ -539,13 +541,12 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
     frf = None
     if "frf" in f:
         g = f["frf"]
+        attrs = {**g.attrs, "n_averages": g["n_averages"][()].tolist()}
         frf = Measurement(FRFSet(
             g["freq"][()], g["H"][()], g["resp_nodes"][()], g["resp_dirs"][()],
             g["exc_nodes"][()], g["exc_dirs"][()], geometry,
-            g["coherence"][()] if "coherence" in g else None,
-            {"estimator": _str(g.attrs.get("estimator", "H1")),
-             "n_averages": g["n_averages"][()].tolist()}),
-            Provenance.restored({k: _str(v) for k, v in g.attrs.items()}, "estimated"), p.name)
+            g["coherence"][()] if "coherence" in g else None),
+            Provenance.restored(attrs, "estimated"), p.name)
     result = json.loads(_str(f["result"][()])) if "result" in f else None
     mounts = _read_mounts(p, f["mounts"]) if "mounts" in f else None
     state = _str(f.attrs.get("state", ""))
@@ -569,6 +570,19 @@ def _read_mounts(p: Path, g: h5py.Group) -> MountsFile:
         return mounts_from_dict(data, f"{p} /mounts")
     except MountsFileError as err:
         raise RunFileError(str(err)) from err
+
+
+def run_mounts(path: str | Path) -> MountsFile | None:
+    """The mounts table of a run file (None when it has none or ``path`` is no run file:
+    an FRF file); raises :class:`RunFileError` (one line) for a damaged run file."""
+    p = Path(path)
+    try:
+        with h5py.File(p, "r") as f:
+            if _str(f.attrs.get("format", "")) != FORMAT:
+                return None
+    except OSError:
+        return None
+    return read_run(p, with_data=False).mounts
 
 
 def write_mounts(path: str | Path, mounts: MountsFile | None) -> None:

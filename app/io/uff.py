@@ -43,10 +43,12 @@ from app.io._uff_write import AxisInfo, open_for_writing
 from app.io.uff_geometry import assign_node_frames, read_geometry, read_geometry_uff
 from app.io.uff_time import TimeRun, read_time_uff, write_time_uff
 from processing.data import FRFSet, InputError
+from processing.measurement import Measurement, Provenance
 
 __all__ = [
     "TimeRun",
     "UnitFactors",
+    "read_frf_measurement_uff",
     "read_frf_uff",
     "read_geometry",
     "read_geometry_uff",
@@ -197,7 +199,14 @@ def _coherence(
 
 
 def read_frf_uff(path: str | Path) -> FRFSet:
-    """Read a self-contained UFF FRF file into an :class:`FRFSet`.
+    """The FRFs of a self-contained UFF FRF file (:func:`read_frf_measurement_uff` without
+    the file's notes)."""
+    return read_frf_measurement_uff(path).frf
+
+
+def read_frf_measurement_uff(path: str | Path) -> Measurement:
+    """Read a self-contained UFF FRF file: its FRFs, given (an analyser's: their coherence
+    stands for their noise), and what the file said about them.
 
     Parameters
     ----------
@@ -205,13 +214,15 @@ def read_frf_uff(path: str | Path) -> FRFSet:
 
     Returns
     -------
-    FRFSet
-        ``freq`` in Hz; ``H`` (n_resp, n_exc, n_f) accelerance in (m/s^2)/N; response
-        and excitation DOFs in order of first appearance, directions as unit vectors in
-        the global frame (sign of the direction code included; a DOF seen again with the
-        opposite sign has its data negated); geometry in m with every node of the file;
-        ``coherence`` when a type-6 record exists for every pair, else None; ``meta``
-        with the file name, units and record counts.
+    Measurement
+        FRFs: ``freq`` in Hz; ``H`` (n_resp, n_exc, n_f) accelerance in (m/s^2)/N;
+        response and excitation DOFs in order of first appearance, directions as unit
+        vectors in the global frame (sign of the direction code included; a DOF seen again
+        with the opposite sign has its data negated); geometry in m with every node of the
+        file; ``coherence`` when a type-6 record exists for every pair, else None. The
+        provenance's ``notes`` give the file's units, its ordinate types and the coherence
+        found (``"coherence: absent"``, ``"complete"``, ``"incomplete (k of n pairs)"``);
+        ``source`` is the file's name.
 
     Raises
     ------
@@ -270,18 +281,12 @@ def read_frf_uff(path: str | Path) -> FRFSet:
             "the file must hold every response x reference combination"
         )
     coherence, coh_status = _coherence(coh, resp, exc, freq)
-    meta: dict[str, object] = {
-        "source": p.name,
-        "path": str(p),
-        "format": "uff",
-        "units": units.as_meta(),
-        "ordinate_types": sorted(DATA_TYPE_NAMES[t] for t in ordinates),
-        "n_frf_records": len(frf),
-        "coherence": coh_status,
-    }
     log.info("%s: %d x %d FRFs, %d lines, units %s", p.name, H.shape[0], H.shape[1],
              freq.size, units.description or units.code)
-    return FRFSet(
+    notes = (f"units: {units.describe()}",
+             "ordinates: " + ", ".join(sorted(DATA_TYPE_NAMES[t] for t in ordinates)),
+             f"coherence: {coh_status}")
+    return Measurement(FRFSet(
         freq=freq,
         H=H,
         resp_nodes=np.array(resp.nodes, dtype=np.int64),
@@ -290,8 +295,7 @@ def read_frf_uff(path: str | Path) -> FRFSet:
         exc_dirs=np.array(exc.dirs),
         geometry=geometry,
         coherence=coherence,
-        meta=meta,
-    )
+    ), Provenance(notes=notes), p.name)
 
 
 def _unique_dofs(nodes: NDArray[np.int64], codes: NDArray[np.int64], what: str) -> None:

@@ -19,9 +19,10 @@ __all__ = ["assemble", "check_reports"]
 def assemble(freq: NDArray[np.float64], Hs: Sequence[NDArray[np.complex128]],
              cohs: Sequence[NDArray[np.float64]], resp_nodes: NDArray[np.int64],
              resp_dirs: NDArray[np.float64], exc_nodes: NDArray[np.int64],
-             exc_dirs: NDArray[np.float64], geometry: Geometry, meta: dict[str, object],
-             fmax: float, reports: list[RunReport]) -> FRFSet:
-    """Excitation columns -> FRF set on the lines above 0 Hz up to ``fmax`` Hz.
+             exc_dirs: NDArray[np.float64], geometry: Geometry, fmax: float,
+             reports: list[RunReport]) -> tuple[FRFSet, NDArray[np.bool_]]:
+    """Excitation columns -> FRF set on the lines above 0 Hz up to ``fmax`` Hz, and which
+    columns were kept.
 
     A column with undefined values there (no force at those frequencies) is reported (one
     skipped :class:`RunReport` appended to ``reports``) and dropped. Raises
@@ -32,7 +33,7 @@ def assemble(freq: NDArray[np.float64], Hs: Sequence[NDArray[np.complex128]],
                         "or the record length", reports)
     whole = FRFSet(freq=freq, H=np.concatenate(Hs, axis=1), resp_nodes=resp_nodes,
                    resp_dirs=resp_dirs, exc_nodes=exc_nodes, exc_dirs=exc_dirs,
-                   geometry=geometry, coherence=np.concatenate(cohs, axis=1), meta=meta)
+                   geometry=geometry, coherence=np.concatenate(cohs, axis=1))
     cut = whole.select_lines(fmax)
     finite = np.all(np.isfinite(cut.H), axis=(0, 2))
     for j in np.flatnonzero(~finite):
@@ -43,12 +44,12 @@ def assemble(freq: NDArray[np.float64], Hs: Sequence[NDArray[np.complex128]],
         raise OpenError("every FRF column is undefined somewhere (no force at some "
                         "frequencies): excite the whole band", reports)
     if finite.all():
-        return cut
+        return cut, finite
     assert cut.coherence is not None
     return FRFSet(freq=cut.freq, H=cut.H[:, finite], resp_nodes=cut.resp_nodes,
                   resp_dirs=cut.resp_dirs, exc_nodes=cut.exc_nodes[finite],
                   exc_dirs=cut.exc_dirs[finite], geometry=geometry,
-                  coherence=cut.coherence[:, finite], meta=cut.meta)
+                  coherence=cut.coherence[:, finite]), finite
 
 
 def check_reports(frf: FRFSet, threshold: float) -> list[RunReport]:

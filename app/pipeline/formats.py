@@ -11,12 +11,12 @@ from pathlib import Path
 
 from app.io.frf_h5 import FORMAT as FRF_H5_FORMAT
 from app.io.frf_h5 import h5_format, read_frf_measurement
-from app.io.uff import read_frf_uff
+from app.io.uff import read_frf_measurement_uff
 from app.io.uff_time import uff_holds_time_data
 from app.pipeline.runs import open_run_file
 from app.pipeline.settings import Settings
 from app.pipeline.time_uff import open_time_uff
-from processing.measurement import Measurement, Provenance
+from processing.measurement import Measurement
 
 __all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "H5_SUFFIXES", "READERS", "RUN_FILE", "SUFFIXES",
            "TIME_UFF", "UFF_SUFFIXES", "detect_format", "load"]
@@ -51,9 +51,7 @@ def detect_format(path: str | Path) -> str:
 
 
 def _frf_uff(path: Path, _: Settings) -> Measurement:
-    frf = read_frf_uff(path)  # FRFs given: their coherence stands for their noise
-    return Measurement(frf, Provenance(estimator=str(frf.meta.get("estimator", "H1"))),
-                       path.name)
+    return read_frf_measurement_uff(path)  # given: their coherence stands for their noise
 
 
 def _frf_h5(path: Path, _: Settings) -> Measurement:

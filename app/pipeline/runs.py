@@ -34,8 +34,8 @@ def open_run_file(path: Path, s: Settings) -> Measurement:
 
     With ``s.run_points == "all"``: every point's FRF column (InputError naming a point
     without a used record; a run whose force is aligned by host timing only is refused), on
-    the lines up to fs / 2.56, with the per-hit or per-block spectra, and the file's name,
-    the run's state and its mounts table in the FRFs' ``meta`` (for the views); no report.
+    the lines up to fs / 2.56, with the per-hit or per-block spectra and the run's state;
+    no report.
     With ``"usable"``: the points with a used record (the others reported and left out,
     the first ``s.averages`` used records of each point averaged), on the lines up to
     ``s.fmax`` (default fs / 2.56), with the checks reported.
@@ -47,10 +47,8 @@ def open_run_file(path: Path, s: Settings) -> Measurement:
         return _usable_points(run, path, s)
     check_identifiable(run)
     m = anti_aliased(run_measurement(run)[0])
-    m.frf.meta.update({"file": Path(path).name, "run_state": run.state})  # for the views
-    if run.mounts is not None:
-        m.frf.meta["mounts"] = run.mounts
-    return m
+    return dataclasses.replace(m, provenance=dataclasses.replace(m.provenance,
+                                                                 run_state=run.state))
 
 
 def _usable_points(run: RunData, path: Path, s: Settings) -> Measurement:
@@ -88,8 +86,10 @@ def _usable_points(run: RunData, path: Path, s: Settings) -> Measurement:
             raise OpenError(str(err), reports) from err
     col = m.frf
     assert col.coherence is not None
-    out = assemble(col.freq, [col.H], [col.coherence], col.resp_nodes, col.resp_dirs,
-                   col.exc_nodes, col.exc_dirs, col.geometry, col.meta, fmax, reports)
+    out, kept = assemble(col.freq, [col.H], [col.coherence], col.resp_nodes, col.resp_dirs,
+                         col.exc_nodes, col.exc_dirs, col.geometry, fmax, reports)
     reports += check_reports(out, s.coherence)
+    n_avg = m.provenance.n_averages
     return dataclasses.replace(m, frf=out, provenance=dataclasses.replace(
-        m.provenance, anti_alias_fmax=fmax, reports=tuple(reports)))
+        m.provenance, anti_alias_fmax=fmax, run_state=run.state, reports=tuple(reports),
+        n_averages=tuple(n for n, k in zip(n_avg, kept, strict=True) if k) if n_avg else ()))

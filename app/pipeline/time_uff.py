@@ -470,10 +470,10 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
     geometry = data.geometry
     keys = list(cols)
     fmax = s.fmax if s.fmax is not None else first.fs / 2.56
-    out = assemble(cols[keys[0]][2], [cols[k][0] for k in keys], [cols[k][1] for k in keys],
-                   first.resp_nodes, first.resp_dirs, np.array([k[0] for k in keys]),
-                   np.array([k[1] for k in keys]), geometry,
-                   {"estimator": s.estimator, "excitation": s.excitation}, fmax, reports)
+    out, _ = assemble(cols[keys[0]][2], [cols[k][0] for k in keys],
+                      [cols[k][1] for k in keys], first.resp_nodes, first.resp_dirs,
+                      np.array([k[0] for k in keys]), np.array([k[1] for k in keys]), geometry,
+                      fmax, reports)
     units = [u for k in keys if (u := cols[k][3]) is not None]
     time_units, top = None, None
     if len(units) == len(keys):  # per-unit spectra: the bootstrap, the hammer's usable band
@@ -488,7 +488,8 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
     return Measurement(out, Provenance(
         origin="estimated", excitation=str(s.excitation), estimator=s.estimator,
         units=time_units, exponential_tau=s.exp_tau or None if s.excitation == "impact"
-        else None, force_band_top=top, anti_alias_fmax=fmax, reports=tuple(reports)),
+        else None, force_band_top=top, anti_alias_fmax=fmax,
+        window="" if s.excitation == "impact" else str(s.window), reports=tuple(reports)),
         Path(path).name)
 
 

@@ -178,8 +178,8 @@ def check_rows(a: Analysis) -> list[CheckRow]:
         rows.append(CheckRow(f"coherence ≥ {thr:g}", None, "no coherence in the data"))
     else:
         detail = gate.summary()
-        n_avg = np.asarray(a.frf.meta.get("n_averages", []), dtype=float)
-        if n_avg.size and n_avg.max() <= 1:
+        n_avg = a.measurement.provenance.n_averages
+        if n_avg and max(n_avg) <= 1:
             detail += ("; one average per point: coherence is 1 by definition, this check "
                        "needs several hits or blocks per point")
         rows.append(CheckRow(f"coherence ≥ {thr:g}", gate.n_dropped == 0, detail))

@@ -64,10 +64,11 @@ def test_overrides_during_a_run_and_from_the_command_line(tmp_path: Path, capsys
     assert list(rec.accepted) == [h.accepted for h in proc.hits]
     assert rec.point.tolist().count(0) == 3 and rec.accepted[rec.point == 0].sum() == 2
     # replay honours the overrides: the same FRFs as the live run, bit for bit
-    frf = run_measurement(run)[0].frf
+    m = run_measurement(run)[0]
+    frf = m.frf
     assert run.measurement is not None and np.array_equal(frf.H, run.measurement.frf.H)
     assert np.array_equal(frf.H, proc.frf.H)
-    assert frf.meta["n_averages"] == [2, 2]
+    assert m.provenance.n_averages == (2, 2)
 
     # on the finished file: clear the reject of record 2 (printed numbers are 1-based)
     capsys.readouterr()
@@ -76,7 +77,7 @@ def test_overrides_during_a_run_and_from_the_command_line(tmp_path: Path, capsys
     assert "record 2: override reject -> none" in out and "recomputed and stored" in out
     after = read_run(path)
     assert after.records.override[:2] == ("accept", "") and after.state == "finished"
-    assert after.measurement is not None and after.measurement.frf.meta["n_averages"] == [3, 2]
+    assert after.measurement is not None and after.measurement.provenance.n_averages == (3, 2)
     frf2 = run_measurement(after)[0].frf
     assert np.array_equal(frf2.H, after.measurement.frf.H) and not np.array_equal(frf2.H, frf.H)
     assert np.array_equal(after.records.data, rec.data)  # raw records untouched

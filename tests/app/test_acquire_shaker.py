@@ -115,7 +115,7 @@ def test_chirp_run_identifies_the_engine_and_replay_is_identical(tmp_path: Path)
     assert run.records.accepted.all() and run.records.point.tolist() == list(range(len(POINTS)))
     assert np.abs(run.records.data[:, 0]).max() < 2000  # force within the sensor's range
     stored = run.measurement
-    assert stored is not None and stored.frf.meta["n_averages"] == [1] * len(POINTS)
+    assert stored is not None and stored.provenance.n_averages == (1,) * len(POINTS)
     frf = run_measurement(run)[0].frf  # the whole band, as the live run stored it
     result = fit(load(path, fmt=RUN_FILE))  # what every view identifies from the run file
     assert np.isfinite(proc.frf.H).all()  # 0 Hz too: blocks are not detrended
@@ -226,7 +226,7 @@ def test_burst_random_plan_acquired_and_identified_from_the_command_line(
     assert not on[:, BURST_PRE + burst + 3:].any()
     assert run.measurement is not None
     stored = run.measurement.frf
-    assert stored.meta["n_averages"] == [2] * n_pts
+    assert run.measurement.provenance.n_averages == (2,) * n_pts
     band = (stored.freq >= 5.0) & (stored.freq <= 150.0)
     # two bursts of a random multisine per point: coherence 1 but for leakage (none seen)
     assert stored.coherence is not None

@@ -10,7 +10,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from app.acquire.analysis import hit_result, margin_samples, point_result
 from app.cli.main import main
-from app.io.frf_h5 import read_frf_h5
+from app.io.frf_h5 import read_frf_h5, read_frf_measurement
 from app.io.runfile import RunWriter
 from app.io.uff import read_frf_uff
 from app.mockbench.bench import plan_for_bench
@@ -82,7 +82,8 @@ def test_frf_from_run_file_skips_points_without_hits(
     assert_array_equal(frf.freq, ref.freq[keep])
     assert_array_equal(frf.H, ref.H[..., keep])
     assert_array_equal(frf.coherence, ref.coherence[..., keep])
-    assert frf.meta["excitation"] == "impact" and frf.meta["estimator"] == "H1"
+    prov = read_frf_measurement(out).provenance
+    assert prov.excitation == "impact" and prov.estimator == "H1" and prov.estimated
     # the UFF output of the same: the same FRFs, coherence, DOFs and geometry when read back
     # (ASCII 58 records keep 12 significant digits)
     assert main(["frf", str(path), "--out", str(tmp_path / "frf.uff")]) == 2
@@ -116,8 +117,9 @@ def test_averages_on_a_run_file_uses_the_first_hits(run_file: tuple[Path, list[n
     out = tmp_path / "frf.h5"
     assert main(["frf", str(path), "--out", str(out), "--averages", "1"]) == 2  # 2 bad points
     assert "1 of 2 hits used" in capsys.readouterr().out
-    frf = read_frf_h5(out)
-    assert frf.meta["n_averages"] == [1]
+    kept = read_frf_measurement(out)
+    assert kept.provenance.n_averages == (1,)
+    frf = kept.frf
     plan = plan_for_bench("engine-rigid", points=POINTS, fs=FS, length=4.0, pretrigger=0.25)
     names = ["F", *(f"a{i}" for i in range(12))]
     ref = point_result([hit_result(good[0], plan.record, names, None)])

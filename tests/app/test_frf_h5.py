@@ -34,10 +34,10 @@ def engine() -> tuple[Measurement, tuple[float, float]]:
     low = np.flatnonzero((frf.freq >= lo) & (frf.freq <= hi))[5:9]  # 4 lines in the mass band
     coh[2, 4, low] = 0.5
     coh[0, 0, -3:] = 0.1  # outside both bands: no effect on the identification
-    meta = {"estimator": "H1", "excitation": "impact",
-            "n_averages": list(range(frf.H.shape[1]))}
-    prov = Provenance(origin="estimated", excitation="impact", exponential_tau=0.5)
-    return (Measurement(replace(frf, coherence=coh, meta=meta), prov),
+    prov = Provenance(origin="estimated", excitation="impact", exponential_tau=0.5,
+                      n_averages=tuple(range(frf.H.shape[1])), run_state="finished",
+                      notes=("units: SI",))
+    return (Measurement(replace(frf, coherence=coh), prov),
             (float(frf.freq[low[0]]), float(frf.freq[low[-1]])))
 
 
@@ -51,26 +51,25 @@ def test_round_trip_and_layout(tmp_path: Path, engine: tuple[Measurement, object
         assert_array_equal(getattr(back, name), getattr(frf, name), err_msg=name)
     assert_array_equal(back.geometry.node_ids, frf.geometry.node_ids)
     assert_array_equal(back.geometry.xyz, frf.geometry.xyz)
-    assert back.meta == frf.meta
     kept = read_frf_measurement(path)
     assert kept.provenance == m.provenance and kept.provenance.exponential_tau == 0.5
     assert kept.source == "frf.h5"
     assert_array_equal(kept.frf.H, frf.H)
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"] == "insitu-frf" and f.attrs["schema_version"] == 1
+        assert f.attrs["format"] == "insitu-frf" and f.attrs["schema_version"] == 2
         assert f.attrs["source"] == "time.uff" and f.attrs["estimator"] == "H1"
         units: dict[str, str] = {}
         f.visititems(lambda n, o: units.update({n: o.attrs["units"]})
                      if isinstance(o, h5py.Dataset) else None)
     assert units == {"freq": "Hz", "H": "m/s^2/N", "coherence": "1", "resp_nodes": "1",
                      "resp_dirs": "1", "exc_nodes": "1", "exc_dirs": "1",
-                     "geometry/node_ids": "1", "geometry/xyz": "m", "meta": "n/a"}
+                     "geometry/node_ids": "1", "geometry/xyz": "m"}
     assert h5_format(path) == "insitu-frf"
-    # without coherence, and numpy values in meta
-    bare = replace(frf, coherence=None, meta={"tau": np.float64(0.25), "n": np.arange(3)})
+    # without coherence, bare FRFs: given
+    bare = replace(frf, coherence=None)
     write_frf_h5(path, bare)
     again = read_frf_h5(path)
-    assert again.coherence is None and again.meta == {"tau": 0.25, "n": [0, 1, 2]}
+    assert again.coherence is None
     assert read_frf_measurement(path).provenance == Provenance()  # FRFs given
 
 
@@ -90,7 +89,12 @@ def test_bad_files_are_one_line(tmp_path: Path, engine: tuple[Measurement, objec
     write_frf_h5(path, frf)
     with h5py.File(path, "a") as f:
         f.attrs["schema_version"] = 7
-    with pytest.raises(FRFFileError, match="schema version 7; this insitu reads version 1"):
+    with pytest.raises(FRFFileError, match="schema version 7; this insitu reads versions 1, 2"):
+        read_frf_h5(path)
+    write_frf_h5(path, engine[0])
+    with h5py.File(path, "a") as f:
+        f["provenance"].attrs["exponential_tau"] = "abc"
+    with pytest.raises(FRFFileError, match="damaged FRF file: provenance field exponential_tau"):
         read_frf_h5(path)
     write_frf_h5(path, frf)
     with h5py.File(path, "a") as f:
@@ -117,3 +121,20 @@ def test_identify_reads_frf_file_and_reports_low_coherence(
     assert coh["low_ranges_hz"] == [[lo, hi]] and coh["low_values"] == 4
     assert coh["pass"] and coh["threshold"] == 0.8  # 4 values of the bands' thousands
     assert "4 of" in text and f"weighted by their noise, not dropped; at {lo:g}-{hi:g} Hz" in text
+
+
+def test_a_version_1_file_keeps_its_provenance_in_meta(tmp_path: Path,
+                                                       engine: tuple[Measurement, object],
+                                                       ) -> None:
+    """Files written before ``/provenance`` kept the numbers the fit reads in ``/meta``."""
+    path = tmp_path / "old.h5"
+    write_frf_h5(path, engine[0].frf)
+    with h5py.File(path, "a") as f:
+        f.attrs["schema_version"] = 1
+        del f["provenance"]
+        f.create_dataset("meta", data=json.dumps({
+            "estimator": "H1", "excitation": "impact", "exponential_tau": 0.5,
+            "force_band_top": 180.0, "from_time_records": True, "n_averages": [3, 3]}))
+    prov = read_frf_measurement(path).provenance
+    assert prov.estimated and prov.exponential_tau == 0.5 and prov.force_band_top == 180.0
+    assert prov.n_averages == (3, 3) and prov.excitation == "impact"

@@ -112,10 +112,11 @@ def test_two_correlated_shakers_identify_the_engine(tmp_path: Path) -> None:
     physics = _write_run(path, plan)
     model = physics.bench.model
     run = read_run(path)
-    frfs = run_measurement(run)[0].frf
+    m = run_measurement(run)[0]
+    frfs = m.frf
     assert frfs.H.shape[:2] == (12, len(POINTS))
     assert_allclose(frfs.exc_nodes, plan.exc_nodes)
-    assert frfs.meta["n_averages"] == [BLOCKS] * len(POINTS) and frfs.meta["shakers"] == 2
+    assert m.provenance.n_averages == (BLOCKS,) * len(POINTS) and m.provenance.references == 2
 
     # each column against the bench's one-force response (a single-force burst)
     band = (frfs.freq >= 5.0) & (frfs.freq <= 150.0)

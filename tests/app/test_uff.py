@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from app.io import (
     TimeRun,
+    read_frf_measurement_uff,
     read_frf_uff,
     read_geometry,
     read_geometry_uff,
@@ -130,7 +131,8 @@ def test_round_trip_bench(tmp_path: Path, request: pytest.FixtureRequest, bench:
     fs: FRFSet = request.getfixturevalue(bench)
     path = tmp_path / "frf.uff"
     write_frf_uff(path, fs, binary=binary, length_unit=length_unit)  # type: ignore[arg-type]
-    back = read_frf_uff(path)
+    m = read_frf_measurement_uff(path)
+    back, notes = m.frf, m.provenance.notes
     rtol = RTOL_BINARY if binary else RTOL_ASCII
     assert_allclose(back.freq, fs.freq, rtol=1e-15)
     assert back.H.shape == fs.H.shape
@@ -142,15 +144,14 @@ def test_round_trip_bench(tmp_path: Path, request: pytest.FixtureRequest, bench:
     assert_array_equal(back.geometry.node_ids, fs.geometry.node_ids)
     assert_allclose(back.geometry.xyz, fs.geometry.xyz, rtol=0, atol=1e-15)
     if fs.coherence is None:
-        assert back.coherence is None and back.meta["coherence"] == "absent"
+        assert back.coherence is None and "coherence: absent" in notes
     else:
-        assert back.coherence is not None and back.meta["coherence"] == "complete"
+        assert back.coherence is not None and "coherence: complete" in notes
         assert_allclose(back.coherence, fs.coherence, rtol=0, atol=1e-11 if not binary else 0)
-    units = back.meta["units"]
-    assert isinstance(units, dict)
-    assert units["length_factor"] == (1000.0 if length_unit == "mm" else 1.0)
-    assert back.meta["source"] == "frf.uff"
-    assert back.meta["ordinate_types"] == ["acceleration"]
+    assert ("lengths x 0.001, forces x 1 to SI" in notes[0] if length_unit == "mm"
+            else notes[0] == "units: SI")
+    assert m.source == "frf.uff" and not m.provenance.estimated
+    assert "ordinates: acceleration" in notes
 
 
 def test_written_file_layout(tmp_path: Path, engine: FRFSet, block: FRFSet) -> None:
@@ -251,10 +252,11 @@ def test_velocity_and_displacement_frfs(tmp_path: Path, small: FRFSet, binary: b
             recs.append(rec58((1, resp_ids[i]), (2, j + 1), small.freq, data, binary=binary,
                               ordinate=kind))
     path = small_file(tmp_path, recs, nodes=nodes2411([1, 2], xyz[:2] * 1000))
-    back = read_frf_uff(path)
+    m = read_frf_measurement_uff(path)
+    back = m.frf
     assert_allclose(back.H, small.H[:3, :3], rtol=RTOL_BINARY if binary else RTOL_ASCII, atol=0)
     assert_allclose(back.resp_dirs, np.eye(3), atol=0)
-    assert back.meta["ordinate_types"] == ["acceleration", "displacement", "velocity"]
+    assert "ordinates: acceleration, displacement, velocity" in m.provenance.notes
 
 
 def test_coordinate_system_2420_rotated_and_translated(tmp_path: Path) -> None:
@@ -317,9 +319,9 @@ def test_coherence_incomplete_is_none(tmp_path: Path) -> None:
     recs = [rec58((1, 1), (2, d), FREQ, DATA) for d in (1, 2)]
     recs.append(rec58((1, 1), (2, 1), FREQ, np.full(8, 0.9), func_type=6, ordinate=1,
                       denominator=0))
-    back = read_frf_uff(small_file(tmp_path, recs))
-    assert back.coherence is None
-    assert back.meta["coherence"] == "incomplete (1 of 2 pairs)"
+    m = read_frf_measurement_uff(small_file(tmp_path, recs))
+    assert m.frf.coherence is None
+    assert "coherence: incomplete (1 of 2 pairs)" in m.provenance.notes
 
 
 def test_read_units() -> None:

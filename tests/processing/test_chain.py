@@ -36,7 +36,7 @@ def _band_limited(f: FRFSet, noise: float, location_error: float) -> FRFSet:
     geometry = BENCH.frfset(0.0, location_error, seed=7).geometry if location_error else f.geometry
     assert f.coherence is not None
     return FRFSet(f.freq[keep], f.H[..., keep], f.resp_nodes, f.resp_dirs, f.exc_nodes,
-                  f.exc_dirs, geometry, f.coherence[..., keep], f.meta)
+                  f.exc_dirs, geometry, f.coherence[..., keep])
 
 
 def _shaker_frfs(noise: float, averages: int) -> FRFSet:

@@ -15,7 +15,7 @@ def _frf(coherence: bool = True) -> FRFSet:
     coh[0, 1, 50] = np.nan
     geo = Geometry(np.array([1, 2, 3, 4, 5]), np.arange(15.0).reshape(5, 3))
     return FRFSet(freq, H, [1, 2], np.eye(3)[:2], [3, 4, 5], np.eye(3),
-                  geo, coh if coherence else None, {"estimator": "H1"})
+                  geo, coh if coherence else None)
 
 
 def test_cut_to_fmax_and_nan_coherence_is_zero() -> None:
@@ -26,7 +26,6 @@ def test_cut_to_fmax_and_nan_coherence_is_zero() -> None:
     assert_array_equal(cut.H, frf.H[..., 1:101])
     assert cut.coherence is not None
     assert cut.coherence[0, 1, 49] == 0.0 and np.all(np.isfinite(cut.coherence))
-    assert cut.meta == frf.meta and cut.meta is not frf.meta
 
 
 def test_all_positive_lines_without_fmax() -> None:

@@ -30,11 +30,10 @@ MASS = 110.0  # kg, the bench model's
 
 def _frfs(key: str, with_band: bool = True) -> Measurement:
     d = np.load(DATA)
-    meta: dict[str, object] = {"estimator": "H1", "excitation": "impact"}
     top = float(d[f"force_band_top_{key}"]) if with_band else None
     frf = FRFSet(d["freq"], d[f"H_{key}"].astype(complex), d["resp_nodes"], d["resp_dirs"],
                  d["exc_nodes"], d["exc_dirs"], Geometry(d["node_ids"], d["xyz"]),
-                 np.ones(d[f"H_{key}"].shape), meta)
+                 np.ones(d[f"H_{key}"].shape))
     return Measurement(frf, Provenance(excitation="impact", force_band_top=top))
 
 
