@@ -58,7 +58,12 @@ def free_decay(seg: NDArray[np.float64], n_out: int, sigma: NDArray[np.float64],
     >>> bool(np.allclose(folded[0], x[400:].reshape(-1, 200).sum(axis=0), atol=1e-4))
     True
     """
-    y = np.asarray(seg, dtype=float) / np.maximum(sigma, 1e-300)[:, None]
+    seg = np.asarray(seg, dtype=float)
+    # a channel without noise (simulated, or flat) is scaled by its precision instead:
+    # divided by almost nothing its moments overflow
+    peak = np.max(np.abs(seg), axis=-1) if seg.size else np.zeros(seg.shape[0])
+    sigma = np.maximum(np.asarray(sigma, dtype=float), np.where(peak > 0, 1e-9 * peak, 1.0))
+    y = seg / sigma[:, None]
     n_ch, n_s = y.shape
     r = int(min(order, n_s // 4))
     if r < 2:
@@ -81,7 +86,7 @@ def free_decay(seg: NDArray[np.float64], n_out: int, sigma: NDArray[np.float64],
         near = np.abs(1 - zL) < 1e-9
         zn = zn * np.where(near, FOLD_WRAPS, (1 - zL**FOLD_WRAPS) / np.where(near, 1, 1 - zL))
     out = np.real(zn @ amp).T
-    return np.asarray(out * np.maximum(sigma, 1e-300)[:, None], dtype=np.float64)
+    return np.asarray(out * sigma[:, None], dtype=np.float64)
 
 
 def _powers(z: NDArray[Any], first: int, n: int) -> NDArray[np.complex128]:

@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from app.io.runfile import RunFileError, RunWriter, read_run
 from drivers.base import ChannelConfig
 from processing.data import FRFSet, Geometry
+from processing.measurement import Measurement, Provenance
 
 
 @pytest.fixture(scope="module")
@@ -37,8 +38,9 @@ def whole(tmp_path_factory: pytest.TempPathFactory) -> Path:
     w.add_note("tip changed", 1.0)
     frf = FRFSet(np.arange(1.0, 5.0), np.ones((1, 1, 4), complex), np.array([1]),
                  np.array([[1.0, 0, 0]]), np.array([101]), np.array([[0, 1.0, 0]]), geo,
-                 np.ones((1, 1, 4)), {"n_averages": [1]})
-    w.finish("finished", "", frf, {"mass": 1.0})
+                 np.ones((1, 1, 4)))
+    w.finish("finished", "", Measurement(frf, Provenance(origin="estimated", n_averages=(1,))),
+             {"mass": 1.0})
     return path
 
 

@@ -129,3 +129,14 @@ def test_burst_train_found_through_the_ringing() -> None:
     on = burst_onsets(data[0], FS)
     assert np.all(np.abs(np.diff(on) - 1024) <= 8)
     assert shaker_signal(data[0], FS).kind == "burst"
+
+
+def test_a_channel_without_noise_is_continued_not_overflowed() -> None:
+    """A simulated (noise-free) or flat channel: its noise estimate is 0, and divided by it
+    the prediction's moments overflowed (the run failed on a mock bench's record)."""
+    t = np.arange(600) / 100.0
+    x = np.exp(-0.3 * t) * np.cos(2 * np.pi * 3.0 * t)
+    with np.errstate(all="raise"):
+        out = free_decay(np.vstack([x[:400], np.zeros(400)]), 200, np.array([0.0, 0.0]))
+    np.testing.assert_allclose(out[0], x[400:], atol=1e-9)
+    assert np.all(out[1] == 0.0)
