@@ -388,6 +388,19 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
     extra = sorted(set(data) - _TOP)
     if extra:
         raise c.fail(extra[0], f"unknown key; allowed: {', '.join(sorted(_TOP))}")
+    name, method, hits = _plan_table(c, data, source)
+    record = _record_settings(c, data, method)
+    shaker = _shaker_settings(c, data)
+    excs = _excitations(c, data)
+    resps = _responses(c, data)
+    _check_shakers(c, method, shaker, excs)
+    plan = TestPlan(name, method, hits, record, tuple(excs), tuple(resps), shaker, source)
+    plan.geometry()  # nodes with two coordinates
+    return plan
+
+
+def _plan_table(c: _Ctx, data: Mapping[str, Any], source: str) -> tuple[str, Method, int]:
+    """The ``[plan]`` table: name (default the file's stem), method and hits."""
     p = c.table(data, "plan", {"name", "method", "hits"})
     name = p.get("name", Path(source).stem)
     if not isinstance(name, str):
@@ -396,6 +409,11 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
     if method not in ("hammer", "shaker"):
         raise c.fail("plan.method", f"must be 'hammer' or 'shaker', got {method!r}")
     hits = c.number(p, "hits", "plan", 3, integer=True)
+    return name, method, int(hits)
+
+
+def _record_settings(c: _Ctx, data: Mapping[str, Any], method: Method) -> RecordSettings:
+    """The ``[record]`` table; a shaker plan without a length records one ``nperseg`` block."""
     r = c.table(data, "record", {"fs", "length", "lines", "pretrigger", "trigger_level",
                                  "exp_tau", "estimator"})
     fs = float(c.number(r, "fs", "record"))
@@ -420,7 +438,11 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
         raise c.fail("record.estimator", f"must be H1, H2 or Hv, got {est!r}")
     if round(length * fs) < 64:
         raise c.fail("record.length", f"{length:g} s at {fs:g} Hz is under 64 samples")
-    record = RecordSettings(fs, length, pre, level, tau, est)
+    return RecordSettings(fs, length, pre, level, tau, est)
+
+
+def _shaker_settings(c: _Ctx, data: Mapping[str, Any]) -> ShakerSettings:
+    """The ``[shaker]`` table, with its defaults."""
     s = c.table(data, "shaker", {"waveform", "level", "f_start", "f_stop", "averages",
                                  "nperseg", "ramp", "settle", "duty", "shakers"})
     wf = s.get("waveform", "random")
@@ -440,6 +462,11 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
         raise c.fail("shaker.duty", f"must be <= 1, got {shaker.duty:g}")
     if shaker.f_start >= shaker.f_stop:
         raise c.fail("shaker.f_stop", f"must be above f_start ({shaker.f_start:g} Hz)")
+    return shaker
+
+
+def _excitations(c: _Ctx, data: Mapping[str, Any]) -> list[ExcitationPoint]:
+    """The ``[[excitation]]`` points, in order."""
     excs = []
     for i, e in enumerate(c.points(data, "excitation")):
         key = f"excitation[{i}]"
@@ -448,6 +475,11 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
             raise c.fail(f"{key}.{bad[0]}", "unknown key; allowed: direction, node, xyz")
         excs.append(ExcitationPoint(i, c.node(e, key), c.vector(e, "xyz", key, nonzero=False),
                                     c.vector(e, "direction", key, nonzero=True)))
+    return excs
+
+
+def _responses(c: _Ctx, data: Mapping[str, Any]) -> list[ResponsePoint]:
+    """The ``[[response]]`` points, in order; a station channel may serve one point only."""
     resps = []
     seen: dict[str, int] = {}
     for i, rp in enumerate(c.points(data, "response")):
@@ -466,6 +498,12 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
             seen[nm] = i
         resps.append(ResponsePoint(c.node(rp, key), c.vector(rp, "xyz", key, nonzero=False),
                                    tuple(ch)))
+    return resps
+
+
+def _check_shakers(c: _Ctx, method: Method, shaker: ShakerSettings,
+                   excs: list[ExcitationPoint]) -> None:
+    """Refuse several shakers where their forces could not be told apart."""
     k = shaker.shakers
     if k > 1:
         if method != "shaker":
@@ -486,9 +524,6 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
             if len(dofs) < k:
                 raise c.fail(f"excitation[{i}]", f"the {k} excitations driven together "
                              f"(excitation[{i}] to [{i + k - 1}]) must differ")
-    plan = TestPlan(name, method, int(hits), record, tuple(excs), tuple(resps), shaker, source)
-    plan.geometry()  # nodes with two coordinates
-    return plan
 
 
 def load_plan(path: str | Path) -> TestPlan:

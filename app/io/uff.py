@@ -39,7 +39,7 @@ from app.io._uff_common import (
     sample_axis,
     type_name,
 )
-from app.io._uff_write import AxisInfo, open_for_writing
+from app.io._uff_write import AxisInfo, UffWriter, open_for_writing
 from app.io.uff_geometry import assign_node_frames, read_geometry, read_geometry_uff
 from app.io.uff_time import TimeRun, read_time_uff, write_time_uff
 from processing.data import FRFSet, InputError
@@ -248,38 +248,8 @@ def read_frf_measurement_uff(path: str | Path) -> Measurement:
     geometry.coordinates(np.array([int(ds["ref_node"]) for _, ds in frf]), "excitation")
     resp, exc = _DofIndex("response", rotations), _DofIndex("reference", rotations)
     freq = sample_axis(frf[0][1], record_label(*frf[0]))
-    entries: list[tuple[int, int, int, int, NDArray[np.complex128]]] = []
-    ordinates: set[int] = set()
-    for i, ds in frf:
-        where = record_label(i, ds)
-        r = resp.add(int(ds["rsp_node"]), int(ds["rsp_dir"]), where)
-        e = exc.add(int(ds["ref_node"]), int(ds["ref_dir"]), where)
-        x = sample_axis(ds, where)
-        if not _same_axis(x, freq):
-            raise InputError(
-                f"{where} has {_axis_text(x)} but {record_label(*frf[0])} has "
-                f"{_axis_text(freq)}: export every FRF on one frequency axis"
-            )
-        entries.append((r[0], e[0], r[1] * e[1], i, _accelerance(ds, freq, units, where)))
-        ordinates.add(int(ds.get("ordinate_spec_data_type", 0)))
-    H = np.zeros((len(resp.nodes), len(exc.nodes), freq.size), dtype=np.complex128)
-    owner = np.full(H.shape[:2], -1)
-    for ri, ei, sign, i, values in entries:
-        if owner[ri, ei] >= 0:
-            raise InputError(
-                f"FRF of response {resp.label(ri)} and reference {exc.label(ei)} is given twice "
-                f"(datasets #{owner[ri, ei] + 1} and #{i + 1}): keep one record per pair"
-            )
-        owner[ri, ei] = i
-        H[ri, ei] = sign * values
-    missing = np.argwhere(owner < 0)
-    if missing.size:
-        ri, ei = (int(v) for v in missing[0])
-        raise InputError(
-            f"{p.name} lacks the FRF of {missing.shape[0]} of {owner.size} response/reference "
-            f"pairs, e.g. response {resp.label(ri)} with reference {exc.label(ei)}: "
-            "the file must hold every response x reference combination"
-        )
+    entries, ordinates = _frf_entries(frf, resp, exc, freq, units)
+    H = _frf_grid(entries, resp, exc, freq, p.name)
     coherence, coh_status = _coherence(coh, resp, exc, freq)
     log.info("%s: %d x %d FRFs, %d lines, units %s", p.name, H.shape[0], H.shape[1],
              freq.size, units.description or units.code)
@@ -296,6 +266,58 @@ def read_frf_measurement_uff(path: str | Path) -> Measurement:
         geometry=geometry,
         coherence=coherence,
     ), Provenance(notes=notes), p.name)
+
+
+#: one FRF record read: response and reference DOF indices, the sign that brings the
+#: record's directions to the stored DOFs', the dataset index and the SI accelerance
+_FrfEntry = tuple[int, int, int, int, NDArray[np.complex128]]
+
+
+def _frf_entries(frf: list[tuple[int, Dataset]], resp: _DofIndex, exc: _DofIndex,
+                 freq: NDArray[np.float64], units: UnitFactors,
+                 ) -> tuple[list[_FrfEntry], set[int]]:
+    """Each FRF record's DOFs (added to ``resp`` and ``exc``) and accelerance, and the
+    ordinate types met; InputError for a record off the first one's frequency axis."""
+    entries: list[_FrfEntry] = []
+    ordinates: set[int] = set()
+    for i, ds in frf:
+        where = record_label(i, ds)
+        r = resp.add(int(ds["rsp_node"]), int(ds["rsp_dir"]), where)
+        e = exc.add(int(ds["ref_node"]), int(ds["ref_dir"]), where)
+        x = sample_axis(ds, where)
+        if not _same_axis(x, freq):
+            raise InputError(
+                f"{where} has {_axis_text(x)} but {record_label(*frf[0])} has "
+                f"{_axis_text(freq)}: export every FRF on one frequency axis"
+            )
+        entries.append((r[0], e[0], r[1] * e[1], i, _accelerance(ds, freq, units, where)))
+        ordinates.add(int(ds.get("ordinate_spec_data_type", 0)))
+    return entries, ordinates
+
+
+def _frf_grid(entries: list[_FrfEntry], resp: _DofIndex, exc: _DofIndex,
+              freq: NDArray[np.float64], name: str) -> NDArray[np.complex128]:
+    """H (n_resp, n_exc, n_f) from the records; InputError for a pair given twice or
+    missing (file ``name``)."""
+    H = np.zeros((len(resp.nodes), len(exc.nodes), freq.size), dtype=np.complex128)
+    owner = np.full(H.shape[:2], -1)
+    for ri, ei, sign, i, values in entries:
+        if owner[ri, ei] >= 0:
+            raise InputError(
+                f"FRF of response {resp.label(ri)} and reference {exc.label(ei)} is given twice "
+                f"(datasets #{owner[ri, ei] + 1} and #{i + 1}): keep one record per pair"
+            )
+        owner[ri, ei] = i
+        H[ri, ei] = sign * values
+    missing = np.argwhere(owner < 0)
+    if missing.size:
+        ri, ei = (int(v) for v in missing[0])
+        raise InputError(
+            f"{name} lacks the FRF of {missing.shape[0]} of {owner.size} response/reference "
+            f"pairs, e.g. response {resp.label(ri)} with reference {exc.label(ei)}: "
+            "the file must hold every response x reference combination"
+        )
+    return H
 
 
 def _unique_dofs(nodes: NDArray[np.int64], codes: NDArray[np.int64], what: str) -> None:
@@ -357,25 +379,14 @@ def write_frf_uff(
         without coordinates; directions at one node that are not along the axes of
         one orthonormal frame; a DOF given twice; an unknown ``length_unit``.
     """
-    if length_unit not in ("m", "mm"):
-        raise InputError(f"length_unit must be 'm' or 'mm', got {length_unit!r}")
-    if node_dataset not in (2411, 15):
-        raise InputError(f"node_dataset must be 2411 or 15, got {node_dataset!r}")
+    coh = frfset.coherence if coherence else None
+    _check_writable(frfset, coh, length_unit, node_dataset)
     factor = 1000.0 if length_unit == "mm" else 1.0
     units = (
         UnitFactors()
         if length_unit == "m"
         else UnitFactors(length=1000.0, code=9, description="mm (newton)")
     )
-    freq = frfset.freq
-    _check_axis(freq)
-    if not np.all(np.isfinite(frfset.H)):
-        raise InputError("the FRFs hold NaN or infinite values: drop those lines before writing")
-    coh = frfset.coherence if coherence else None
-    if coh is not None and not np.all(np.isfinite(coh)):
-        raise InputError("the coherence holds NaN or infinite values: drop those lines first")
-    frfset.geometry.coordinates(frfset.resp_nodes, "response")  # InputError if a node lacks one
-    frfset.geometry.coordinates(frfset.exc_nodes, "excitation")
     n_r, n_e = frfset.H.shape[:2]
     frames, codes = assign_node_frames(
         np.concatenate([frfset.resp_nodes, frfset.exc_nodes]),
@@ -385,37 +396,67 @@ def write_frf_uff(
     _unique_dofs(frfset.resp_nodes, r_codes, "response")
     _unique_dofs(frfset.exc_nodes, e_codes, "excitation")
     stamp = datetime.now().strftime("%d-%b-%y %H:%M:%S")
-    freq_axis = AxisInfo(18, 0, 0, "Frequency", "Hz")
     acc = AxisInfo(12, 1, 0, "Acceleration", f"{length_unit}/s^2")
     force = AxisInfo(13, 0, 1, "Force", "N")
-    kinds: list[tuple[int, NDArray[np.float64] | NDArray[np.complex128], AxisInfo, AxisInfo, str]]
-    kinds = [(4, frfset.H * factor, acc, force, "FRF")]
+    kinds: list[_FunctionKind] = [(4, frfset.H * factor, acc, force, "FRF")]
     if coh is not None:
         kinds.append((6, coh, AxisInfo(1, 0, 0, "Coherence", "1"), AxisInfo(), "Coherence"))
     with open_for_writing(path) as w:
         w.units(units)
         w.geometry(frfset.geometry, frames, factor, node_dataset)
         func_id = 0
-        for func_type, values, ordinate, denominator, name in kinds:
-            for j in range(n_e):
-                ref = (int(frfset.exc_nodes[j]), int(e_codes[j]))
-                for i in range(n_r):
-                    rsp = (int(frfset.resp_nodes[i]), int(r_codes[i]))
-                    func_id += 1
-                    w.function(
-                        func_type=func_type,
-                        func_id=func_id,
-                        load_case=0,
-                        response=rsp,
-                        reference=ref,
-                        x=freq,
-                        data=values[i, j],
-                        abscissa=freq_axis,
-                        ordinate=ordinate,
-                        denominator=denominator,
-                        ids=[f"{name} {rsp[0]}:{rsp[1]:+d} / {ref[0]}:{ref[1]:+d}", "insitu",
-                             stamp],
-                        binary=binary,
-                    )
+        for kind in kinds:
+            func_id = _write_functions(w, frfset, kind, r_codes, e_codes, func_id, stamp, binary)
     log.info("wrote %d FRFs to %s (%s, %s)", n_r * n_e, path, "58b" if binary else "58",
              length_unit)
+
+
+#: the records of one function type: type, values (n_resp, n_exc, n_f), ordinate and
+#: denominator axes, name in the record's ID line
+_FunctionKind = tuple[int, NDArray[np.float64] | NDArray[np.complex128], AxisInfo, AxisInfo, str]
+
+
+def _check_writable(frfset: FRFSet, coh: NDArray[np.float64] | None, length_unit: str,
+                    node_dataset: int) -> None:
+    """InputError unless :func:`write_frf_uff` can write ``frfset`` (and ``coh``) as asked."""
+    if length_unit not in ("m", "mm"):
+        raise InputError(f"length_unit must be 'm' or 'mm', got {length_unit!r}")
+    if node_dataset not in (2411, 15):
+        raise InputError(f"node_dataset must be 2411 or 15, got {node_dataset!r}")
+    _check_axis(frfset.freq)
+    if not np.all(np.isfinite(frfset.H)):
+        raise InputError("the FRFs hold NaN or infinite values: drop those lines before writing")
+    if coh is not None and not np.all(np.isfinite(coh)):
+        raise InputError("the coherence holds NaN or infinite values: drop those lines first")
+    frfset.geometry.coordinates(frfset.resp_nodes, "response")  # InputError if a node lacks one
+    frfset.geometry.coordinates(frfset.exc_nodes, "excitation")
+
+
+def _write_functions(w: UffWriter, frfset: FRFSet, kind: _FunctionKind,
+                     r_codes: NDArray[np.int64], e_codes: NDArray[np.int64], func_id: int,
+                     stamp: str, binary: bool) -> int:
+    """Write one 58 record per response x reference DOF, reference-major, numbered on from
+    ``func_id``; the last number used."""
+    func_type, values, ordinate, denominator, name = kind
+    freq_axis = AxisInfo(18, 0, 0, "Frequency", "Hz")
+    n_r, n_e = frfset.H.shape[:2]
+    for j in range(n_e):
+        ref = (int(frfset.exc_nodes[j]), int(e_codes[j]))
+        for i in range(n_r):
+            rsp = (int(frfset.resp_nodes[i]), int(r_codes[i]))
+            func_id += 1
+            w.function(
+                func_type=func_type,
+                func_id=func_id,
+                load_case=0,
+                response=rsp,
+                reference=ref,
+                x=frfset.freq,
+                data=values[i, j],
+                abscissa=freq_axis,
+                ordinate=ordinate,
+                denominator=denominator,
+                ids=[f"{name} {rsp[0]}:{rsp[1]:+d} / {ref[0]}:{ref[1]:+d}", "insitu", stamp],
+                binary=binary,
+            )
+    return func_id

@@ -133,6 +133,45 @@ def _run(
 ) -> TimeRun:
     """One run from its records; InputError names the load case and the problem."""
     lc = f"load case {load_case}"
+    force, responses = _force_and_responses(lc, items)
+    rates, signals = [], []
+    resp_nodes: list[int] = []
+    resp_dirs: list[NDArray[np.float64]] = []
+    seen: set[tuple[int, int]] = set()
+    exc_node, exc_dir = 0, np.zeros(3)
+    for i, ds in [force, *responses]:
+        where = f"{lc}: {record_label(i, ds)}"
+        kind, rate, signal = _time_signal(ds, units, where)
+        rates.append(rate)
+        signals.append(signal)
+        node, code = int(ds.get("rsp_node", 0)), int(ds.get("rsp_dir", 0))
+        what = "excitation" if kind == _FORCE else "response"
+        axis, _, vec = dof_direction(node, code, rotations, what, where)
+        if kind == _ACCELERATION:
+            if (node, axis) in seen:
+                raise InputError(f"{where}: response {node}:{code:+d} recorded twice in the run")
+            seen.add((node, axis))
+            resp_nodes.append(node)
+            resp_dirs.append(vec)
+        else:
+            exc_node, exc_dir = node, vec
+    _check_one_timebase(lc, rates, [sig.size for sig in signals])
+    return TimeRun(
+        load_case=load_case,
+        fs=rates[0],
+        force=signals[0],
+        exc_node=exc_node,
+        exc_dir=exc_dir,
+        responses=np.vstack(signals[1:]),
+        resp_nodes=np.array(resp_nodes, dtype=np.int64),
+        resp_dirs=np.array(resp_dirs),
+    )
+
+
+def _force_and_responses(lc: str, items: list[tuple[int, Dataset]],
+                         ) -> tuple[tuple[int, Dataset], list[tuple[int, Dataset]]]:
+    """The run's one force record and its other records; InputError (naming ``lc``, the
+    load case) without a force, with several, or without any other record."""
     forces = [(i, ds) for i, ds in items if int(ds.get("ordinate_spec_data_type", 0)) == _FORCE]
     if not forces:
         raise InputError(
@@ -148,43 +187,35 @@ def _run(
     responses = [(i, ds) for i, ds in items if i != forces[0][0]]
     if not responses:
         raise InputError(f"{lc}: no acceleration records (ordinate type 12) besides the force")
-    rates, sizes, signals = [], [], []
-    resp_nodes: list[int] = []
-    resp_dirs: list[NDArray[np.float64]] = []
-    seen: set[tuple[int, int]] = set()
-    exc_node, exc_dir = 0, np.zeros(3)
-    for i, ds in [forces[0], *responses]:
-        where = f"{lc}: {record_label(i, ds)}"
-        kind = int(ds.get("ordinate_spec_data_type", 0))
-        if kind not in (_FORCE, _ACCELERATION):
-            raise InputError(
-                f"{where}: ordinate type {type_name(kind)}; time responses must be "
-                "acceleration (12): export accelerations or drop the channel"
-            )
-        absc = int(ds.get("abscissa_spec_data_type", 0) or 0)
-        if absc not in (0, 17):
-            raise InputError(f"{where}: abscissa type {type_name(absc)} is not time (17)")
-        values = np.asarray(ds.get("data"))
-        if np.iscomplexobj(values):
-            raise InputError(f"{where}: complex values in a time record: export real samples")
-        x = sample_axis(ds, where)
-        bad = int(np.sum(~np.isfinite(values)))
-        if bad:
-            raise InputError(f"{where}: {bad} NaN or infinite sample(s): repair or drop the run")
-        rates.append(_rate(ds, x, where))
-        sizes.append(values.size)
-        signals.append(values.astype(float) * units.to_si(*exponents(ds, "ordinate")))
-        node, code = int(ds.get("rsp_node", 0)), int(ds.get("rsp_dir", 0))
-        what = "excitation" if kind == _FORCE else "response"
-        axis, _, vec = dof_direction(node, code, rotations, what, where)
-        if kind == _ACCELERATION:
-            if (node, axis) in seen:
-                raise InputError(f"{where}: response {node}:{code:+d} recorded twice in the run")
-            seen.add((node, axis))
-            resp_nodes.append(node)
-            resp_dirs.append(vec)
-        else:
-            exc_node, exc_dir = node, vec
+    return forces[0], responses
+
+
+def _time_signal(ds: Dataset, units: UnitFactors, where: str,
+                 ) -> tuple[int, float, NDArray[np.float64]]:
+    """A time record's ordinate type (force or acceleration), sample rate (Hz) and samples in
+    SI units; InputError for any other type, a non-time abscissa, or bad samples."""
+    kind = int(ds.get("ordinate_spec_data_type", 0))
+    if kind not in (_FORCE, _ACCELERATION):
+        raise InputError(
+            f"{where}: ordinate type {type_name(kind)}; time responses must be "
+            "acceleration (12): export accelerations or drop the channel"
+        )
+    absc = int(ds.get("abscissa_spec_data_type", 0) or 0)
+    if absc not in (0, 17):
+        raise InputError(f"{where}: abscissa type {type_name(absc)} is not time (17)")
+    values = np.asarray(ds.get("data"))
+    if np.iscomplexobj(values):
+        raise InputError(f"{where}: complex values in a time record: export real samples")
+    x = sample_axis(ds, where)
+    bad = int(np.sum(~np.isfinite(values)))
+    if bad:
+        raise InputError(f"{where}: {bad} NaN or infinite sample(s): repair or drop the run")
+    rate = _rate(ds, x, where)
+    return kind, rate, values.astype(float) * units.to_si(*exponents(ds, "ordinate"))
+
+
+def _check_one_timebase(lc: str, rates: list[float], sizes: list[int]) -> None:
+    """InputError (naming ``lc``) unless the run's records share one length and one rate."""
     if len(set(sizes)) > 1:
         raise InputError(
             f"{lc}: records of different lengths ({', '.join(map(str, sorted(set(sizes))))} "
@@ -196,16 +227,6 @@ def _run(
             f"{lc}: records with different sample rates ({shown} Hz): "
             "export every channel of a run at one rate"
         )
-    return TimeRun(
-        load_case=load_case,
-        fs=rates[0],
-        force=signals[0],
-        exc_node=exc_node,
-        exc_dir=exc_dir,
-        responses=np.vstack(signals[1:]),
-        resp_nodes=np.array(resp_nodes, dtype=np.int64),
-        resp_dirs=np.array(resp_dirs),
-    )
 
 
 @overload
