@@ -62,6 +62,25 @@ class AcquisitionView(QtWidgets.QWidget):
         self.word = "hit"  # "block" in a shaker run
         self.hits: list[HitRecord] = []
         self.state: RunState = RunState.IDLE
+        self._pause_asked = False
+        top = self._run_controls()
+        left = self._progress_panel()
+        self.bridge = AcquisitionBridge(self)
+        self.plots = AcquisitionPlots(self.bridge.samples)
+        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        split.addWidget(left)
+        split.addWidget(self.plots)
+        split.setSizes([520, 760])
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.addLayout(top)
+        lay.addWidget(split, 1)
+        self._connect_bridge()
+        plan_view.rows_changed.connect(self.projections.set_rows)
+        self._set_state(RunState.IDLE)
+
+    # --- layout ----------------------------------------------------------------------------------
+    def _run_controls(self) -> QtWidgets.QHBoxLayout:
+        """The row of the run file, the simulated operator and the run buttons."""
         self.run_path = QtWidgets.QLineEdit()
         self.run_path.setPlaceholderText("run file (HDF5) to write")
         browse = QtWidgets.QPushButton("Browse…")
@@ -86,11 +105,32 @@ class AcquisitionView(QtWidgets.QWidget):
         top.addWidget(self.operator_box)
         for b in (self.start_button, self.pause_button, self.resume_button, self.stop_button):
             top.addWidget(b)
+        return top
+
+    def _progress_panel(self) -> QtWidgets.QWidget:
+        """The next point and the progress above the hits (with their overrides) and the
+        projections."""
         self.next_label = QtWidgets.QLabel("Not running")
         self.next_label.setStyleSheet("font-size:15pt; font-weight:bold;")
         self.progress_bar = QtWidgets.QProgressBar()
         self.progress_bar.setFormat("%v of %m points")
         self.progress_label = QtWidgets.QLabel("")
+        self.projections = ProjectionsWidget()
+        left = QtWidgets.QWidget()
+        ll = QtWidgets.QVBoxLayout(left)
+        ll.setContentsMargins(0, 0, 0, 0)
+        ll.addWidget(self.next_label)
+        ll.addWidget(self.progress_bar)
+        ll.addWidget(self.progress_label)
+        vsplit = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
+        vsplit.addWidget(self._hits_box())
+        vsplit.addWidget(self.projections)
+        vsplit.setSizes([330, 420])
+        ll.addWidget(vsplit, 1)
+        return left
+
+    def _hits_box(self) -> QtWidgets.QWidget:
+        """The table of hits (or blocks) and the buttons that override their verdicts."""
         self.hits_table = QtWidgets.QTableWidget(0, len(_HIT_COLUMNS))
         self.hits_table.setHorizontalHeaderLabels(list(_HIT_COLUMNS))
         self.hits_table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
@@ -107,32 +147,15 @@ class AcquisitionView(QtWidgets.QWidget):
         overrides = QtWidgets.QHBoxLayout()
         for b in (self.accept_button, self.reject_button, self.clear_button):
             overrides.addWidget(b)
-        self.projections = ProjectionsWidget()
-        left = QtWidgets.QWidget()
-        ll = QtWidgets.QVBoxLayout(left)
-        ll.setContentsMargins(0, 0, 0, 0)
-        ll.addWidget(self.next_label)
-        ll.addWidget(self.progress_bar)
-        ll.addWidget(self.progress_label)
         hits_box = QtWidgets.QWidget()
         hl = QtWidgets.QVBoxLayout(hits_box)
         hl.setContentsMargins(0, 0, 0, 0)
         hl.addWidget(self.hits_table, 1)
         hl.addLayout(overrides)
-        vsplit = QtWidgets.QSplitter(QtCore.Qt.Orientation.Vertical)
-        vsplit.addWidget(hits_box)
-        vsplit.addWidget(self.projections)
-        vsplit.setSizes([330, 420])
-        ll.addWidget(vsplit, 1)
-        self.bridge = AcquisitionBridge(self)
-        self.plots = AcquisitionPlots(self.bridge.samples)
-        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
-        split.addWidget(left)
-        split.addWidget(self.plots)
-        split.setSizes([520, 760])
-        lay = QtWidgets.QVBoxLayout(self)
-        lay.addLayout(top)
-        lay.addWidget(split, 1)
+        return hits_box
+
+    def _connect_bridge(self) -> None:
+        """Show what the acquisition reports, through the bridge to the GUI thread."""
         self.bridge.next_point.connect(self._next_point)
         self.bridge.hit.connect(self._hit)
         self.bridge.frf.connect(self._frf)
@@ -140,10 +163,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.bridge.paused.connect(self._paused)
         self.bridge.resumed.connect(lambda: self._set_state(RunState.RUNNING))
         self.bridge.error.connect(lambda m: self.message.emit("error", f"acquisition: {m}"))
-        self._pause_asked = False
         self.bridge.finished.connect(self._finished)
-        plan_view.rows_changed.connect(self.projections.set_rows)
-        self._set_state(RunState.IDLE)
 
     # --- controls --------------------------------------------------------------------------------
     def _browse(self) -> None:

@@ -45,7 +45,30 @@ class ResultsView(QtWidgets.QWidget):
         super().__init__(parent)
         self.session = session
         self._filling = False
-        # --- controls
+        ctl = self._build_controls()
+        self._build_tables()
+        self.table_tabs = self._table_tabs()
+        left = self._left_panel(self.table_tabs)
+        self.plot_tabs = self._plot_tabs()
+        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
+        split.addWidget(left)
+        split.addWidget(self.plot_tabs)
+        split.setSizes([520, 760])
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.addLayout(ctl)
+        lay.addWidget(split, 1)
+        set_verdict(self.verdict, None, "No results yet: open FRFs or run a test")
+        session.runner.busy.connect(self._busy)
+        session.data_changed.connect(self._new_data)
+        session.mounts_changed.connect(self._show_mount_system)
+        self.excitation.valueChanged.connect(self._show_mount_system)
+        self._analysis: Analysis | None = None
+        self.mount_system: MountSystem | None = None
+
+    # --- layout ----------------------------------------------------------------------------------
+    def _build_controls(self) -> QtWidgets.QHBoxLayout:
+        """The band, method and excitation controls, wired to re-identify after a pause; the
+        row of them above the results."""
         self.auto_bands = QtWidgets.QCheckBox("automatic bands")
         self.auto_bands.setChecked(True)
         self.mass_lo, self.mass_hi = _spin(), _spin()
@@ -85,7 +108,10 @@ class ResultsView(QtWidgets.QWidget):
         self.auto_bands.toggled.connect(self._changed)
         self.method.currentIndexChanged.connect(self._changed)
         self.physical.toggled.connect(self._changed)
-        # --- tables
+        return ctl
+
+    def _build_tables(self) -> None:
+        """The verdict and summary labels, the result tables and the mode-shape view."""
         self.verdict = QtWidgets.QLabel()
         self.summary = QtWidgets.QLabel()
         self.summary.setWordWrap(True)
@@ -109,15 +135,23 @@ class ResultsView(QtWidgets.QWidget):
         self.mode_shapes = ModeShapesWidget()
         for t in (self.modes, self.energy, self.mount_rates, self.tra):
             t.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
-        mounts_page = QtWidgets.QWidget()
-        mp = QtWidgets.QVBoxLayout(mounts_page)
-        mp.setContentsMargins(0, 0, 0, 0)
-        mp.addWidget(self.mount_rates, 3)
-        mp.addWidget(self.mount_notes)
-        mp.addWidget(self.tra, 2)
+
+    def _table_tabs(self) -> QtWidgets.QTabWidget:
+        """The tabs of K, damping, modes, energy decoupling, and mounts and TRA."""
         tabs = QtWidgets.QTabWidget()
         tabs.addTab(self.K, "Stiffness K at O")
-        # viscous C and structural D of K* = K + j w C + j D on one page, with the model chosen
+        self.damping_page = self._damping_page()
+        tabs.addTab(self.damping_page, "Damping at O")
+        self.modes_page = self._modes_page()
+        tabs.addTab(self.modes_page, "Modes")
+        tabs.addTab(self.energy, "Energy decoupling")
+        self.mounts_page = self._mounts_page()
+        tabs.addTab(self.mounts_page, "Mounts and TRA")
+        return tabs
+
+    def _damping_page(self) -> QtWidgets.QWidget:
+        """Viscous C and structural D of K* = K + j w C + j D on one page, under a note naming
+        the damping model chosen."""
         damping_page = QtWidgets.QWidget()
         dl = QtWidgets.QVBoxLayout(damping_page)
         dl.setContentsMargins(0, 0, 0, 0)
@@ -128,8 +162,10 @@ class ResultsView(QtWidgets.QWidget):
         dl.addWidget(self.C, 1)
         dl.addWidget(QtWidgets.QLabel("<b>Structural D</b> (units of K)"))
         dl.addWidget(self.D, 1)
-        self.damping_page = damping_page
-        tabs.addTab(damping_page, "Damping at O")
+        return damping_page
+
+    def _modes_page(self) -> QtWidgets.QWidget:
+        """The modes table under the excitation frequency for the isolation margins."""
         modes_page = QtWidgets.QWidget()
         mlay = QtWidgets.QVBoxLayout(modes_page)
         mlay.setContentsMargins(0, 0, 0, 0)
@@ -139,12 +175,20 @@ class ResultsView(QtWidgets.QWidget):
         erow.addStretch(1)
         mlay.addLayout(erow)
         mlay.addWidget(self.modes, 1)
-        self.modes_page = modes_page
-        tabs.addTab(modes_page, "Modes")
-        tabs.addTab(self.energy, "Energy decoupling")
-        tabs.addTab(mounts_page, "Mounts and TRA")
-        self.mounts_page = mounts_page
-        self.table_tabs = tabs
+        return modes_page
+
+    def _mounts_page(self) -> QtWidgets.QWidget:
+        """The mount rates, their notes and the TRA table."""
+        mounts_page = QtWidgets.QWidget()
+        mp = QtWidgets.QVBoxLayout(mounts_page)
+        mp.setContentsMargins(0, 0, 0, 0)
+        mp.addWidget(self.mount_rates, 3)
+        mp.addWidget(self.mount_notes)
+        mp.addWidget(self.tra, 2)
+        return mounts_page
+
+    def _left_panel(self, tabs: QtWidgets.QTabWidget) -> QtWidgets.QWidget:
+        """Verdict, summary, inertia and principal tables above ``tabs``, and the units."""
         left = QtWidgets.QWidget()
         ll = QtWidgets.QVBoxLayout(left)
         ll.setContentsMargins(0, 0, 0, 0)
@@ -160,7 +204,10 @@ class ResultsView(QtWidgets.QWidget):
                                  "N/rad, N m/m, N m/rad; C: N s/m, N s/rad, N m s/m, N m s/rad.")
         units.setWordWrap(True)
         ll.addWidget(units)
-        # --- plots
+        return left
+
+    def _plot_tabs(self) -> QtWidgets.QTabWidget:
+        """The FRF and K* plots on one tab, the mode shapes on another."""
         self.stiffness_plot = make_plot()
         self.stiffness_rot_plot = make_plot()
         self.synthesis_plot = make_plot()
@@ -170,23 +217,10 @@ class ResultsView(QtWidgets.QWidget):
         pl.addWidget(self.synthesis_plot)
         pl.addWidget(self.stiffness_plot)
         pl.addWidget(self.stiffness_rot_plot)
-        self.plot_tabs = QtWidgets.QTabWidget()
-        self.plot_tabs.addTab(plots, "FRFs and K*")
-        self.plot_tabs.addTab(self.mode_shapes, "Mode shapes")
-        split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
-        split.addWidget(left)
-        split.addWidget(self.plot_tabs)
-        split.setSizes([520, 760])
-        lay = QtWidgets.QVBoxLayout(self)
-        lay.addLayout(ctl)
-        lay.addWidget(split, 1)
-        set_verdict(self.verdict, None, "No results yet: open FRFs or run a test")
-        session.runner.busy.connect(self._busy)
-        session.data_changed.connect(self._new_data)
-        session.mounts_changed.connect(self._show_mount_system)
-        self.excitation.valueChanged.connect(self._show_mount_system)
-        self._analysis: Analysis | None = None
-        self.mount_system: MountSystem | None = None
+        plot_tabs = QtWidgets.QTabWidget()
+        plot_tabs.addTab(plots, "FRFs and K*")
+        plot_tabs.addTab(self.mode_shapes, "Mode shapes")
+        return plot_tabs
 
     # --- controls --------------------------------------------------------------------------------
     @QtCore.Slot(bool)
