@@ -47,7 +47,6 @@ __all__ = [
     "find_triggers",
     "force_band_top",
     "impact_defaults",
-    "impact_frfset",
     "impact_measurement",
     "merge_results",
     "pretrigger_for",
@@ -610,20 +609,6 @@ def impact_measurement(
         exponential_tau=taus.pop() if len(taus) == 1 else None,
         force_band_top=force_band_top(results[0].freq, np.stack(forces)),
         n_averages=tuple(r.n_accepted for r in results)))
-
-
-def impact_frfset(
-    results: Sequence[ImpactResult],
-    geometry: Geometry,
-    resp_nodes: ArrayLike,
-    resp_dirs: ArrayLike,
-    exc_nodes: ArrayLike,
-    exc_dirs: ArrayLike,
-) -> FRFSet:
-    """The FRFs of :func:`impact_measurement` (one column per excitation point, in the order
-    of ``results``), without their provenance."""
-    return impact_measurement(results, geometry, resp_nodes, resp_dirs, exc_nodes,
-                              exc_dirs).frf
 
 
 def force_band_top(freq: NDArray[np.float64], Sff: NDArray[np.float64]) -> float | None:

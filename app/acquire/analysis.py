@@ -19,11 +19,10 @@ from numpy.typing import NDArray
 from app.acquire.blocks import BlockAnalysis, RecordLoader, shaker_measurement
 from app.acquire.plan import RecordSettings, TestPlan
 from app.io.runfile import RunData
-from processing.data import FRFSet, Geometry, InputError
+from processing.data import Geometry, InputError
 from processing.impact import (
     ImpactResult,
     ImpactSettings,
-    impact_frfset,
     impact_measurement,
     merge_results,
     process_impacts,
@@ -33,7 +32,7 @@ from processing.units import TimeUnits, UnitSpectra
 
 __all__ = ["PointColumn", "RecordAnalysis", "RecordLoader", "RunAnalysis", "analyse_blocks",
            "analyse_records", "analysis_measurement", "anti_aliased", "check_identifiable",
-           "frfset", "hit_result", "host_timed", "impact_settings", "margin_samples",
+           "hit_result", "host_timed", "impact_settings", "margin_samples",
            "point_result", "run_measurement", "run_units"]
 
 
@@ -72,12 +71,6 @@ def point_result(results: Sequence[ImpactResult]) -> ImpactResult | None:
     """The averaged FRF column of a point from its accepted hits' results (None if none)."""
     used = [r for r in results if r.H is not None]
     return merge_results(used) if used else None
-
-
-def frfset(plan: TestPlan, points: Sequence[ImpactResult], geometry: Geometry,
-           resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64]) -> FRFSet:
-    """All points' FRF columns as one FRF set (raises InputError naming a point without hits)."""
-    return impact_frfset(points, geometry, resp_nodes, resp_dirs, plan.exc_nodes, plan.exc_dirs)
 
 
 def anti_aliased(m: Measurement) -> Measurement:

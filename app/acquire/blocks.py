@@ -41,7 +41,7 @@ from processing.spectral import CrossSpectra, SpectralAccumulator, frf
 from processing.units import TimeUnits, UnitSpectra
 
 __all__ = ["REBUILD_BLOCKS", "WINDOWS", "WORKERS", "BlockAnalysis", "BlockResult",
-           "RecordLoader", "block_verdict", "shaker_frfset", "shaker_measurement"]
+           "RecordLoader", "block_verdict", "shaker_measurement"]
 
 #: window of each waveform's blocks (scipy window names)
 WINDOWS = {"random": "hann", "burst-random": "boxcar", "chirp": "boxcar"}
@@ -291,9 +291,3 @@ def shaker_measurement(plan: TestPlan, points: Sequence[BlockResult | None],
         origin="estimated", excitation=f"shaker {plan.shaker.waveform}",
         estimator=plan.record.estimator, units=units, n_averages=tuple(n_avg),
         window=WINDOWS[plan.shaker.waveform], references=plan.n_references))
-
-
-def shaker_frfset(plan: TestPlan, points: Sequence[BlockResult | None], geometry: Geometry,
-                  resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64]) -> FRFSet:
-    """The FRFs of :func:`shaker_measurement`, without their provenance."""
-    return shaker_measurement(plan, points, geometry, resp_nodes, resp_dirs).frf
