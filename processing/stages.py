@@ -517,11 +517,10 @@ def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tu
     ``w^2`` residual or none) is one for all of them: the one whose half-band disagreement
     has the smaller geometric mean over the candidates. A residual left out biases both
     halves of a narrow band alike (it hardly changes over a few lines), so a candidate free
-    to drop it looks most stable at the narrowest band: on FRFs estimated from noisy time
-    records the choice then fell on 16 lines without the residual, and the mass was off by
-    3-4 %. Chosen on the whole band alone, the model follows whatever spoils that band's
-    top (a hammer's force falls to a spectral zero near the end of the data): the choice
-    there was a toss-up, and the mass 0.7 % off on 16 lines in 3 runs of 8.
+    to drop it would look most stable at the narrowest band; chosen on the whole band
+    alone, the model would follow whatever spoils that band's top (a hammer's force falls
+    to a spectral zero near the end of the data). The measurements behind this rule:
+    ``benchmarks/results/accuracy-mass-line-model.md``.
     """
     if problem.options.mass_band is not None or not problem.improved:
         return bands, weights
