@@ -2,6 +2,27 @@
 
 from __future__ import annotations
 
+#: the command line's name of each pipeline setting (:class:`app.pipeline.Settings`,
+#: :class:`app.pipeline.settings.TestUncertaintySettings`): their errors name the setting,
+#: the command line says the flag
+FLAGS = {
+    "nperseg": "--nperseg", "overlap": "--overlap", "window": "--window",
+    "averages": "--averages", "level": "--level", "record": "--record",
+    "pretrigger": "--pretrigger", "exp_tau": "--exp-tau", "ring": "--force-ring",
+    "tail": "--tail", "carryover": "--carryover", "coherence": "--coherence", "fmax": "--fmax",
+    "location_uncertainty": "--location-uncertainty", "angle_uncertainty": "--angle-uncertainty",
+    "gain_uncertainty": "--gain-uncertainty", "draws": "--draws",
+}
+
 
 class UserError(Exception):
     """A problem the user can fix; printed as one line, exit status 2."""
+
+
+def in_flags(err: BaseException) -> str:
+    """The one line of ``err`` in the command line's words: a setting's error (or one that
+    stems from it) names the flag."""
+    from app.pipeline.settings import SettingError
+
+    cause = err if isinstance(err, SettingError) else err.__cause__
+    return cause.worded(FLAGS) if isinstance(cause, SettingError) else str(err)

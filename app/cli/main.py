@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from app.cli.common import UserError
+from app.cli.common import UserError, in_flags
 
 #: terminal width (characters) assumed when the output is a file or a pipe
 PIPE_COLUMNS = 200
@@ -139,7 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.run(args) or 0)
     except (UserError, ValueError, OSError) as err:
         details = f" (details in {path})" if errors.count and path is not None else ""
-        print(f"insitu {args.verb}: error: {err}{details}", file=sys.stderr)
+        print(f"insitu {args.verb}: error: {in_flags(err)}{details}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"insitu {args.verb}: interrupted", file=sys.stderr)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -13,7 +13,8 @@ import scipy.signal
 from processing.data import InputError
 from processing.measurement import Report
 
-__all__ = ["OpenError", "RunReport", "Settings", "TestUncertaintySettings", "parse_quantity"]
+__all__ = ["OpenError", "RunReport", "SettingError", "Settings", "TestUncertaintySettings",
+           "parse_quantity"]
 
 #: largest accepted --nperseg (samples), --record (s) and --fmax (Hz): far beyond any test,
 #: small enough that a typo is refused before memory is asked for
@@ -22,9 +23,26 @@ MAX_RECORD = 3600.0
 MAX_FMAX = 1e7
 
 
-def _between(option: str, value: float, lo: float, hi: float, unit: str) -> None:
+class SettingError(InputError):
+    """A setting out of range or contradicting another, in the settings' own terms.
+
+    ``template`` names settings as ``{nperseg}``; ``str()`` gives them their own names,
+    :meth:`worded` the words of a front end (the command line's flags).
+    """
+
+    def __init__(self, template: str, *names: str) -> None:
+        self.template, self.names = template, names
+        super().__init__(self.worded({}))
+
+    def worded(self, words: Mapping[str, str]) -> str:
+        """The message with each setting called ``words[name]`` (its own name if absent)."""
+        return self.template.format(**{n: words.get(n, n) for n in self.names})
+
+
+def _between(name: str, value: float, lo: float, hi: float, unit: str) -> None:
     if not (math.isfinite(value) and lo <= value <= hi):
-        raise InputError(f"{option} must be from {lo:.10g} to {hi:.10g} {unit}, got {value:.10g}")
+        raise SettingError(f"{{{name}}} must be from {lo:.10g} to {hi:.10g} {unit}, got "
+                           f"{value:.10g}", name)
 
 
 @dataclass(frozen=True)
@@ -97,58 +115,65 @@ class Settings:
     def __post_init__(self) -> None:
         """Every option checked once, here, in the units the user typed; one line each."""
         if self.nperseg is not None:
-            _between("--nperseg", self.nperseg, 8, MAX_NPERSEG, "samples")
+            _between("nperseg", self.nperseg, 8, MAX_NPERSEG, "samples")
             if not isinstance(self.nperseg, int):
-                raise InputError(f"--nperseg must be a whole number of samples, got "
-                                 f"{self.nperseg}")
+                raise SettingError(f"{{nperseg}} must be a whole number of samples, got "
+                                   f"{self.nperseg}", "nperseg")
         if self.overlap is not None and not (math.isfinite(self.overlap)
                                              and 0 <= self.overlap < 1):
-            raise InputError(f"--overlap must be at least 0 and below 1, got {self.overlap:g}")
+            raise SettingError(f"{{overlap}} must be at least 0 and below 1, got "
+                               f"{self.overlap:g}", "overlap")
         if self.window is not None:
             try:
                 scipy.signal.get_window(self.window, 16)
             except (ValueError, TypeError) as err:
-                raise InputError(f"--window {self.window!r} is not a window scipy knows: use "
-                                 "hann, hamming, blackman, flattop, boxcar, ...") from err
+                raise SettingError(f"{{window}} {self.window!r} is not a window scipy knows: "
+                                   "use hann, hamming, blackman, flattop, boxcar, ...",
+                                   "window") from err
         if self.averages is not None and self.averages < 1:
-            raise InputError(f"--averages must be at least 1, got {self.averages}")
+            raise SettingError(f"{{averages}} must be at least 1, got {self.averages}",
+                               "averages")
         if self.level is not None and not (math.isfinite(self.level) and self.level > 0):
-            raise InputError(f"--level must be a positive force in N (the trigger fires when "
-                             f"the force rises above it), got {self.level:g}")
+            raise SettingError(f"{{level}} must be a positive force in N (the trigger fires "
+                               f"when the force rises above it), got {self.level:g}", "level")
         if self.record is not None:
-            _between("--record", self.record, 1e-3, MAX_RECORD, "s")
+            _between("record", self.record, 1e-3, MAX_RECORD, "s")
         if self.pretrigger is not None and not (
                 math.isfinite(self.pretrigger) and 0 <= self.pretrigger
                 and (self.record is None or self.pretrigger < self.record)):
-            raise InputError(f"--pretrigger must be at least 0 s and shorter than --record "
-                             f"({self.record:g} s), got {self.pretrigger:g} s"
-                             if self.record is not None else
-                             f"--pretrigger must be at least 0 s, got {self.pretrigger:g} s")
+            raise SettingError(f"{{pretrigger}} must be at least 0 s and shorter than "
+                               f"{{record}} ({self.record:g} s), got {self.pretrigger:g} s"
+                               if self.record is not None else
+                               f"{{pretrigger}} must be at least 0 s, got {self.pretrigger:g} s",
+                               "pretrigger", "record")
         if self.exp_tau is not None and not (math.isfinite(self.exp_tau) and self.exp_tau >= 0):
-            raise InputError(f"--exp-tau must be a time constant in s (0: no exponential "
-                             f"window), got {self.exp_tau:g}")
+            raise SettingError(f"{{exp_tau}} must be a time constant in s (0: no exponential "
+                               f"window), got {self.exp_tau:g}", "exp_tau")
         if self.tail and self.exp_tau:
-            raise InputError("--tail on puts each record's own tail back, which an exponential "
-                             f"window would weigh down: give --exp-tau 0 or --tail off, not "
-                             f"--exp-tau {self.exp_tau:g}")
+            raise SettingError("{tail} on puts each record's own tail back, which an "
+                               "exponential window would weigh down: give {exp_tau} 0 or "
+                               f"{{tail}} off, not {{exp_tau}} {self.exp_tau:g}", "tail",
+                               "exp_tau")
         if self.ring is not None and not (isinstance(self.ring, int) and self.ring >= 0):
-            raise InputError(f"--force-ring must be a whole number of samples, at least 0, "
-                             f"got {self.ring}")
+            raise SettingError(f"{{ring}} must be a whole number of samples, at least 0, "
+                               f"got {self.ring}", "ring")
         if not (math.isfinite(self.coherence) and 0 <= self.coherence <= 1):
-            raise InputError(f"--coherence must be from 0 to 1, got {self.coherence:g}")
+            raise SettingError(f"{{coherence}} must be from 0 to 1, got {self.coherence:g}",
+                               "coherence")
         if self.fmax is not None:
-            _between("--fmax", self.fmax, 1e-3, MAX_FMAX, "Hz")
+            _between("fmax", self.fmax, 1e-3, MAX_FMAX, "Hz")
 
     def check_rate(self, fs: float, longest: float) -> None:
         """The options that depend on the data, checked once per file: ``fs`` its sample
         rate (Hz), ``longest`` its longest run (s)."""
         if self.fmax is not None and self.fmax > fs / 2:
-            raise InputError(f"--fmax {self.fmax:g} Hz is above the records' Nyquist frequency "
-                             f"({fs / 2:g} Hz): give at most {fs / 2.56:g} Hz (fs / 2.56) or "
-                             "leave it out")
+            raise SettingError(f"{{fmax}} {self.fmax:g} Hz is above the records' Nyquist "
+                               f"frequency ({fs / 2:g} Hz): give at most {fs / 2.56:g} Hz "
+                               "(fs / 2.56) or leave it out", "fmax")
         if self.record is not None and self.excitation != "random" and self.record > longest:
-            raise InputError(f"--record {self.record:g} s is longer than every run (the "
-                             f"longest is {longest:g} s): give at most that, or leave it out")
+            raise SettingError(f"{{record}} {self.record:g} s is longer than every run (the "
+                               f"longest is {longest:g} s): give at most that, or leave it out",
+                               "record")
 
 
     @property
@@ -203,12 +228,12 @@ def parse_quantity(option: str, text: str, units: dict[str, float], example: str
     match = _QUANTITY.match(text)
     allowed = ", ".join(u or "no unit" for u in units)
     if match is None or match.group(2) not in units:
-        raise InputError(f"{option} {text!r} is not a number with a unit ({allowed}): "
-                         f"give e.g. {example}")
+        raise SettingError(f"{{{option}}} {text!r} is not a number with a unit ({allowed}): "
+                           f"give e.g. {example}", option)
     value, unit = float(match.group(1)), match.group(2)
     if not (math.isfinite(value) and 0 <= value * units[unit] <= upper):
-        raise InputError(f"{option} must be from 0 to {upper / units[unit]:g}{unit} (a standard "
-                         f"deviation), got {text}")
+        raise SettingError(f"{{{option}}} must be from 0 to {upper / units[unit]:g}{unit} (a "
+                           f"standard deviation), got {text}", option)
     return value * units[unit]
 
 
@@ -226,17 +251,17 @@ class TestUncertaintySettings:
     @property
     def location(self) -> float:
         return (0.0 if self.location_text is None else parse_quantity(
-            "--location-uncertainty", self.location_text, LENGTH_UNITS, "3mm", 0.5))
+            "location_uncertainty", self.location_text, LENGTH_UNITS, "3mm", 0.5))
 
     @property
     def angle(self) -> float:
         return (0.0 if self.angle_text is None else parse_quantity(
-            "--angle-uncertainty", self.angle_text, ANGLE_UNITS, "2deg", math.radians(30)))
+            "angle_uncertainty", self.angle_text, ANGLE_UNITS, "2deg", math.radians(30)))
 
     @property
     def gain(self) -> float:
         return (0.0 if self.gain_text is None else parse_quantity(
-            "--gain-uncertainty", self.gain_text, RELATIVE_UNITS, "2%", 0.5))
+            "gain_uncertainty", self.gain_text, RELATIVE_UNITS, "2%", 0.5))
 
     @property
     def stated(self) -> bool:
@@ -248,6 +273,8 @@ class TestUncertaintySettings:
         _ = self.location, self.angle, self.gain  # every text checked now, one line each
         if self.draws is not None:
             if not self.stated:
-                raise InputError("--draws needs --location-uncertainty, --angle-uncertainty "
-                                 "or --gain-uncertainty: say what to draw")
-            _between("--draws", self.draws, 2, 1_000_000, "draws")
+                raise SettingError("{draws} needs {location_uncertainty}, {angle_uncertainty} "
+                                   "or {gain_uncertainty}: say what to draw", "draws",
+                                   "location_uncertainty", "angle_uncertainty",
+                                   "gain_uncertainty")
+            _between("draws", self.draws, 2, 1_000_000, "draws")

@@ -172,3 +172,18 @@ def test_no_function_over_80_lines() -> None:
             if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef)
             and n.end_lineno is not None and n.end_lineno - n.lineno + 1 > 80]
     assert long == []
+
+
+def test_settings_speak_their_own_terms_and_the_command_line_its_flags() -> None:
+    from app.cli.common import in_flags
+    from app.pipeline.settings import SettingError, TestUncertaintySettings
+
+    with pytest.raises(SettingError) as err:
+        Settings(exp_tau=0.5, tail=True)
+    assert str(err.value).startswith("tail on puts each record's own tail back")
+    assert "give exp_tau 0 or tail off" in str(err.value)
+    assert in_flags(err.value).startswith("--tail on puts") and "--exp-tau 0" in in_flags(err.value)
+    with pytest.raises(SettingError) as err:
+        TestUncertaintySettings(location_text="3 parsecs")
+    assert str(err.value).startswith("location_uncertainty '3 parsecs' is not a number")
+    assert in_flags(err.value).startswith("--location-uncertainty '3 parsecs'")
