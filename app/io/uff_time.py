@@ -284,16 +284,20 @@ def read_time_uff(
 @dataclass(frozen=True)
 class TimeFile:
     """A time-data UFF file read in one pass: its good runs, the problems of the others
-    (``(load_case, message)``) and its node geometry (m)."""
+    (``(load_case, message)``) and its datasets, for :meth:`geometry`."""
 
     runs: list[TimeRun]
     problems: list[Problem]
-    geometry: Geometry
+    datasets: list[Dataset]
+
+    def geometry(self) -> Geometry:
+        """The file's node geometry (m); InputError when it has none."""
+        return read_geometry(self.datasets)[0]
 
 
 def read_time_file(path: str | Path) -> TimeFile:
-    """The runs, their problems and the geometry of a time-data UFF file, parsed once
-    (:func:`read_time_uff` with ``strict=False``, and the nodes of
+    """The runs, their problems and the datasets of a time-data UFF file, parsed once
+    (:func:`read_time_uff` with ``strict=False``; :meth:`TimeFile.geometry` the nodes of
     :func:`app.io.uff_geometry.read_geometry_uff`).
 
     Raises
@@ -301,8 +305,7 @@ def read_time_file(path: str | Path) -> TimeFile:
     InputError
         As :func:`read_time_uff`.
     """
-    runs, problems, sets = _read(Path(path))
-    return TimeFile(runs, problems, read_geometry(sets)[0])
+    return TimeFile(*_read(Path(path)))
 
 
 def _read(p: Path) -> tuple[list[TimeRun], list[Problem], list[Dataset]]:

@@ -441,7 +441,7 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
     rigidity check. Raises :class:`OpenError` (one line) when no run is usable or a setting
     fits no run.
     """
-    data = read_time_file(path)  # parsed once: runs, their problems, the geometry
+    data = read_time_file(path)  # parsed once: runs, their problems, the datasets
     runs = data.runs
     reports = [RunReport(msg, skipped=True) for _, msg in data.problems]
     levels: dict[int, float] = {}
@@ -467,7 +467,7 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
         raise OpenError(f"{path}: no usable time run ({n_skipped(reports)} bad run(s), see "
                         "above)", reports)
     first = runs[0]
-    geometry = data.geometry
+    geometry = data.geometry()
     keys = list(cols)
     fmax = s.fmax if s.fmax is not None else first.fs / 2.56
     out, _ = assemble(cols[keys[0]][2], [cols[k][0] for k in keys],

@@ -54,4 +54,4 @@ def test_a_time_uff_is_parsed_once(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     assert m.frf.H.shape[:2] == (12, 3) and m.provenance.estimated
     data = read_time_file(path)
     assert [r.load_case for r in data.runs] == [1, 2, 7] and data.problems == []
-    np.testing.assert_allclose(data.geometry.xyz, geometry.xyz, atol=1e-15)
+    np.testing.assert_allclose(data.geometry().xyz, geometry.xyz, atol=1e-15)
