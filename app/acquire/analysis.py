@@ -42,13 +42,12 @@ def margin_samples(fs: float) -> int:
 
 
 def impact_settings(record: RecordSettings) -> ImpactSettings:
-    """The processing settings of a plan's record section: without an exponential window
-    each record's own cut-off tail is put back (its responses' free decay continued past
-    its end and folded onto it, as time UFF files get by default: the rectangular window
-    then leaks nothing, :attr:`processing.impact.ImpactSettings.complete`)."""
+    """The processing settings of a plan's record section. No record tails: a live run's
+    FRFs must be the same bits in every process that replays it, and with the tails' fit
+    of damped sinusoids (least squares through BLAS) the acquiring process and the replay
+    did not always agree to the last bit."""
     return ImpactSettings(level=record.trigger_level, record_length=record.n_samples,
-                          pretrigger=record.n_pretrigger, exp_tau=record.exp_tau,
-                          complete=record.exp_tau is None)
+                          pretrigger=record.n_pretrigger, exp_tau=record.exp_tau)
 
 
 def hit_result(data: NDArray[np.float64], record: RecordSettings, names: Sequence[str],

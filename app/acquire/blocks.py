@@ -36,7 +36,6 @@ from numpy.typing import NDArray
 
 from app.acquire.plan import ShakerSettings, TestPlan
 from processing.data import FRFSet, Geometry, InputError
-from processing.excitation import burst_records
 from processing.measurement import Measurement, Provenance
 from processing.spectral import CrossSpectra, SpectralAccumulator, frf
 from processing.units import TimeUnits, UnitSpectra
@@ -171,16 +170,6 @@ class BlockAnalysis:
         acc.update(np.zeros((len(self.names), self.plan.shaker.nperseg)))
         frf(acc.spectra(), self.plan.record.estimator)
 
-    def averaged(self, data: NDArray[np.float64]) -> NDArray[np.float64]:
-        """A stored block as it is averaged: a burst's block completed with its own
-        cut-off tail (its free decay after the burst continued past the block's end and
-        folded onto it, :func:`processing.excitation.burst_records`, as a file's burst
-        records are), so the rectangular window leaks nothing; other blocks as they are."""
-        if self.plan.shaker.waveform != "burst-random" or not np.all(np.isfinite(data)):
-            return data
-        return burst_records(data, self.plan.record.fs, np.zeros(1, np.int64), data.shape[1],
-                             force_rows=self.plan.n_references)[0]
-
     def add(self, hit_id: int, point: int, data: NDArray[np.float64],
             override: str = "") -> tuple[bool, str, float] | None:
         """Judge a stored block; returns its verdict (None if it has lost samples)."""
@@ -211,7 +200,7 @@ class BlockAnalysis:
                 and (st is None or hit_id > st.ids[-1])):
             if st is None:
                 st = self._points[point] = _Point(self._accumulator())
-            st.acc.update(self.averaged(pending[1]))  # one block an update, in their order
+            st.acc.update(pending[1])  # one block per update, in acquisition order
             st.ids.append(hit_id)
         else:
             self._stale.add(point)
@@ -255,7 +244,7 @@ class BlockAnalysis:
         spectra = []
         for _, data in self.loader(ids):
             acc = self._accumulator()
-            acc.update(self.averaged(data))
+            acc.update(data)
             spectra.append(acc.spectra())
         return UnitSpectra.of(spectra)
 
@@ -269,7 +258,7 @@ class BlockAnalysis:
         st = _Point(self._accumulator())
         batch: list[NDArray[np.float64]] = []
         for i, data in self.loader(ids):
-            batch.append(self.averaged(data))
+            batch.append(data)
             st.ids.append(i)
             if len(batch) == REBUILD_BLOCKS:
                 st.acc.update(np.concatenate(batch, axis=1))  # no overlap: the same segments
