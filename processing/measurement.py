@@ -21,10 +21,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from processing.data import FRFSet, InputError
-from processing.units import TimeUnits
+
+if TYPE_CHECKING:  # spectra and scipy.signal load where spectra are computed
+    from processing.units import TimeUnits
 
 __all__ = ["Measurement", "Origin", "Provenance", "Report"]
 
