@@ -1,6 +1,6 @@
 """``insitu report FILE [--out report.html]``: the test report, without a GUI.
 
-FILE is any file ``insitu identify`` reads: a run file (a finished run's stored FRFs), an
+FILE is any file ``insitu identify`` reads: a run file (its records processed again), an
 FRF file (``.h5``), a UFF file of FRFs or of time records (FRFs computed with the
 default time-data settings of ``insitu frf``; a bad run is reported and left out).
 """
