@@ -41,7 +41,7 @@ from app.acquire.overrides import override_run, parse_override
 from app.acquire.plan import TestPlan, parse_plan
 from app.acquire.recording import RecordingProcedure
 from app.acquire.shaker import ShakerProcedure
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 from app.io.runfile import read_run
 from drivers.station import StationConfig, load_station
 
@@ -89,7 +89,7 @@ class ProgressBars(Listener):
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("acquire", help="acquire a test plan into an HDF5 run file",
+    p = sub.add_parser("acquire", help=VERB_HELP["acquire"],
                        description=__doc__)
     p.add_argument("--station", type=Path, help="station.toml (default: built-in mock bench)")
     p.add_argument("--plan", type=Path, help="test plan TOML (default with --mock: the bench's)")

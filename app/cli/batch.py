@@ -25,7 +25,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from app.batch.campaign import Row, run_campaign, write_tables
 from app.batch.cluster import open_client, total_threads
 from app.cli import identify as identify_verb
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 from app.cli.frf import add_processing_arguments, settings_from
 
 #: the ``insitu identify`` options a campaign takes, with identify's own definitions and
@@ -47,7 +47,7 @@ class _Capture:
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("batch", help="identify many files on a Dask cluster, one table",
+    p = sub.add_parser("batch", help=VERB_HELP["batch"],
                        description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("files", type=Path, nargs="+", metavar="FILE",

@@ -20,7 +20,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from app.acquire.events import Listener
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 from app.cli.summary import print_result
 from app.io.uff import write_frf_uff
 from app.pipeline import FRF_UFF, load
@@ -30,7 +30,7 @@ from processing.inertia import inertia_properties
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("demo", help="run the main job on the built-in simulated bench",
+    p = sub.add_parser("demo", help=VERB_HELP["demo"],
                        description=__doc__)
     p.add_argument("--bench", choices=sorted(BENCHES), default="engine")
     p.add_argument("--noise", type=float, default=0.01)

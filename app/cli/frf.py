@@ -28,7 +28,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 from app.io.frf_h5 import write_frf_h5
 from app.io.uff import write_frf_uff
 from app.pipeline import RUN_FILE, TIME_UFF, OpenError, RunReport, Settings, load
@@ -38,7 +38,7 @@ from processing.spectral import ESTIMATORS
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("frf", help="FRFs and coherence from UFF time records or a run file",
+    p = sub.add_parser("frf", help=VERB_HELP["frf"],
                        description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", type=Path,

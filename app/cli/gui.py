@@ -6,11 +6,11 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("gui", help="start the desktop application", description=__doc__)
+    p = sub.add_parser("gui", help=VERB_HELP["gui"], description=__doc__)
     p.add_argument("--station", type=Path,
                    help="station file (default: the last one used, or the built-in mock bench)")
     p.set_defaults(run=run)

@@ -22,7 +22,7 @@ from typing import Any
 
 from rich.console import Console
 
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 from app.cli.frf import add_processing_arguments, load_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
@@ -37,7 +37,7 @@ from processing.mounts import check_mounts
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("identify", help="identify inertia parameters and K, C from a UFF file",
+    p = sub.add_parser("identify", help=VERB_HELP["identify"],
                        description=__doc__)
     p.add_argument("file", type=Path,
                    help="UFF file with geometry (15/2411) and FRFs or time records (58), "

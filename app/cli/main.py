@@ -13,18 +13,17 @@ import logging
 import logging.handlers
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from app.cli.common import UserError, in_flags
+from app.cli.common import VERB_HELP, UserError, in_flags
 
 #: terminal width (characters) assumed when the output is a file or a pipe
 PIPE_COLUMNS = 200
 
-#: verb -> module under app.cli
-VERBS = ("identify", "simulate", "demo", "frf", "mock-bench", "acquire", "replay", "repair",
-         "gui", "report", "batch")
+#: the verbs (modules under app.cli), in the order ``insitu --help`` lists them
+VERBS = tuple(VERB_HELP)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -34,7 +33,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(verbs: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The command line's parser: every verb's options, or only those of ``verbs`` (the
+    others listed with their line of help: their modules, and what they import, are not
+    loaded)."""
     parser = _Parser(
         prog="insitu",
         description="In situ identification of inertia parameters and mount stiffness from FRFs.",
@@ -42,9 +44,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
     for verb in VERBS:
-        module = importlib.import_module(f"app.cli.{verb.replace('-', '_')}")
-        module.add_parser(sub)
+        if verbs is None or verb in verbs:
+            importlib.import_module(f"app.cli.{verb.replace('-', '_')}").add_parser(sub)
+        else:
+            sub.add_parser(verb, help=VERB_HELP[verb])
     return parser
+
+
+def named_verb(argv: Sequence[str]) -> set[str]:
+    """The verb a command line names (its first word after ``-v``), as a set; empty when
+    it names none (``insitu --help``, a typo: the parser then says so)."""
+    for word in argv:
+        if word in ("-v", "--verbose"):
+            continue
+        return {word} & set(VERBS)
+    return set()
 
 
 class _OneLine(logging.Formatter):
@@ -128,8 +142,8 @@ def _configure_logging(verbose: bool) -> tuple[_Errors, Path | None]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser(named_verb(argv)).parse_args(argv)
     if not sys.stdout.isatty():
         # rich sizes tables to COLUMNS, 80 when output goes to a file or a pipe: a log of
         # `insitu demo > run.log` would cut the K and C cells

@@ -21,7 +21,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 from app.mockbench import bench_names
 
 FE_RATES = (256, 512, 1024, 2048, 4096)
@@ -30,7 +30,7 @@ SHAKERS = ("1", "2")
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("mock-bench", help="run a simulated bench and print its station file",
+    p = sub.add_parser("mock-bench", help=VERB_HELP["mock-bench"],
                        description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--station", type=Path, help="also write the station file here")

@@ -13,11 +13,12 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from app.cli.common import VERB_HELP
 from app.io.runfile import read_run, repair
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("repair", help="make a crashed run file readable by any HDF5 tool",
+    p = sub.add_parser("repair", help=VERB_HELP["repair"],
                        description=__doc__)
     p.add_argument("file", type=Path, help="run file (HDF5) written by insitu acquire")
     p.set_defaults(run=run)

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 from app.cli.summary import print_result
 from app.io.runfile import read_run
 from app.pipeline import RUN_FILE, load
@@ -25,7 +25,7 @@ from processing.identify import fit
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("replay", help="recompute FRFs and identification from a run file",
+    p = sub.add_parser("replay", help=VERB_HELP["replay"],
                        description=__doc__)
     p.add_argument("file", type=Path, help="run file (HDF5) written by insitu acquire")
     p.add_argument("--out", type=Path, help="write the result JSON here")

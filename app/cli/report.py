@@ -12,11 +12,11 @@ import os
 from pathlib import Path
 from typing import Any
 
-from app.cli.common import UserError
+from app.cli.common import VERB_HELP, UserError
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("report", help="write the HTML report of a run, an FRF file or a UFF file",
+    p = sub.add_parser("report", help=VERB_HELP["report"],
                        description=__doc__)
     p.add_argument("file", type=Path,
                    help="run file or FRF file (.h5), UFF file of FRFs or time records (.uff)")

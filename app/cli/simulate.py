@@ -6,12 +6,13 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from app.cli.common import VERB_HELP
 from app.io.uff import write_frf_uff
 from hardware_mocks.benches import BENCHES, get_bench
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser("simulate", help="write a simulated bench's FRFs as UFF",
+    p = sub.add_parser("simulate", help=VERB_HELP["simulate"],
                        description=__doc__)
     p.add_argument("bench", choices=sorted(BENCHES), help="built-in bench")
     p.add_argument("--out", type=Path, required=True, help="UFF file to write")
