@@ -285,9 +285,9 @@ def shaker_measurement(plan: TestPlan, points: Sequence[BlockResult | None],
         cohs.append(r.coherence)
         n_avg += [r.n_accepted] * r.H.shape[1]
     first = next(r for r in points if r is not None)
-    frf = FRFSet(first.freq, np.concatenate(cols, axis=1), resp_nodes, resp_dirs,
-                 plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1))
-    return Measurement(frf, Provenance(
+    frfs = FRFSet(first.freq, np.concatenate(cols, axis=1), resp_nodes, resp_dirs,
+                  plan.exc_nodes, plan.exc_dirs, geometry, np.concatenate(cohs, axis=1))
+    return Measurement(frfs, Provenance(
         origin="estimated", excitation=f"shaker {plan.shaker.waveform}",
         estimator=plan.record.estimator, units=units, n_averages=tuple(n_avg),
         window=WINDOWS[plan.shaker.waveform], references=plan.n_references))

@@ -53,7 +53,6 @@ class Session(QtCore.QObject):
         super().__init__(parent)
         self.runner = runner
         self.measurement: Measurement | None = None
-        self.frf: FRFSet | None = None  # the measurement's FRFs
         self.source = ""
         self.path: Path | None = None
         self.format: str | None = None  # the file's format (app.pipeline.FORMATS), if any
@@ -63,6 +62,11 @@ class Session(QtCore.QObject):
         self._generation = 0  # bumped with each new data set: older analyses are dropped
         runner.done.connect(self._on_done)
         runner.failed.connect(self._on_failed)
+
+    @property
+    def frf(self) -> FRFSet | None:
+        """The current measurement's FRFs (None before any)."""
+        return None if self.measurement is None else self.measurement.frf
 
     def open_file(self, path: str | Path) -> None:
         """Load any file the command line reads (UFF FRFs or time records, a run file, an
@@ -78,13 +82,12 @@ class Session(QtCore.QObject):
         """Make ``measurement`` the current data and analyse it with automatic bands.
 
         ``fmt`` is the format of the file at ``path`` (:data:`app.pipeline.FORMATS`)."""
-        self.measurement, self.frf = measurement, measurement.frf
+        self.measurement = measurement
         self.source, self.path, self.format = source, path, fmt
-        frf = measurement.frf
         self._generation += 1
         self.analysis = None
         self.options = replace(self.options, mass_band=None, stiffness_band=None)
-        self.data_changed.emit(frf)
+        self.data_changed.emit(measurement.frf)
         self.reanalyse()
 
     def set_mounts(self, mounts: MountsFile | None) -> None:

@@ -538,11 +538,11 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
     notes = tuple((float(t), _str(x)) for t, x in zip(nt["time"][:k], nt["text"][:k],
                                                      strict=True))
     geometry = Geometry(f["geometry/node_ids"][()], f["geometry/xyz"][()])
-    frf = None
+    stored = None
     if "frf" in f:
         g = f["frf"]
         attrs = {**g.attrs, "n_averages": g["n_averages"][()].tolist()}
-        frf = Measurement(FRFSet(
+        stored = Measurement(FRFSet(
             g["freq"][()], g["H"][()], g["resp_nodes"][()], g["resp_dirs"][()],
             g["exc_nodes"][()], g["exc_dirs"][()], geometry,
             g["coherence"][()] if "coherence" in g else None),
@@ -557,7 +557,7 @@ def _read(p: Path, f: h5py.File, version: int, with_data: bool) -> RunData:
         method=_str(f.attrs.get("method", "")),
         plan_data=json.loads(_str(f["plan"][()])),
         station_data=json.loads(_str(f["station"][()])),
-        channels=channels, geometry=geometry, records=records, notes=notes, measurement=frf,
+        channels=channels, geometry=geometry, records=records, notes=notes, measurement=stored,
         result=result, mounts=mounts)
 
 
