@@ -40,7 +40,6 @@ from processing.massline import MassLineProblem, stack_real
 from processing.physical import constrain_physical
 from processing.problem import Problem, h1_variances, typical_rms
 from processing.results import UNCERTAIN_KEYS
-from processing.spectral import CrossSpectra, frf
 from processing.stages import (
     Bands,
     Fit,
@@ -226,6 +225,8 @@ def _resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
     """FRFs and coherence (n_exc, n_lines, n_resp, n) of the n resamples on ``lines`` (Hz):
     each column's units weighted by how often each was drawn; None when a column lacks a
     line."""
+    from processing.spectral import CrossSpectra, frf  # the numba kernels: with time data only
+
     n = counts[0].shape[0]
     n_l, n_r = lines.size, units.columns[0].Sfx.shape[1]
     H = np.empty((len(units.columns), n_l, n_r, n), complex)

@@ -48,8 +48,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.optimize
-import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
 from processing.geometry import skew
@@ -184,6 +182,8 @@ class MountFit:
     def ci95(self) -> NDArray[np.float64]:
         """(n, 3, 2) 95 % intervals ``rate -+ t(0.975, dof) std`` (Student's t: the residual
         gives few degrees of freedom), clipped at 0; nan where the std is nan."""
+        import scipy.stats  # loaded when intervals are asked for, not with the module
+
         if self.known_variance:
             q = float(scipy.stats.norm.ppf(0.975))
         else:
@@ -269,6 +269,8 @@ def fit_mount_rates(
     >>> bool(np.allclose(fit.rates, 1e5)), bool(fit.identifiable.all())
     (True, True)
     """
+    import scipy.optimize  # loaded when mount rates are fitted, not with the module
+
     if len(mounts) == 0:
         raise MountGeometryError("no mount given: the mounts file needs at least one [[mount]]")
     Km = _symmetric_K(K)

@@ -32,13 +32,11 @@ import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from processing import _welch_kernel as _kernel
+from processing.measurement import ESTIMATORS
 
 __all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError", "coherence",
            "combine", "frf", "h1", "h2", "hv", "ordinary_coherence", "record_spectra",
            "welch_spectra"]
-
-#: names accepted by :func:`frf`
-ESTIMATORS = ("H1", "H2", "Hv")
 
 Scaling = Literal["density", "spectrum"]
 

@@ -14,14 +14,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import scipy.fft
 from numpy.typing import ArrayLike, NDArray
 
 from processing.data import InputError
-from processing.spectral import CrossSpectra, SpectralAccumulator
+
+if TYPE_CHECKING:  # the spectra (numba kernels) load where spectra are computed
+    from processing.spectral import CrossSpectra, SpectralAccumulator
 
 __all__ = ["MIN_UNITS", "TimeUnits", "UnitKind", "UnitSpectra", "record_units", "welch_units"]
 
@@ -97,6 +99,8 @@ class UnitSpectra:
 
     def mean(self) -> CrossSpectra:
         """The weighted mean of the units (the spectra the column's FRF is formed from)."""
+        from processing.spectral import CrossSpectra
+
         w = self.weight / self.weight.sum()
         return CrossSpectra(self.freq, (w @ self.Sff)[None, None] + 0j,
                             np.einsum("u,urf->rf", w, self.Sfx)[None],
@@ -179,6 +183,8 @@ def welch_units(acc: SpectralAccumulator, data: NDArray[np.floating],
     (:class:`~processing.spectral.SpectralAccumulator`); a block's spectra are the
     difference of the running sums before and after its segments. ``acc`` must be new.
     """
+    from processing.spectral import CrossSpectra
+
     N, step = acc.nperseg, acc.step
     n = data.shape[-1]
     n_seg = 0 if n < N else (n - N) // step + 1

@@ -13,9 +13,7 @@ from app.io.frf_h5 import FORMAT as FRF_H5_FORMAT
 from app.io.frf_h5 import h5_format, read_frf_measurement
 from app.io.uff import read_frf_measurement_uff
 from app.io.uff_time import uff_holds_time_data
-from app.pipeline.runs import open_run_file
 from app.pipeline.settings import Settings
-from app.pipeline.time_uff import open_time_uff
 from processing.measurement import Measurement
 
 __all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "H5_SUFFIXES", "READERS", "RUN_FILE", "SUFFIXES",
@@ -58,11 +56,23 @@ def _frf_h5(path: Path, _: Settings) -> Measurement:
     return read_frf_measurement(path)
 
 
+def _time_uff(path: Path, settings: Settings) -> Measurement:
+    from app.pipeline.time_uff import open_time_uff  # the spectra: loaded when time data come
+
+    return open_time_uff(path, settings)
+
+
+def _run_file(path: Path, settings: Settings) -> Measurement:
+    from app.pipeline.runs import open_run_file  # the record processing, likewise
+
+    return open_run_file(path, settings)
+
+
 #: format -> reader
 READERS: dict[str, Reader] = {
     FRF_UFF: _frf_uff,
-    TIME_UFF: open_time_uff,
-    RUN_FILE: open_run_file,
+    TIME_UFF: _time_uff,
+    RUN_FILE: _run_file,
     FRF_H5: _frf_h5,
 }
 

@@ -8,8 +8,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-import scipy.signal
-
 from processing.data import InputError
 from processing.measurement import Report
 
@@ -124,6 +122,8 @@ class Settings:
             raise SettingError(f"{{overlap}} must be at least 0 and below 1, got "
                                f"{self.overlap:g}", "overlap")
         if self.window is not None:
+            import scipy.signal  # loaded only when a window is named
+
             try:
                 scipy.signal.get_window(self.window, 16)
             except (ValueError, TypeError) as err:

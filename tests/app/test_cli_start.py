@@ -35,3 +35,20 @@ def test_a_verb_loads_what_it_uses() -> None:
     loaded, _ = _loaded("repair", "--help")
     assert "app.cli.repair" in loaded and "app.cli.identify" not in loaded
     assert not any(m.startswith("scipy.signal") for m in loaded)
+
+
+def test_identify_of_frfs_loads_no_spectra(tmp_path: Path) -> None:
+    """FRFs given: the numba spectra and the record processing stay unloaded (they are
+    compiled code that takes a second to load); they load for time data."""
+    from app.io.uff import write_frf_uff
+    from hardware_mocks.benches import get_bench
+
+    path = tmp_path / "engine.uff"
+    write_frf_uff(path, get_bench("engine-rigid").frfset(noise=0.01, seed=3), binary=True)
+    code = _HELP.replace('m.split(".")[0] in (', 'm.split(".")[0] in ("numba", ').replace(
+        'm.startswith("app.cli.")', 'm.startswith(("app.cli.", "app.acquire"))')
+    out = subprocess.run([sys.executable, "-c", code, "identify", str(path)], capture_output=True,
+                         text=True, timeout=300, cwd=Path(__file__).parents[2], check=True)
+    loaded = set(out.stdout.split())
+    assert "processing.identify" in loaded  # it did identify
+    assert not {"numba", "processing.spectral", "app.acquire"} & loaded, loaded
