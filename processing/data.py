@@ -11,7 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["FRFSet", "Geometry", "InputError"]
+__all__ = ["ESTIMATORS", "FRFSet", "Geometry", "InputError"]
+
+#: the FRF estimators the spectra compute (:mod:`processing.spectral`)
+ESTIMATORS = ("H1", "H2", "Hv")
 
 
 class InputError(ValueError):

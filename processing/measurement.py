@@ -28,10 +28,7 @@ from processing.data import FRFSet, InputError
 if TYPE_CHECKING:  # spectra and scipy.signal load where spectra are computed
     from processing.units import TimeUnits
 
-__all__ = ["ESTIMATORS", "Measurement", "Origin", "Provenance", "Report"]
-
-#: the FRF estimators the spectra compute (:mod:`processing.spectral`)
-ESTIMATORS = ("H1", "H2", "Hv")
+__all__ = ["Measurement", "Origin", "Provenance", "Report"]
 
 #: FRFs given (an analyser's, a file's) or estimated here from time records
 Origin = Literal["given", "estimated"]

@@ -32,7 +32,7 @@ import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from processing import _welch_kernel as _kernel
-from processing.measurement import ESTIMATORS
+from processing.data import ESTIMATORS
 
 __all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError", "coherence",
            "combine", "frf", "h1", "h2", "hv", "ordinary_coherence", "record_spectra",

@@ -33,7 +33,8 @@ from app.io.frf_h5 import write_frf_h5
 from app.io.uff import write_frf_uff
 from app.pipeline import RUN_FILE, TIME_UFF, OpenError, RunReport, Settings, load
 from app.pipeline.formats import H5_SUFFIXES, UFF_SUFFIXES
-from processing.measurement import ESTIMATORS, Measurement
+from processing.data import ESTIMATORS
+from processing.measurement import Measurement
 
 
 def add_parser(sub: Any) -> None:
