@@ -18,10 +18,14 @@ simulation's): ``fit(Measurement(frf), options)``.
 from __future__ import annotations
 
 import dataclasses
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import ParamSpec, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
+from threadpoolctl import threadpool_limits
 
 from processing.bootstrap import DEFAULT_RESAMPLES, Bootstrap, resample
 from processing.data import FRFSet, InputError
@@ -67,6 +71,7 @@ from processing.uncertainty import (
 from processing.units import MIN_UNITS, TimeUnits
 
 __all__ = [
+    "BLAS_THREADS",
     "Bands",
     "Checks",
     "Fit",
@@ -89,6 +94,26 @@ __all__ = [
     "upper_residual",
     "weigh_lines",
 ]
+
+
+#: BLAS threads during a fit. Its matrices are small (6 x 6 to 10 x 10, stacked over lines):
+#: a second BLAS thread gains nothing, and beside another busy process its spinning made a
+#: hammer run's fit 30 times slower (155 s against 4.8 s, measured); one thread, always.
+BLAS_THREADS = 1
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def one_blas_thread(fn: Callable[_P, _R]) -> Callable[_P, _R]:
+    """``fn`` run with :data:`BLAS_THREADS` BLAS threads (the caller's count restored)."""
+
+    @functools.wraps(fn)
+    def limited(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        with threadpool_limits(BLAS_THREADS, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return limited
 
 
 # --- what the fit reads from a measurement ---------------------------------------------------
@@ -160,6 +185,7 @@ def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stage
     return Stages(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
 
 
+@one_blas_thread
 def stages(measurement: Measurement, options: IdentifyOptions | None = None,
            solver: SolverSettings | None = None) -> Stages:
     """The stages :func:`fit` runs on ``measurement`` (no point refinement): prepared
@@ -254,6 +280,7 @@ def _fit_once(d: _Data, options: IdentifyOptions, solver: SolverSettings,
     return assemble(st.problem, st.bands, st.weights, st.fitted, st.checks, unc)
 
 
+@one_blas_thread
 def fit(measurement: Measurement, options: IdentifyOptions | None = None,
         solver: SolverSettings | None = None) -> IdentificationResult:
     """Identify the ten inertia parameters and K, C at O from a measurement.
@@ -340,6 +367,7 @@ def _refined(d: _Data, opt: IdentifyOptions, solver: SolverSettings) -> Identifi
 # --- the bootstrap alone ---------------------------------------------------------------------
 
 
+@one_blas_thread
 def bootstrap_identify(measurement: Measurement, options: IdentifyOptions | None = None,
                        n: int = DEFAULT_RESAMPLES, seed: int = 0,
                        solver: SolverSettings | None = None) -> tuple[Fit, Bootstrap | str]:
