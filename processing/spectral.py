@@ -20,6 +20,7 @@ multiple coherence of each response.
 from __future__ import annotations
 
 import itertools
+import os
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -34,8 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 from processing import _welch_kernel as _kernel
 
 __all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError", "coherence",
-           "combine", "frf", "h1", "h2", "hv", "ordinary_coherence", "record_spectra",
-           "welch_spectra"]
+           "combine", "free_cores", "frf", "h1", "h2", "hv", "ordinary_coherence",
+           "record_spectra", "welch_spectra"]
 
 #: names accepted by :func:`frf`
 ESTIMATORS = ("H1", "H2", "Hv")
@@ -277,6 +278,26 @@ _LAUNCH = threading.Lock()
 _MAX_TAPS = 8
 
 
+def free_cores() -> int:
+    """Cores free for this process's threads at this instant: the cores it may run on
+    less the runnable threads other than the caller (the fourth field of
+    ``/proc/loadavg`` counts them, the caller included; below 1 if more threads than
+    cores want to run); every core where that is not known (not Linux).
+
+    Examples
+    --------
+    >>> 1 - len(os.sched_getaffinity(0)) <= free_cores() <= len(os.sched_getaffinity(0))
+    True
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))
+        with open("/proc/loadavg") as fh:
+            runnable = int(fh.read().split()[3].partition("/")[0])
+    except (AttributeError, OSError, IndexError, ValueError):
+        return os.cpu_count() or 1
+    return cores - (runnable - 1)
+
+
 def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """The window as a short convolution in frequency, ``rfft(win)[:M + 1] / n``, when it is
     a periodic cosine sum of at most ``_MAX_TAPS`` terms to 1e-13 of its peak (Hann, Hamming,
@@ -320,8 +341,10 @@ class SpectralAccumulator:
     group : int, optional
         Most segments of a channel per FFT call (default 16 for float32 samples, 4 else).
     workers : int, optional
-        Threads sharing the channels, at most (and by default) numba's
-        ``NUMBA_NUM_THREADS`` (the number of cores unless set).
+        Most threads sharing the channels, at most (and by default) numba's
+        ``NUMBA_NUM_THREADS`` (the number of cores unless set). Each block takes as many
+        as :func:`free_cores` finds free when it arrives, at least one: a thread sharing
+        its core with another process holds up every other at the end of the block.
 
     Notes
     -----
@@ -487,7 +510,7 @@ class SpectralAccumulator:
         need = n_new if n_seg == 0 else (max(0, (n_head - 1) * step + N - n_tail) if n_head else 0)
         with _LAUNCH:
             threads = numba.get_num_threads()
-            numba.set_num_threads(self.workers)
+            numba.set_num_threads(max(1, min(self.workers, free_cores())))
             chunk = numba.set_parallel_chunksize(1)  # the runs handed out one at a time
             try:
                 finite = _kernel.add_block(
