@@ -402,8 +402,9 @@ LOAD_NOTE = (
     "core); ms: best run; load (1 min): median of the load average read after each run "
     "(the host is shared: it counts the other users' processes and the busy ones). "
     "against: the accumulator of the revision given, with as many threads as ours may "
-    "take; identical sums: ours, one thread's and its Sff, Sfx, Sxx equal bit for bit in "
-    "every run."
+    "take, in the same process and so under ours' OpenMP settings (threads asleep at once "
+    "after a block unless GOMP_SPINCOUNT is set); identical sums: ours, one thread's and "
+    "its Sff, Sfx, Sxx equal bit for bit in every run."
 )
 
 
