@@ -14,19 +14,25 @@ For each sample rate and sample type, on the same samples (120 s by default):
 - (b) pyFRF (if installed): ``pyFRF.FRF(..., window='hann').get_H1()`` on the whole recording;
 - ``--against REV``: the accumulator of git revision REV (its ``processing/spectral.py`` and
   ``processing/_welch_kernel.py``, imported from a temporary folder), taking turns with ours
-  on each block as the floors do; its sums are compared with ours bit for bit.
+  on each block as the floors do; its sums are compared with ours bit for bit;
+- ``--busy N``: every run twice, quiet and beside N processes spinning in a Python loop
+  (each takes a core), the two taking turns; ours with one thread also takes turns on
+  each block, so that ours (which chooses its threads by the cores free) is compared
+  with one thread and with the revision given under the same load.
 
 Peak memory is measured in a fresh child process per method (resident-set high-water mark
 above the child's baseline). Results are compared with (a) element by element.
 
 Run: ``.venv/bin/python benchmarks/frf.py`` (``--duration 20`` for a quick look);
 ``--write-docs`` writes the table, with the date, machine and command, to
-``docs/benchmarks.md``.
+``docs/benchmarks.md``; ``--write FILE`` to FILE (``benchmarks/results/frf-under-load.md``
+for ``--busy 1 --against REV``).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import importlib
 import itertools
@@ -39,6 +45,7 @@ import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rocket_fft  # noqa: F401  (scipy.fft inside numba)
@@ -59,7 +66,7 @@ GROUP = 4  # the floor's segments per rfft call
 #: (3, with --against) on a block, every one in turn: each goes first as often, and after
 #: each of the others as often (what read a block before, on which core, changes what the
 #: next one pays)
-ORDERS = {k: tuple(itertools.permutations(range(k))) for k in (3, 4)}
+ORDERS = {k: tuple(itertools.permutations(range(k))) for k in (3, 4, 5)}
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -154,20 +161,22 @@ def run_ours(fs: float, duration: float, block_s: float, dtype: str, workers: in
 
 
 def run_paired(fs: float, duration: float, block_s: float, dtype: str, workers: int,
-               against: type | None = None):
-    """Ours (and the revision compared), and the floors on each block as it is generated,
-    taking turns in every order (``ORDERS``), so that a slower spell of the shared host and
-    a block already read hit them alike.
+               against: type | None = None, one_thread: bool = False):
+    """Ours (and ours with one thread, the revision compared), and the floors on each block
+    as it is generated, taking turns in every order (``ORDERS``), so that a slower spell of
+    the shared host and a block already read hit them alike.
 
     Returns (floor with scipy's rfft s, floor with rocket-fft's s, ours s, the revision's
-    s or None, whether its sums equal ours bit for bit); ours and the revision's include
-    reading the spectra and H1.
+    s or None, whether its sums equal ours bit for bit, ours with one thread s or None);
+    ours and the others' include reading the spectra and H1.
     """
     accs = [SpectralAccumulator(fs, NPERSEG, workers=workers)]
+    if one_thread:
+        accs.append(SpectralAccumulator(fs, NPERSEG, workers=1))
     if against is not None:
         accs.append(against(fs, NPERSEG, workers=workers))
     floor = Floor(dtype)
-    t = [0.0, 0.0, 0.0, 0.0]  # floor scipy, floor rocket, ours, the revision's
+    t = [0.0] * (2 + len(accs))  # floor scipy, floor rocket, ours, [one thread], [revision]
     orders = ORDERS[2 + len(accs)]
     for i, b in enumerate(blocks(fs, duration, block_s, dtype)):
         floor.next_block(b)
@@ -184,9 +193,39 @@ def run_paired(fs: float, duration: float, block_s: float, dtype: str, workers: 
         sps.append(acc.spectra())
         h1(sps[-1])
         t[2 + k] += time.perf_counter() - t0
-    same = all(np.array_equal(getattr(sps[0], f), getattr(sps[-1], f))
-               for f in ("Sff", "Sfx", "Sxx"))
-    return t[0], t[1], t[2], (t[3] if against else None), same
+    same = all(np.array_equal(getattr(sps[0], f), getattr(sp, f))
+               for sp in sps[1:] for f in ("Sff", "Sfx", "Sxx"))
+    return (t[0], t[1], t[2], (t[-1] if against else None), same,
+            (t[3] if one_thread else None))
+
+
+@contextlib.contextmanager
+def busy(n: int) -> Iterator[None]:
+    """``n`` processes spinning in a Python loop (each takes a core) while inside."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        if procs:
+            time.sleep(0.5)  # started: spinning, not importing
+        yield
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait()
+
+
+def paired_under_load(fs: float, duration: float, block_s: float, dtype: str, workers: int,
+                      against: type | None, repeat: int, n_busy: int) -> list[dict]:
+    """``repeat`` runs of :func:`run_paired`, or with ``n_busy`` > 0 ``repeat`` pairs of
+    runs, quiet and beside ``n_busy`` busy processes, the two taking turns in going first;
+    each run's times, how many busy processes and the load average (1 min) after it."""
+    out = []
+    for i in range(repeat):
+        for n in ((0, n_busy) if i % 2 == 0 else (n_busy, 0)) if n_busy else (0,):
+            with busy(n):
+                r = run_paired(fs, duration, block_s, dtype, workers, against, n_busy > 0)
+            out.append({"scipy": r[0], "rocket": r[1], "ours": r[2], "against": r[3],
+                        "identical": r[4], "one": r[5], "busy": n, "load": os.getloadavg()[0]})
+    return out
 
 
 def run_scipy(x: np.ndarray, fs: float):
@@ -222,9 +261,10 @@ def _rss_mb(field: str = "VmRSS") -> float:
 
 
 def child(method: str, fs: float, duration: float, block_s: float, dtype: str,
-          workers: int, repeat: int, against: str | None = None) -> None:
+          workers: int, repeat: int, against: str | None = None, n_busy: int = 0) -> None:
     """Run one method in this (fresh) process; print its peak memory above baseline, MB,
-    or for ``times`` the floor's and our times of ``repeat`` paired runs, s."""
+    or for ``times`` the floor's and our times of the paired runs, s
+    (:func:`paired_under_load`)."""
     if method == "times":
         # numba's cache loaded, and one untimed run: on this VM fresh memory costs a page
         # fault per 4 kB; in a fresh process, with glibc's default thresholds, the floor's
@@ -232,12 +272,9 @@ def child(method: str, fs: float, duration: float, block_s: float, dtype: str,
         # floor measured up to 1.8x slower, ours 1.4x): see in_child for the settings
         compile_ahead()
         other = accumulator_of(against) if against else None
-        run_paired(fs, min(duration, 20.0), block_s, dtype, workers, other)
-        runs = [run_paired(fs, duration, block_s, dtype, workers, other)
-                for _ in range(repeat)]
-        print(json.dumps({"scipy": [r[0] for r in runs], "rocket": [r[1] for r in runs],
-                          "ours": [r[2] for r in runs], "against": [r[3] for r in runs],
-                          "identical": all(r[4] for r in runs)}))
+        run_paired(fs, min(duration, 20.0), block_s, dtype, workers, other, n_busy > 0)
+        runs = paired_under_load(fs, duration, block_s, dtype, workers, other, repeat, n_busy)
+        print(json.dumps(runs))
         return
     x = None
     if method in ("scipy", "pyfrf"):
@@ -254,20 +291,22 @@ def child(method: str, fs: float, duration: float, block_s: float, dtype: str,
     print(json.dumps({"peak_mb": _rss_mb("VmHWM") - base}))
 
 
-def in_child(method: str, fs: float, args: argparse.Namespace, dtype: str) -> dict | None:
+def in_child(method: str, fs: float, args: argparse.Namespace, dtype: str) -> Any:
     """What :func:`child` prints, run in a fresh process (None if it failed)."""
     cmd = [sys.executable, __file__, "--child", method, "--rate", str(fs), "--dtype", dtype,
            "--duration", str(args.duration), "--block", str(args.block),
            "--workers", str(args.workers), "--repeat", str(args.repeat)]
     if args.against and method == "times":
         cmd += ["--against", args.against]
+    if args.busy and method == "times":
+        cmd += ["--busy", str(args.busy)]
     env = dict(os.environ)
     if method == "times":  # glibc keeps freed memory (no page faults for the next arrays)
         env.update(MALLOC_MMAP_THRESHOLD_=str(1 << 26), MALLOC_TRIM_THRESHOLD_=str(1 << 28))
     out = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env)
     if out.returncode != 0:
         return None
-    return dict(json.loads(out.stdout.strip().splitlines()[-1]))
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def peak_memory(method: str, fs: float, args: argparse.Namespace, dtype: str) -> float | None:
@@ -303,11 +342,11 @@ NOTE = (
 def measure(fs: float, dtype: str, args: argparse.Namespace) -> list[str]:
     """One row of the table: ``fs`` Hz, ``dtype`` samples."""
     # timed in a fresh process: the references' gigabytes must not weigh on the next row
-    times = in_child("times", fs, args, dtype)
-    if times is None:
+    runs = in_child("times", fs, args, dtype)
+    if runs is None:
         raise SystemExit(f"timing {fs:g} Hz {dtype} failed")
-    t_ours = min(times["ours"])
-    ours, f_scipy, f_rocket = (np.array(times[k]) for k in ("ours", "scipy", "rocket"))
+    ours, f_scipy, f_rocket = (np.array([r[k] for r in runs]) for k in ("ours", "scipy", "rocket"))
+    t_ours = ours.min()
     sp, H = run_ours(fs, args.duration, args.block, dtype, args.workers)
     mem_ours = peak_memory("ours", fs, args, dtype)
     t_a = t_b = mem_a = mem_b = None
@@ -336,33 +375,81 @@ def measure(fs: float, dtype: str, args: argparse.Namespace) -> list[str]:
     def mb(m: float | None) -> str:
         return "-" if m is None else f"{m:.0f}"
 
-    def spread(r: np.ndarray) -> str:
-        return f"{np.median(r):.2f} ({r.min():.2f}-{r.max():.2f})"
-
     row = [f"{fs / 1000:g} kHz", dtype, ms(f_scipy.min()), ms(f_rocket.min()), ms(t_ours),
            spread(ours / np.minimum(f_scipy, f_rocket)), spread(ours / f_scipy),
            f"{args.duration / t_ours:.0f}x", ms(t_a), ratio(t_a), ms(t_b), ratio(t_b),
            mb(mem_ours), mb(mem_a), mb(mem_b), diff]
     if args.against:
-        other = np.array(times["against"])
-        row += [ms(other.min()), spread(ours / other), "yes" if times["identical"] else "NO"]
+        other = np.array([r["against"] for r in runs])
+        row += [ms(other.min()), spread(ours / other),
+                "yes" if all(r["identical"] for r in runs) else "NO"]
     return row
+
+
+def spread(r: np.ndarray) -> str:
+    """Median (range) of ratios."""
+    return f"{np.median(r):.2f} ({r.min():.2f}-{r.max():.2f})"
+
+
+LOAD_COLUMNS = ("rate", "dtype", "busy processes", "load (1 min)", "floor ms", "ours ms",
+                "ours/floor", "one thread/floor", "ours/one thread")
+LOAD_AGAINST = ("against/floor", "ours/against", "identical sums")
+LOAD_NOTE = (
+    "Each run twice, quiet and beside the busy processes (each a Python loop taking a core), "
+    "the two taking turns in going first; ours, ours with one thread (and the revision "
+    "given) and the floors take turns on each block. ratios: median (range) over the runs "
+    "of that load, against the faster floor of the run (bare rfft of the same segments, one "
+    "core); ms: best run; load (1 min): median of the load average read after each run "
+    "(the host is shared: it counts the other users' processes and the busy ones). "
+    "against: the accumulator of the revision given, with as many threads as ours may "
+    "take, in the same process and so under ours' OpenMP settings (threads asleep at once "
+    "after a block unless GOMP_SPINCOUNT is set); identical sums: ours, one thread's and "
+    "its Sff, Sfx, Sxx equal bit for bit in every run."
+)
+
+
+def measure_load(fs: float, dtype: str, args: argparse.Namespace) -> list[list[str]]:
+    """Two rows of the table under load (``--busy``): quiet, and beside the busy processes."""
+    runs = in_child("times", fs, args, dtype)
+    if runs is None:
+        raise SystemExit(f"timing {fs:g} Hz {dtype} failed")
+    rows = []
+    for n in (0, args.busy):
+        mine = [r for r in runs if r["busy"] == n]
+        floor, ours, one = (np.array([min(r["scipy"], r["rocket"]) for r in mine]),
+                            *(np.array([r[k] for r in mine]) for k in ("ours", "one")))
+        row = [f"{fs / 1000:g} kHz", dtype, str(n),
+               f"{np.median([r['load'] for r in mine]):.1f}", f"{1e3 * floor.min():.0f}",
+               f"{1e3 * ours.min():.0f}", spread(ours / floor), spread(one / floor),
+               spread(ours / one)]
+        if args.against:
+            other = np.array([r["against"] for r in mine])
+            row += [spread(other / floor), spread(ours / other),
+                    "yes" if all(r["identical"] for r in mine) else "NO"]
+        rows.append(row)
+    return rows
 
 
 def write_docs(path: Path, title: str, columns: tuple[str, ...], rows: list[list[str]],
                note: str) -> None:
-    """The table as markdown in ``path``, with the date, the machine and the command."""
+    """The table as markdown in ``path``, with the date, the machine, the command and the
+    load average."""
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo")
                 if line.startswith("model name")), platform.processor()) if Path(
         "/proc/cpuinfo").exists() else platform.processor()
+    command = " ".join(["benchmarks/frf.py", *sys.argv[1:]])
+    docs = path == ROOT / "docs" / "benchmarks.md"
     lines = [
-        "# Benchmarks", "",
-        "Written by `benchmarks/frf.py --write-docs`; run it again to refresh this page.", "",
+        "# Benchmarks" if docs else "# H1 spectra under load", "",
+        f"Written by `{'benchmarks/frf.py --write-docs' if docs else command}`; run it again "
+        "to refresh this page.", "",
+        *(["Under a second busy process: `benchmarks/results/frf-under-load.md` "
+           "(`benchmarks/frf.py --busy 1`).", ""] if docs else []),
         f"## {title}", "",
         f"- date: {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC",
         f"- machine: {cpu}, {os.cpu_count()} cores, {platform.system()} "
         f"{platform.release()}, Python {platform.python_version()}",
-        f"- command: `{' '.join(['.venv/bin/python', 'benchmarks/frf.py', *sys.argv[1:]])}`",
+        f"- command: `.venv/bin/python {command}`",
         f"- load average (1 min) when written: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores",
         "", "| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns),
         *("| " + " | ".join(r) + " |" for r in rows), "", note, "",
@@ -376,18 +463,21 @@ def main() -> int:
     p.add_argument("--rates", type=float, nargs="+", default=[25600.0, 51200.0])
     p.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
     p.add_argument("--block", type=float, default=1.0, help="block length, s")
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--workers", type=int, default=2, help="ours: most threads")
     p.add_argument("--repeat", type=int, default=5, help="runs (floor and ours taking turns)")
     p.add_argument("--no-references", action="store_true", help="skip scipy and pyFRF")
     p.add_argument("--against", metavar="REV", help="also time the accumulator of git REV")
+    p.add_argument("--busy", type=int, default=0, metavar="N",
+                   help="each run also beside N busy processes (times only)")
     p.add_argument("--write-docs", action="store_true", help="write docs/benchmarks.md")
+    p.add_argument("--write", type=Path, metavar="FILE", help="write the table to FILE")
     p.add_argument("--child", help=argparse.SUPPRESS)
     p.add_argument("--rate", type=float, help=argparse.SUPPRESS)
     p.add_argument("--dtype", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
         child(args.child, args.rate, args.duration, args.block, args.dtype, args.workers,
-              args.repeat, args.against)
+              args.repeat, args.against, args.busy)
         return 0
     try:
         import pyFRF  # noqa: F401
@@ -400,12 +490,17 @@ def main() -> int:
 
     console = Console(width=260)
     title = (f"H1 spectra, 1 force + {N_RESP} accelerations, {args.duration:g} s, "
-             f"nperseg {NPERSEG}, 50 % overlap, ours with {args.workers} threads")
-    columns = COLUMNS + (AGAINST if args.against else ())
+             f"nperseg {NPERSEG}, 50 % overlap, ours with at most {args.workers} threads")
+    if args.busy:
+        columns = LOAD_COLUMNS + (LOAD_AGAINST if args.against else ())
+        note = LOAD_NOTE
+    else:
+        columns = COLUMNS + (AGAINST if args.against else ())
+        note = NOTE.format(group=GROUP) + (f" {pyfrf_note}." if pyfrf_note else "")
     rows = []
     for fs in args.rates:
         for dtype in args.dtypes:
-            rows.append(measure(fs, dtype, args))
+            rows += measure_load(fs, dtype, args) if args.busy else [measure(fs, dtype, args)]
             console.print(f"done {fs:g} Hz {dtype}", style="dim")
     table = Table(title=title)
     for col in columns:
@@ -413,10 +508,11 @@ def main() -> int:
     for row in rows:
         table.add_row(*row)
     console.print(table)
-    note = NOTE.format(group=GROUP) + (f" {pyfrf_note}." if pyfrf_note else "")
     console.print(note)
     if args.write_docs:
         write_docs(ROOT / "docs" / "benchmarks.md", title, columns, rows, note)
+    if args.write:
+        write_docs(args.write, title, columns, rows, note)
     return 0
 
 

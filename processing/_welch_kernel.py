@@ -13,13 +13,12 @@ not depend on the others in its call: the same bits whatever the block boundarie
 grouping and the number of threads.
 
 Threads: numba's OpenMP layer where the OpenMP runtime is present (else ``workqueue``),
-unless ``NUMBA_THREADING_LAYER`` says otherwise, with ``OMP_WAIT_POLICY=PASSIVE`` and
-``GOMP_SPINCOUNT=200000`` unless set: after a block its threads spin for about 3 ms of one
-core (measured here) before they sleep, so back-to-back blocks find them awake, and they do
-not hold the cores from other threads (the acquisition's readers) for longer than that on a
-loaded machine. Sleeping at once costs about 10 % per block on a virtual machine, where an
-idle core is halted and slow to wake; spinning without bound takes a core. The hot loops index from
-zero upwards: numba's wrap-around of negative indices stops LLVM vectorising a loop.
+unless ``NUMBA_THREADING_LAYER`` says otherwise, with ``OMP_WAIT_POLICY=PASSIVE`` unless
+set: after a block its threads sleep at once (libgomp's spin count 0), so they neither hold
+a core from other threads (the acquisition's readers, another process) nor count as
+runnable when the next block looks for free cores (:func:`processing.spectral.free_cores`).
+The hot loops index from zero upwards: numba's wrap-around of negative indices stops LLVM
+vectorising a loop.
 """
 
 from __future__ import annotations
@@ -48,8 +47,7 @@ BATCH = 64
 
 if "NUMBA_THREADING_LAYER" not in os.environ:
     # read by the OpenMP runtime when numba first loads it (the first parallel call)
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    os.environ.setdefault("GOMP_SPINCOUNT", "200000")  # libgomp's busy-wait, then sleep
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # no busy-wait after a block
     numba.config.THREADING_LAYER = "default"  # type: ignore[attr-defined]
 
 #: compiled once per sample precision and layout, cached on disk; releases the GIL

@@ -20,6 +20,7 @@ multiple coherence of each response.
 from __future__ import annotations
 
 import itertools
+import os
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -35,8 +36,8 @@ from processing import _welch_kernel as _kernel
 from processing.data import ESTIMATORS
 
 __all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError", "coherence",
-           "combine", "frf", "h1", "h2", "hv", "ordinary_coherence", "record_spectra",
-           "welch_spectra"]
+           "combine", "free_cores", "frf", "h1", "h2", "hv", "ordinary_coherence",
+           "record_spectra", "welch_spectra"]
 
 Scaling = Literal["density", "spectrum"]
 
@@ -110,10 +111,8 @@ def combine(a: CrossSpectra, b: CrossSpectra) -> CrossSpectra:
     if n == 0:
         return a
     wa, wb = a.n_averages / n, b.n_averages / n
-    return CrossSpectra(
-        a.freq, wa * a.Sff + wb * b.Sff, wa * a.Sfx + wb * b.Sfx, wa * a.Sxx + wb * b.Sxx,
-        n, a.ref_channels, a.resp_channels,
-    )
+    return CrossSpectra(a.freq, wa * a.Sff + wb * b.Sff, wa * a.Sfx + wb * b.Sfx,
+                        wa * a.Sxx + wb * b.Sxx, n, a.ref_channels, a.resp_channels)
 
 
 def _solve_refs(sp: CrossSpectra, rhs: NDArray[np.complex128]) -> NDArray[np.complex128]:
@@ -157,9 +156,8 @@ def h2(sp: CrossSpectra) -> NDArray[np.complex128]:
     Defined for one reference only; use H1 or Hv with several references.
     """
     if sp.n_ref != 1:
-        raise SpectralError(
-            f"H2 needs exactly one reference, got {sp.n_ref}: use estimator 'H1' or 'Hv'"
-        )
+        raise SpectralError(f"H2 needs exactly one reference, got {sp.n_ref}: "
+                            "use estimator 'H1' or 'Hv'")
     with np.errstate(divide="ignore", invalid="ignore"):
         return (sp.Sxx / np.conj(sp.Sfx[0]))[:, None, :]
 
@@ -223,22 +221,18 @@ def frf(
     try:
         fn = funcs[estimator.lower()]
     except KeyError:
-        raise SpectralError(
-            f"unknown estimator {estimator!r}: choose one of {', '.join(ESTIMATORS)}"
-        ) from None
+        raise SpectralError(f"unknown estimator {estimator!r}: choose one of "
+                            f"{', '.join(ESTIMATORS)}") from None
     H = fn(sp)
     coh = np.broadcast_to(coherence(sp)[:, None, :], H.shape).copy()
     return H, coh
 
 
-def _channel_roles(
-    n_ch: int, references: Sequence[int], responses: Sequence[int] | None
-) -> tuple[tuple[int, ...], tuple[int, ...]]:
+def _channel_roles(n_ch: int, references: Sequence[int], responses: Sequence[int] | None
+                   ) -> tuple[tuple[int, ...], tuple[int, ...]]:
     refs = tuple(int(r) for r in references)
-    if responses is None:
-        resps = tuple(c for c in range(n_ch) if c not in refs)
-    else:
-        resps = tuple(int(r) for r in responses)
+    resps = tuple(c for c in range(n_ch) if c not in refs) if responses is None else tuple(
+        int(r) for r in responses)
     every = refs + resps
     if not refs:
         raise SpectralError("give at least one reference (force) channel")
@@ -273,6 +267,18 @@ _NO_TAPS = np.ones(1)
 _LAUNCH = threading.Lock()
 #: the most lines a window may spread over to be applied in frequency
 _MAX_TAPS = 8
+
+
+def free_cores() -> int:
+    """Cores free for this process's threads now: the cores it may run on less the runnable
+    threads but the caller (``/proc/loadavg``'s fourth field; below 1 when more threads than
+    cores want to run); every core where that is not known (not Linux)."""
+    try:
+        with open("/proc/loadavg") as fh:
+            runnable = int(fh.read().split()[3].partition("/")[0])
+        return len(os.sched_getaffinity(0)) - (runnable - 1)
+    except (AttributeError, OSError, IndexError, ValueError):
+        return os.cpu_count() or 1
 
 
 def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:
@@ -318,8 +324,10 @@ class SpectralAccumulator:
     group : int, optional
         Most segments of a channel per FFT call (default 16 for float32 samples, 4 else).
     workers : int, optional
-        Threads sharing the channels, at most (and by default) numba's
-        ``NUMBA_NUM_THREADS`` (the number of cores unless set).
+        Most threads sharing the channels, at most (and by default) numba's
+        ``NUMBA_NUM_THREADS`` (the number of cores unless set). Each block takes as many
+        as :func:`free_cores` finds free when it arrives, at least one: a thread sharing
+        its core with another process holds up every other at the end of the block.
 
     Notes
     -----
@@ -485,7 +493,7 @@ class SpectralAccumulator:
         need = n_new if n_seg == 0 else (max(0, (n_head - 1) * step + N - n_tail) if n_head else 0)
         with _LAUNCH:
             threads = numba.get_num_threads()
-            numba.set_num_threads(self.workers)
+            numba.set_num_threads(max(1, min(self.workers, free_cores())))
             chunk = numba.set_parallel_chunksize(1)  # the runs handed out one at a time
             try:
                 finite = _kernel.add_block(
@@ -513,16 +521,12 @@ class SpectralAccumulator:
             If not one complete segment has been received yet.
         """
         if self._n_seg == 0 or self._tail is None:
-            raise SpectralError(
-                f"no complete segment yet: {self._n_samples} samples per channel received, "
-                f"{self.nperseg} needed"
-            )
-        n = self._n_seg
-        norm = self.fs * np.sum(self.window**2) if self.scaling == "density" else np.sum(
-            self.window
-        ) ** 2
-        return _averaged_spectra(self.freq, self.nperseg, float(norm), n, self._P, self._Q,
-                                 self._refs, self._resps)
+            raise SpectralError(f"no complete segment yet: {self._n_samples} samples per "
+                                f"channel received, {self.nperseg} needed")
+        w = self.window
+        norm = self.fs * np.sum(w**2) if self.scaling == "density" else np.sum(w) ** 2
+        return _averaged_spectra(self.freq, self.nperseg, float(norm), self._n_seg, self._P,
+                                 self._Q, self._refs, self._resps)
 
 
 def welch_spectra(data: ArrayLike, fs: float, nperseg: int, noverlap: int | None = None,

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numba
@@ -15,6 +18,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from hardware_mocks.benches import get_bench
 from hardware_mocks.signals import impulse_response, simulate
+from processing import spectral
 from processing.excitation import burst_random, continuous_random, periodic_chirp
 from processing.spectral import (
     CrossSpectra,
@@ -22,6 +26,7 @@ from processing.spectral import (
     SpectralError,
     coherence,
     combine,
+    free_cores,
     frf,
     h1,
     h2,
@@ -207,6 +212,43 @@ def test_threads_default_to_every_numba_thread():
     assert SpectralAccumulator(FS, 256).workers == most
     assert SpectralAccumulator(FS, 256, workers=1000).workers == most
     assert SpectralAccumulator(FS, 256, workers=1).workers == 1
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one numba thread")
+@pytest.mark.parametrize(("free", "workers", "threads"),
+                         [(-3, None, 1), (0, 2, 1), (1, None, 1), (2, None, 2), (9, 2, 2),
+                          (2, 1, 1)])
+def test_each_block_takes_the_threads_of_the_free_cores(monkeypatch, free, workers, threads):
+    # a thread sharing its core with a busy process holds up the others at the end of a
+    # block (2x slower than one thread): the free cores are read at each block, here given
+    used = []
+
+    def set_num_threads(n):
+        used.append(n)
+        real(n)
+
+    real = numba.set_num_threads
+    monkeypatch.setattr(spectral, "free_cores", lambda: free)
+    monkeypatch.setattr(numba, "set_num_threads", set_num_threads)
+    data = _signals(n=3000, n_resp=9)
+    acc = SpectralAccumulator(FS, 256, workers=workers)
+    for block in np.array_split(data, 3, axis=-1):
+        acc.update(block)
+    assert used[::2] == [threads] * 3  # each launch's, then numba's own count put back
+    assert_array_equal(acc.spectra().Sfx, welch_spectra(data, FS, 256, workers=1).Sfx)
+
+
+def test_free_cores_leave_out_a_busy_process():
+    # the process is runnable from its first line on: never a free core for it
+    cores = len(os.sched_getaffinity(0))
+    with subprocess.Popen([sys.executable, "-c", "print(flush=True)\nwhile True: pass"],
+                          stdout=subprocess.PIPE) as busy:
+        try:
+            assert busy.stdout is not None and busy.stdout.readline() == b"\n"
+            assert free_cores() <= cores - 1
+        finally:
+            busy.kill()
+    assert free_cores() <= cores
 
 
 def test_spectra_can_be_read_while_streaming():
