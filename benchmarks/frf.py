@@ -33,12 +33,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import datetime
 import importlib
 import itertools
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -432,29 +430,20 @@ def measure_load(fs: float, dtype: str, args: argparse.Namespace) -> list[list[s
 
 def write_docs(path: Path, title: str, columns: tuple[str, ...], rows: list[list[str]],
                note: str) -> None:
-    """The table as markdown in ``path``, with the date, the machine, the command and the
-    load average."""
-    cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo")
-                if line.startswith("model name")), platform.processor()) if Path(
-        "/proc/cpuinfo").exists() else platform.processor()
-    command = " ".join(["benchmarks/frf.py", *sys.argv[1:]])
-    docs = path == ROOT / "docs" / "benchmarks.md"
-    lines = [
-        "# Benchmarks" if docs else "# H1 spectra under load", "",
-        f"Written by `{'benchmarks/frf.py --write-docs' if docs else command}`; run it again "
-        "to refresh this page.", "",
-        *(["Under a second busy process: `benchmarks/results/frf-under-load.md` "
-           "(`benchmarks/frf.py --busy 1`).", ""] if docs else []),
-        f"## {title}", "",
-        f"- date: {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC",
-        f"- machine: {cpu}, {os.cpu_count()} cores, {platform.system()} "
-        f"{platform.release()}, Python {platform.python_version()}",
-        f"- command: `.venv/bin/python {command}`",
-        f"- load average (1 min) when written: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores",
-        "", "| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns),
-        *("| " + " | ".join(r) + " |" for r in rows), "", note, "",
-    ]
-    path.write_text("\n".join(lines))
+    """The table as markdown, with the date, the machine, the command and the load average:
+    this script's section of docs/benchmarks.md, or a page of its own at ``path``."""
+    from docs_page import PAGE, provenance, write_section
+
+    docs = path == PAGE
+    body = [f"## {title}", "", *provenance("benchmarks/frf.py"), "",
+            *(["Under a second busy process: `benchmarks/results/frf-under-load.md` "
+               "(`benchmarks/frf.py --busy 1`).", ""] if docs else []),
+            "| " + " | ".join(columns) + " |", "|" + " --- |" * len(columns),
+            *("| " + " | ".join(r) + " |" for r in rows), "", note, ""]
+    if docs:
+        write_section("benchmarks/frf.py", "\n".join(body))
+    else:
+        path.write_text("\n".join(["# H1 spectra under load", "", *body]))
 
 
 def main() -> int:
