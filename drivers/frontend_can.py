@@ -277,17 +277,18 @@ class CanFrontEnd(StreamingFrontEnd):
         block = _Assembly(np.zeros((self.n_inputs, self.layout.samples)))
         self._n_status = 0
         while not self._reader.stopping:
+            t_poll = time.monotonic()
             msg = self._link.recv(0.05)
-            if msg is None:
-                continue
-            t_rx = time.monotonic()
-            fid = msg.arbitration_id
-            if fid == ID_ACK:
-                self._on_ack(msg)
-            elif fid == ID_STATUS:
-                self._on_status(msg)
-            elif fid == self.layout.frame_id:
-                self._on_samples(msg, t_rx, block)
+            if msg is not None:
+                t_rx = time.monotonic()
+                fid = msg.arbitration_id
+                if fid == ID_ACK:
+                    self._on_ack(msg)
+                elif fid == ID_STATUS:
+                    self._on_status(msg)
+                elif fid == self.layout.frame_id:
+                    self._on_samples(msg, t_rx, block)
+            self._buffer.polled(t_poll)
 
     def _on_ack(self, msg: can.Message) -> None:
         """Queue an FE_ACK for :meth:`command`."""
