@@ -31,7 +31,14 @@ from numpy.typing import ArrayLike, NDArray
 from hardware_mocks.benches import Bench
 from hardware_mocks.signals import ImpulseResponse, impulse_response, simulate
 
-__all__ = ["BenchPhysics", "DeviceClock", "ForceSource", "Hit", "sampled_pulse"]
+__all__ = ["STALL_TIMEOUT", "BenchPhysics", "DeviceClock", "ForceSource", "Hit",
+           "sampled_pulse"]
+
+#: seconds of silence after which the drivers take a mock device for stopped
+#: (``stall_timeout``). The mocks are threads on the host the acquisition shares with
+#: other work: at load 4 on 2 cores a mock's thread got no time for 0.27 s (a front end's
+#: longest gap between frames, 20 s of streaming); a real device's drivers keep their 0.5 s.
+STALL_TIMEOUT = 2.0
 
 
 class ForceSource(Protocol):
