@@ -15,6 +15,9 @@ import serial
 from hardware_mocks.hammer_device import HammerDevice, crc16_ccitt_false
 
 
+FRAME = bytes.fromhex("a5 5a 01 00")  # the start of a 32-bit sample frame
+
+
 def read_for(port: serial.Serial, seconds: float) -> bytes:
     out = b""
     deadline = time.monotonic() + seconds
@@ -75,16 +78,27 @@ def test_stream_frames_have_the_documented_layout(port: serial.Serial) -> None:
     assert tail.endswith(b"OK\n")
 
 
-def test_frames_are_paced_by_the_device_clock(port: serial.Serial) -> None:
-    port.write(b"RATE 1024\nSTART\n")
-    port.read_until(b"\n")
-    port.read_until(b"\n")
-    t0 = time.monotonic()
-    data = read_for(port, 0.5)
-    elapsed = time.monotonic() - t0
-    n_frames = data.count(bytes.fromhex("a5 5a 01 00"))
-    assert abs(n_frames * 4 - 1024 * elapsed) < 1024 * 0.05  # within 50 ms of real time
-    port.write(b"STOP\n")
+def test_frames_are_paced_by_the_device_clock(engine_physics_factory) -> None:
+    """The device sends a frame once its samples are due on its own clock, and not before:
+    with that clock standing still, half a second of it at 1024 Hz is 128 frames of 4."""
+    host = [100.0]
+    dev = HammerDevice(engine_physics_factory(), frame_len=4, now=lambda: host[0])
+    try:
+        with serial.Serial(dev.path, timeout=0.05) as port:
+            port.write(b"RATE 1024\nSTART\n")
+            assert port.read_until(b"\n") + port.read_until(b"\n") == b"OK\nOK\n"
+            host[0] += 0.5  # samples 0..512 are due: 128 whole frames
+            data = b""
+            deadline = time.monotonic() + 30.0  # only guards against a hang
+            while data.count(FRAME) < 128 and time.monotonic() < deadline:
+                data += port.read(max(1, port.in_waiting))
+            port.write(b"STOP\n")  # the end frame follows whatever the device sent
+            data += port.read_until(b"OK\n")
+    finally:
+        dev.shutdown()
+    assert data.endswith(b"OK\n")
+    frames = data[:data.index(bytes.fromhex("a5 5a 81 00"))]  # up to the end-of-stream frame
+    assert frames.count(FRAME) == 128 and dev.frames_sent == 128 + 1  # and the end frame
 
 
 def test_host_closing_the_port_stops_the_stream(device: HammerDevice) -> None:
