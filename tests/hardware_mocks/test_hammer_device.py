@@ -14,7 +14,6 @@ import serial
 
 from hardware_mocks.hammer_device import HammerDevice, crc16_ccitt_false
 
-
 FRAME = bytes.fromhex("a5 5a 01 00")  # the start of a 32-bit sample frame
 
 
