@@ -7,6 +7,7 @@ import os
 import select
 import struct
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -17,10 +18,15 @@ from hardware_mocks.hammer_device import HammerDevice, crc16_ccitt_false
 FRAME = bytes.fromhex("a5 5a 01 00")  # the start of a 32-bit sample frame
 
 
-def read_for(port: serial.Serial, seconds: float) -> bytes:
+END = bytes.fromhex("a5 5a 80 00")  # the start of the 16-bit end-of-stream frame
+
+
+def read_until(port: serial.Serial, done: Callable[[bytes], bool]) -> bytes:
+    """What the device sends until ``done(received)``; 30 s only guard against a hang."""
     out = b""
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
+    deadline = time.monotonic() + 30.0
+    while not done(out):
+        assert time.monotonic() < deadline, f"not done after 30 s: {out[-200:]!r}"
         out += port.read(max(1, port.in_waiting))
     return out
 
@@ -61,7 +67,7 @@ def test_stream_frames_have_the_documented_layout(port: serial.Serial) -> None:
     port.write(b"FMT 16\nRATE 1024\nSTART\n")
     assert port.read_until(b"\n") + port.read_until(b"\n") + port.read_until(b"\n") == \
         b"OK\nOK\nOK\n"
-    data = read_for(port, 0.1)
+    data = read_until(port, lambda got: len(got) >= 24)  # two frames and more
     # frame 0: sync, flags 0 (int16), reserved, seq 0, n = 4, 4 x int16, CRC
     assert data[:8] == bytes.fromhex("a5 5a 00 00 00 00 04 00")
     frame = data[:8 + 8 + 2]
@@ -70,9 +76,9 @@ def test_stream_frames_have_the_documented_layout(port: serial.Serial) -> None:
     assert data[18:24] == bytes.fromhex("a5 5a 00 00 01 00")  # next frame: seq 1
     port.write(b"RATE 2048\n")  # settings are refused while streaming
     port.write(b"STOP\n")
-    tail = read_for(port, 0.1)
+    tail = read_until(port, lambda got: END in got and got.endswith(b"OK\n"))
     assert b"ERR 3 busy\n" in tail
-    end = tail.index(bytes.fromhex("a5 5a 80 00"))
+    end = tail.index(END)
     assert tail[end + 6:end + 8] == b"\x00\x00"  # n = 0
     assert tail.endswith(b"OK\n")
 
@@ -122,10 +128,12 @@ def test_raw_pty_has_no_echo(device: HammerDevice) -> None:
     fd = os.open(device.path, os.O_RDWR | os.O_NOCTTY)
     try:
         os.write(fd, b"ID?\n")
-        r, _, _ = select.select([fd], [], [], 1.0)
-        assert r
-        time.sleep(0.05)
-        assert os.read(fd, 100) == b"ID INSITU,HD-1,0001,1.3\n"
+        got = b""
+        while not got.endswith(b"\n"):  # the answer, however it comes in pieces
+            r, _, _ = select.select([fd], [], [], 30.0)  # only guards against a hang
+            assert r, got
+            got += os.read(fd, 100)
+        assert got == b"ID INSITU,HD-1,0001,1.3\n"  # no echo of the command before it
     finally:
         os.close(fd)
 
