@@ -185,6 +185,12 @@ class FrontEndDevice:
         self._overflow_flag = False
         self._last_status = time.monotonic()
 
+    @property
+    def clock(self) -> DeviceClock:
+        """The sample clock of the stream (started at the last START), which tests compare
+        with what the host measured."""
+        return self._clock
+
     def unplug(self) -> None:
         """Disconnect from the bus: no more frames, no more answers."""
         self._unplugged.set()

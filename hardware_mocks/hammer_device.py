@@ -129,6 +129,12 @@ class HammerDevice(SerialMockDevice):
         self._rx = bytearray()
         self._start_firmware("mock-hammer")
 
+    @property
+    def clock(self) -> DeviceClock:
+        """The sample clock of the stream (started at the last START), which tests compare
+        with what the host measured."""
+        return self._clock
+
     def hit(self, exc: int = 0, peak: float = 200.0, duration: float = 0.004,
             double: tuple[float, float] | None = None, delay: float = 0.05) -> list[Hit]:
         """Hit the bench at excitation DOF ``exc``; see :meth:`BenchPhysics.hit`."""
