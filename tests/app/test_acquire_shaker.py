@@ -90,7 +90,7 @@ def test_chirp_run_identifies_the_engine_and_replay_is_identical(tmp_path: Path)
         proc = ShakerProcedure(plan, bench.station, path,
                                listeners=[bench.shaker_operator, rec])
         proc.start()
-        assert proc.wait(90) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
         assert _wait(lambda: bench.shaker.level_now == 0.0)
         assert not bench.shaker.output and bench.shaker.exc is None
         cmds = bench.shaker.commands
@@ -163,11 +163,11 @@ def test_output_off_on_device_error_hung_worker_and_stop(tmp_path: Path) -> None
             proc.resume()
             assert _wait(lambda: dev.output and len(rec.hits) > n_before + 2)
             proc.stop()
-            assert proc.wait(60) is RunState.STOPPED
+            assert proc.wait(300) is RunState.STOPPED
             assert not dev.output and _wait(lambda: dev.level_now == 0.0)
         finally:
             proc.stop()
-            proc.wait(60)
+            proc.wait(300)
     run = read_run(path)
     assert run.state == "stopped" and len(run.records) == len(rec.hits)
     rejected = [i for i, h in enumerate(rec.hits) if not h.auto_accepted]
@@ -193,10 +193,10 @@ def test_stop_during_the_ramp_turns_the_output_off_at_once(tmp_path: Path) -> No
             proc.stop()
             levels: list[float] = []
             assert _wait(lambda: levels.append(dev.level_now) or not dev.output)
-            assert proc.wait(60) is RunState.STOPPED
+            assert proc.wait(300) is RunState.STOPPED
         finally:
             proc.stop()
-            proc.wait(60)
+            proc.wait(300)
     assert max(levels) < 0.4, f"the output ramped to {max(levels):.2f} V after Stop"
     assert not rec.hits  # stopped before the first block
 

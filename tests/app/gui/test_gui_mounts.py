@@ -145,7 +145,7 @@ def test_run_file_mounts_are_loaded_with_the_run(qtbot, make_window, choose_file
     with InProcessBench("engine-rigid") as bench:
         proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
         proc.start()
-        assert proc.wait(60) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
     write_mounts(path, load_mounts(toml))
     window: MainWindow = make_window()
     choose_file(path)
