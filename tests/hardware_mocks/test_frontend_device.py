@@ -16,6 +16,7 @@ from drivers.errors import DeviceTimeoutError
 from drivers.frontend_can import CanFrontEnd, load_dbc
 from hardware_mocks.frontend_device import FrontEndDevice
 from hardware_mocks.physics import STALL_TIMEOUT, BenchPhysics
+from hardware_mocks.shaker_device import ShakerDevice
 
 
 def bench_channels(physics: BenchPhysics, accel_range: float = 1.0,
@@ -210,3 +211,29 @@ def test_device_gone_times_out(fd_rig: tuple[FrontEndDevice, CanFrontEnd], fault
         fe.read_block(100000, timeout=30.0)
     with pytest.raises(DeviceTimeoutError, match="no answer to STOP"):
         fe.stop()
+
+
+def test_no_sample_is_sent_before_its_shaker_force_is_simulated(
+        engine_physics_factory, channel_name: str) -> None:
+    """A loaded host: simulating the shaker's force takes longer (0.3 s a call) than the
+    0.1 s it simulates. Every sample sent carries the force, none is sent empty."""
+    physics = engine_physics_factory()
+    simulate_forces = physics.source_forces
+
+    def slow(t: np.ndarray) -> list:
+        time.sleep(0.3)  # the scenario: the device's thread gets the CPU late
+        return simulate_forces(t)
+
+    physics.source_forces = slow  # type: ignore[method-assign]
+    with ShakerDevice(physics, exc=2, force_per_volt=50.0) as shaker:
+        shaker.level, shaker.ramp, shaker.output = 1.0, 0.0, True
+        shaker.function, shaker.frequency = "SIN", 50.0  # 50 N peak at 50 Hz
+        dev, fe = rig(physics, channel_name)
+        try:
+            force = fe.read_block(2048, timeout=60.0).channel("F")  # (a hang guard)
+        finally:
+            fe.shutdown()
+            dev.shutdown()
+    # a sine sampled at 1024 Hz is never within 1 mN of zero: such a sample was sent empty
+    assert np.count_nonzero(np.abs(force) < 1e-3) == 0
+    assert np.sqrt(np.mean(force**2)) == pytest.approx(50.0 / np.sqrt(2), rel=0.01)

@@ -73,8 +73,10 @@ def test_drift_and_offset_are_measured_and_corrected(engine_physics_factory) -> 
 def test_refused_when_streams_cannot_be_aligned(engine_physics_factory) -> None:
     physics = engine_physics_factory()
     ref, other, fits, _, _ = run(physics, "sync-2", hammer_ppm=30000.0, hammer_offset=0.0)
+    # the rate alone (the timing's scatter, which a loaded host raises, is
+    # tests/drivers/test_sync_clock.py's)
     with pytest.raises(SyncError, match="hammer: clock off by"):
-        check_alignment(fits, max_ppm=10000)
+        check_alignment(fits, max_ppm=10000, max_residual=np.inf)
     with pytest.raises(SyncError, match="streams do not overlap"):
         align(ref, fits["fe"], other, fits["hammer"].__class__(
             **{**fits["hammer"].__dict__, "t0": fits["hammer"].t0 + 5.0}), "hammer")
