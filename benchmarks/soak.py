@@ -1,11 +1,14 @@
 """Soak test: a long acquisition on the mock bench process, with faults injected at random.
 
     .venv/bin/python benchmarks/soak.py [--minutes 60] [--seed 1] [--json out.json]
-                                        [--write-docs]
+                                        [--hits N] [--fault-every LOW HIGH] [--write-docs]
 
 The mock bench (``insitu mock-bench``) runs in its own process; ``insitu acquire
 --mock-operator`` acquires one long hammer run from it (the mock-bench plan with short
-records and many hits per point: an accelerated test). At random moments this script:
+records and many hits per point: an accelerated test). ``--hits N`` gives each point N
+hits instead: the soak then ends when the run is complete, or after ``--minutes`` at the
+latest (``tests/app/test_soak.py``: 3 hits at each of the 9 points, a fault every 1 to 4 s).
+At random moments (every ``--fault-every`` 5 to 25 s by default) this script:
 
 - sets a fault of the bench's devices for a while through its control channel: front-end
   frames dropped or truncated, hammer frames corrupted or dropped, line noise;
@@ -71,6 +74,7 @@ class Report:
     rss_growth_hour_mb: float = 0.0
     stop_s: list[float] = field(default_factory=list)
     crashes: list[str] = field(default_factory=list)
+    finished: bool = False  # the run is complete (all its points' hits)
 
 
 def _rss_mb(pid: int) -> float:
@@ -154,12 +158,22 @@ def _counts(path: Path) -> tuple[int, int, int, int]:
             int(np.sum(r.bad_frames)))
 
 
-def soak(minutes: float, seed: int, folder: Path, console: Console) -> Report:
+def _finished(path: Path) -> bool:
+    """True once the run file says the run is complete."""
+    from app.io.runfile import read_run
+
+    return path.exists() and read_run(path, with_data=False).state == "finished"
+
+
+def soak(minutes: float, seed: int, folder: Path, console: Console, hits: int = 100000,
+         fault_every: tuple[float, float] = (5.0, 25.0)) -> Report:
+    """Acquire for ``minutes`` (or until the run of ``hits`` per point is complete), a
+    fault every ``fault_every`` s (uniform between the two)."""
     rng = random.Random(seed)
     report = Report(minutes, seed)
     plan = folder / "plan.toml"
-    text = PLAN.read_text().replace("hits = 1", "hits = 100000").replace("length = 1.5",
-                                                                          "length = 0.5")
+    text = PLAN.read_text().replace("hits = 1", f"hits = {hits}").replace("length = 1.5",
+                                                                           "length = 0.5")
     plan.write_text(text)
     out = folder / "soak.h5"
     bench = Bench(folder)
@@ -167,7 +181,7 @@ def soak(minutes: float, seed: int, folder: Path, console: Console) -> Report:
     end = time.monotonic() + 60 * minutes
     kept = (0, 0, 0, 0)
     try:
-        while time.monotonic() < end:
+        while time.monotonic() < end and not _finished(out):
             args = [*INSITU, "acquire", "--station", str(bench.station), "--plan", str(plan),
                     "--out", str(out), "--mock-operator"]
             if out.exists():
@@ -181,7 +195,7 @@ def soak(minutes: float, seed: int, folder: Path, console: Console) -> Report:
             rss: list[tuple[float, float]] = []
             size0 = out.stat().st_size if out.exists() else 0
             t_first = -1.0  # when the segment stored its first record
-            next_fault = t0 + rng.uniform(5, 20)
+            next_fault = t0 + rng.uniform(*fault_every)
             while acq.poll() is None and time.monotonic() < end:
                 time.sleep(0.5)
                 rss.append((time.monotonic() - t0, _rss_mb(acq.pid)))
@@ -189,7 +203,7 @@ def soak(minutes: float, seed: int, folder: Path, console: Console) -> Report:
                     t_first = rss[-1][0]  # start-up over (imports, devices, read-back)
                 if time.monotonic() < next_fault:
                     continue
-                next_fault = time.monotonic() + rng.uniform(5, 25)
+                next_fault = time.monotonic() + rng.uniform(*fault_every)
                 what = rng.choice([*FAULTS, "bench killed", "host stall"])
                 report.faults[what] = report.faults.get(what, 0) + 1
                 console.log(f"fault: {what}")
@@ -245,6 +259,7 @@ def soak(minutes: float, seed: int, folder: Path, console: Console) -> Report:
     finally:
         bench.stop()
     report.records, report.accepted, report.samples_lost, report.bad_frames = kept
+    report.finished = _finished(out)
     if report.rss_mb_peak:
         report.rss_mb_max = float(max(report.rss_mb_peak))
         # over the hour: the highest peak of any segment above the first segment's first minute
@@ -283,13 +298,18 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--hits", type=int, default=100000,
+                    help="hits per point: the soak ends when the run is complete")
+    ap.add_argument("--fault-every", type=float, nargs=2, default=(5.0, 25.0),
+                    metavar=("LOW", "HIGH"), help="seconds between faults (uniform)")
     ap.add_argument("--json", type=Path, help="write the report as JSON here")
     ap.add_argument("--write-docs", action="store_true",
                     help="append the table to docs/reliability.md")
     args = ap.parse_args()
     console = Console()
     with tempfile.TemporaryDirectory() as d:
-        report = soak(args.minutes, args.seed, Path(d), console)
+        report = soak(args.minutes, args.seed, Path(d), console, args.hits,
+                      tuple(args.fault_every))
     console.print(table(report))
     for p in report.pauses:
         console.print(f"segment ended: {p}")

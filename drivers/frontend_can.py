@@ -183,20 +183,15 @@ class CanFrontEnd(StreamingFrontEnd):
         self._send(opcode, **fields)
         deadline = time.monotonic() + self.reply_timeout
         while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise DeviceTimeoutError(f"{self.name}: no answer to {opcode} within "
-                                         f"{self.reply_timeout:g} s", self.name)
-            if self._reader.is_alive():
-                try:
-                    ack_op, result = self._acks.get(timeout=remaining)
-                except queue.Empty:
-                    continue
-            else:
-                msg = self._link.recv(min(remaining, 0.05))
-                if msg is None or msg.arbitration_id != ID_ACK:
-                    continue
-                ack_op, result = msg.data[0], msg.data[1]
+            # what has arrived is taken before the time is looked at (a loaded host)
+            remaining = max(deadline - time.monotonic(), 0.0)
+            ack = self._next_ack(remaining)
+            if ack is None:
+                if time.monotonic() >= deadline:
+                    raise DeviceTimeoutError(f"{self.name}: no answer to {opcode} within "
+                                             f"{self.reply_timeout:g} s", self.name)
+                continue
+            ack_op, result = ack
             if ack_op != OPCODES[opcode]:
                 continue
             if result != 0:
@@ -205,15 +200,29 @@ class CanFrontEnd(StreamingFrontEnd):
                     self.name)
             return
 
+    def _next_ack(self, timeout: float) -> tuple[int, int] | None:
+        """The next FE_ACK (opcode, result) within ``timeout`` s, from the reader thread's
+        queue while it runs, else from the bus; None if none came."""
+        if self._reader.is_alive():
+            try:
+                return self._acks.get(timeout=timeout)
+            except queue.Empty:
+                return None
+        msg = self._link.recv(min(timeout, 0.05))
+        if msg is None or msg.arbitration_id != ID_ACK:
+            return None
+        return msg.data[0], msg.data[1]
+
     def _identify(self) -> dict[str, int]:
         self._send("IDENTIFY")
         deadline = time.monotonic() + self.reply_timeout
-        while time.monotonic() < deadline:
+        while True:  # what has arrived is read before the time is looked at
             msg = self._link.recv(0.05)
             if msg is not None and msg.arbitration_id == ID_INFO:
                 return self.decode(ID_INFO, msg.data)
-        raise DeviceTimeoutError(f"{self.name}: no FE_INFO answer to IDENTIFY within "
-                                 f"{self.reply_timeout:g} s", self.name)
+            if time.monotonic() >= deadline:
+                raise DeviceTimeoutError(f"{self.name}: no FE_INFO answer to IDENTIFY within "
+                                         f"{self.reply_timeout:g} s", self.name)
 
     def _open_internal(self) -> None:
         self._link.open()
@@ -277,17 +286,18 @@ class CanFrontEnd(StreamingFrontEnd):
         block = _Assembly(np.zeros((self.n_inputs, self.layout.samples)))
         self._n_status = 0
         while not self._reader.stopping:
+            t_poll = time.monotonic()
             msg = self._link.recv(0.05)
-            if msg is None:
-                continue
-            t_rx = time.monotonic()
-            fid = msg.arbitration_id
-            if fid == ID_ACK:
-                self._on_ack(msg)
-            elif fid == ID_STATUS:
-                self._on_status(msg)
-            elif fid == self.layout.frame_id:
-                self._on_samples(msg, t_rx, block)
+            if msg is not None:
+                t_rx = time.monotonic()
+                fid = msg.arbitration_id
+                if fid == ID_ACK:
+                    self._on_ack(msg)
+                elif fid == ID_STATUS:
+                    self._on_status(msg)
+                elif fid == self.layout.frame_id:
+                    self._on_samples(msg, t_rx, block)
+            self._buffer.polled(t_poll)
 
     def _on_ack(self, msg: can.Message) -> None:
         """Queue an FE_ACK for :meth:`command`."""

@@ -254,12 +254,16 @@ class SerialHammer(StreamingFrontEnd):
         frame_len = 0
         try:
             while not self._reader.stopping:
+                t_poll = time.monotonic()
                 data = self._link.read_some()
                 if not data:
+                    self._buffer.polled(t_poll)
                     continue
                 t_rx = time.monotonic()
                 buf += data
                 frames, bad, skipped = decode_frames(buf)
+                if not frames:  # bytes, but no whole frame: nothing heard yet
+                    self._buffer.polled(t_poll)
                 self.health.bad_frames += bad
                 self.health.resync_bytes += skipped
                 for frame in frames:

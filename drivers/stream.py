@@ -6,6 +6,14 @@ The buffer also keeps ``(host time, sample count)`` pairs, one per frame, from
 which :mod:`drivers.sync` estimates the device clock. A reader thread that dies
 stores its exception in the buffer, and the next ``take`` raises it (python-can's
 ``Notifier`` thread can die silently; ours cannot).
+
+A device is taken for silent when the reader heard nothing from it for the stall
+time *while it was listening*: the reader marks the start of each poll of its
+transport (:meth:`SampleBuffer.polled`), and the silence counts up to the start of
+the latest poll that has been handed over. A reader that did not run (a loaded
+host, a process stopped for a while, a thread holding the GIL) therefore does not
+make a device look silent: the samples that arrived meanwhile wait in the transport
+and are read first.
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ class SampleBuffer:
         self._appended = 0  # samples appended since reset
         self._error: BaseException | None = None
         self._last_arrival = time.monotonic()
+        self._listened: float | None = None  # start of the reader's latest poll handed over
         self._pairs: deque[tuple[float, int]] = deque(maxlen=max_pairs)
 
     def reset(self) -> None:
@@ -53,6 +62,7 @@ class SampleBuffer:
             self._buffered = self._next_out = self._appended = 0
             self._error = None
             self._last_arrival = time.monotonic()
+            self._listened = None
             self._pairs.clear()
 
     # -- producer side (reader thread) ----------------------------------------------------------
@@ -91,6 +101,16 @@ class SampleBuffer:
         with self._cond:
             self._last_arrival = time.monotonic()
 
+    def polled(self, started: float) -> None:
+        """The reader polled its transport from host time ``started`` (``time.monotonic()``,
+        taken before the poll) and has handed over whatever came: the device has been
+        silent at least from the last arrival until ``started``.
+
+        A reader that never calls this leaves the silence counted up to now.
+        """
+        with self._cond:
+            self._listened = started
+
     # -- consumer side --------------------------------------------------------------------------
     @property
     def appended(self) -> int:
@@ -108,7 +128,8 @@ class SampleBuffer:
         A sample instant counts as missing when any channel is NaN there.
 
         Raises the reader's error if it died, or :class:`DeviceTimeoutError` when
-        ``timeout`` s pass or nothing at all arrives for ``stall_timeout`` s.
+        ``timeout`` s pass or nothing at all arrives for ``stall_timeout`` s while the
+        reader listens (see :meth:`polled`).
         """
         deadline = time.monotonic() + timeout
         with self._cond:
@@ -120,9 +141,10 @@ class SampleBuffer:
                     raise DeviceError(f"{self.name}: reader thread failed: {err!r}",
                                       self.name) from err
                 now = time.monotonic()
-                if now - self._last_arrival > stall_timeout:
+                heard = now if self._listened is None else self._listened
+                if heard - self._last_arrival > stall_timeout:
                     raise DeviceTimeoutError(
-                        f"{self.name}: no data for {now - self._last_arrival:.2f} s "
+                        f"{self.name}: no data for {heard - self._last_arrival:.2f} s "
                         f"(device stopped answering?)", self.name)
                 if now >= deadline:
                     raise DeviceTimeoutError(

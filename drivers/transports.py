@@ -129,22 +129,27 @@ class SerialLink:
         return data
 
     def readline(self, timeout: float, terminator: bytes = b"\n") -> bytes:
-        """One line including its terminator; :class:`DeviceTimeoutError` after ``timeout`` s."""
+        """One line including its terminator; :class:`DeviceTimeoutError` after ``timeout`` s.
+
+        What has arrived is read before the time is looked at: a reader that got no CPU
+        for a while (a loaded host) finds the rest of the reply waiting, not a timeout.
+        """
         port = self._require()
         deadline = time.monotonic() + timeout
         buf = bytearray()
         while not buf.endswith(terminator):
-            if time.monotonic() > deadline:
-                raise DeviceTimeoutError(
-                    f"{self.name}: no reply within {timeout:g} s"
-                    + (f" (got {bytes(buf)!r})" if buf else ""), self.name
-                )
             try:
-                buf += port.read(1)
+                got = port.read(1)
             except (serial.SerialException, OSError, TypeError) as err:
                 raise DeviceNotAvailableError(
                     f"{self.name}: serial port lost (unplugged?): {err}", self.name
                 ) from err
+            buf += got
+            if not got and time.monotonic() > deadline:
+                raise DeviceTimeoutError(
+                    f"{self.name}: no reply within {timeout:g} s"
+                    + (f" (got {bytes(buf)!r})" if buf else ""), self.name
+                )
         log_wire(self.name, "<<", bytes(buf))
         return bytes(buf)
 

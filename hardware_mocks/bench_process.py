@@ -34,7 +34,7 @@ from typing import Any
 from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.frontend_device import FrontEndDevice, shaker_force_inputs
 from hardware_mocks.hammer_device import HammerDevice
-from hardware_mocks.physics import BenchPhysics
+from hardware_mocks.physics import HEARTBEAT, REPLY_TIMEOUT, STALL_TIMEOUT, BenchPhysics
 from hardware_mocks.shaker_device import ShakerDevice, bench_shakers, shaker_name
 from hardware_mocks.socketcand import SocketcandServer
 
@@ -149,6 +149,7 @@ class MockBench:
             'backend = "hammer-serial"',
             f"fs = {self.hammer_rate:g}",
             f'transport = {{ url = "{self.hammer.path}", baudrate = 921600 }}',
+            f"options = {{ stall_timeout = {STALL_TIMEOUT:g}, reply_timeout = {REPLY_TIMEOUT:g} }}",
             "",
             "[[devices.hammer.channels]]",
             'name = "hammer"',
@@ -162,7 +163,8 @@ class MockBench:
             lines += [f"[devices.{shaker_name(k)}]",
                       'backend = "shaker-scpi"',
                       f'transport = {{ url = "{dev.path}", baudrate = 115200 }}',
-                      "options = { heartbeat = 0.5, ramp = 1.0 }",
+                      f"options = {{ heartbeat = {HEARTBEAT:g}, ramp = 1.0, "
+                      f"reply_timeout = {REPLY_TIMEOUT:g} }}",
                       ""]
         lines += [
             "[devices.frontend]",
@@ -170,7 +172,9 @@ class MockBench:
             f"fs = {self.fe_rate:g}",
             f'transport = {{ interface = "socketcand", host = "127.0.0.1", '
             f'port = {self.socketcand.port}, channel = "{self.can_channel}", fd = false }}',
-            'options = { frame = "classic" }  # python-can\'s socketcand client has no CAN FD',
+            f'options = {{ frame = "classic", stall_timeout = {STALL_TIMEOUT:g}, '
+            f"reply_timeout = {REPLY_TIMEOUT:g} }}"
+            "  # python-can's socketcand client has no CAN FD",
         ]
         names = response_channel_names(b)
         force_names = {w: name for name, w in self.forces}

@@ -185,6 +185,12 @@ class FrontEndDevice:
         self._overflow_flag = False
         self._last_status = time.monotonic()
 
+    @property
+    def clock(self) -> DeviceClock:
+        """The sample clock of the stream (started at the last START), which tests compare
+        with what the host measured."""
+        return self._clock
+
     def unplug(self) -> None:
         """Disconnect from the bus: no more frames, no more answers."""
         self._unplugged.set()
@@ -215,9 +221,12 @@ class FrontEndDevice:
             if msg is not None and msg.arbitration_id == 0x100:
                 self._command(bytes(msg.data))
             if self.running:
+                # one instant for both: only samples whose shaker forces are simulated are
+                # sent, however long the simulation took (a loaded host)
+                due = self._clock.due()
                 self._absorb_hits()
-                self._absorb_sources(self._clock.due())
-                self._emit_due()
+                self._absorb_sources(due)
+                self._emit_due(due)
                 if time.monotonic() - self._last_status >= 0.1:
                     self._status()
 
@@ -346,9 +355,9 @@ class FrontEndDevice:
             out[rows] += self.force_noise * self._rng.standard_normal((len(rows), n))
         return out
 
-    def _emit_due(self) -> None:
+    def _emit_due(self, due: int) -> None:
+        """Send the whole frames of the samples before sample ``due``."""
         per_frame = 5 if self.fd else 1
-        due = self._clock.due()
         while due - self._produced >= per_frame:
             f = self.faults
             if f.overflow:  # samples lost inside the device

@@ -16,6 +16,7 @@ Example
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,6 +92,9 @@ class HammerDevice(SerialMockDevice):
         Clock error (ppm) and start delay (s), see :class:`DeviceClock`.
     seed : int
         Noise seed.
+    now : callable
+        The host clock its sample clock runs on (``time.monotonic``; a test may stand it
+        still or move it by hand).
     """
 
     RATES = (1024, 2048, 4096, 8192, 16384)
@@ -98,7 +102,8 @@ class HammerDevice(SerialMockDevice):
 
     def __init__(self, physics: BenchPhysics | None = None, *, sensitivity: float = 2.25,
                  frame_len: int = 64, noise: float = 0.0, ppm: float = 0.0, offset: float = 0.0,
-                 seed: int = 0, serial_number: str = "0001") -> None:
+                 seed: int = 0, serial_number: str = "0001",
+                 now: Callable[[], float] = time.monotonic) -> None:
         self.physics = physics if physics is not None else BenchPhysics(get_bench("engine"))
         self.sensitivity = sensitivity
         self.frame_len = frame_len
@@ -106,6 +111,7 @@ class HammerDevice(SerialMockDevice):
         self.ppm = ppm
         self.offset = offset
         self.serial_number = serial_number
+        self._now = now
         self.faults = HammerFaults()
         self.rate = 4096
         self.range_mv = 5000
@@ -122,6 +128,12 @@ class HammerDevice(SerialMockDevice):
         self._frame_no = 0
         self._rx = bytearray()
         self._start_firmware("mock-hammer")
+
+    @property
+    def clock(self) -> DeviceClock:
+        """The sample clock of the stream (started at the last START), which tests compare
+        with what the host measured."""
+        return self._clock
 
     def hit(self, exc: int = 0, peak: float = 200.0, duration: float = 0.004,
             double: tuple[float, float] | None = None, delay: float = 0.05) -> list[Hit]:
@@ -175,7 +187,7 @@ class HammerDevice(SerialMockDevice):
         elif word == "START":
             self._reply("OK")
             self._clock = DeviceClock(self.rate, self.ppm, self.offset)
-            self._clock.start()
+            self._clock.start(self._now())
             self._seq = self._produced = self._frame_no = 0
             self.streaming = True
         elif word in ("RATE", "RANGE", "FMT", "IEPE"):
@@ -208,7 +220,7 @@ class HammerDevice(SerialMockDevice):
         self._reply("OK")
 
     def _emit_due(self) -> None:
-        due = self._clock.due()
+        due = self._clock.due(self._now())
         while due - self._produced >= self.frame_len:
             n = self.frame_len
             t = self._clock.instants(self._produced, n)

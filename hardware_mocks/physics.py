@@ -31,7 +31,21 @@ from numpy.typing import ArrayLike, NDArray
 from hardware_mocks.benches import Bench
 from hardware_mocks.signals import ImpulseResponse, impulse_response, simulate
 
-__all__ = ["BenchPhysics", "DeviceClock", "ForceSource", "Hit", "sampled_pulse"]
+__all__ = ["HEARTBEAT", "REPLY_TIMEOUT", "STALL_TIMEOUT", "BenchPhysics", "DeviceClock",
+           "ForceSource", "Hit", "sampled_pulse"]
+
+# The mock devices are threads on the host the acquisition shares with other work: on a
+# loaded machine (load 10 on 2 cores) a mock front end's frames came up to 0.27 s apart
+# (20 s of streaming), and a mock's answer or the worker's heartbeat can be as late. The
+# drivers of a mock bench are given these times (station options); a real device's keep
+# their own (0.5 s each).
+#: seconds of silence after which a driver takes a mock device for stopped (``stall_timeout``)
+STALL_TIMEOUT = 2.0
+#: seconds a driver waits for a mock device's answer to a command (``reply_timeout``)
+REPLY_TIMEOUT = 2.0
+#: the watchdog armed on a mock shaker, s (``heartbeat``): its output goes off when nobody
+#: has fed it for this long
+HEARTBEAT = 2.0
 
 
 class ForceSource(Protocol):

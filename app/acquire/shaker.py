@@ -86,8 +86,10 @@ class ShakerProcedure(RecordingProcedure):
         The station's excitation device (default: its only one).
     confirm_attach : bool
         Pause at each point until the operator resumes (the shaker is attached there).
-    heartbeat : float
-        Watchdog time armed on an SG-1, s (the worker beats after every 0.1 s read).
+    heartbeat : float, optional
+        Watchdog time armed on an SG-1, s (the worker beats after every 0.1 s read); by
+        default the shaker's ``heartbeat`` option in the station (a mock bench's is longer:
+        its devices share the loaded host), else 0.5 s.
     """
 
     analysis: BlockAnalysis
@@ -99,7 +101,7 @@ class ShakerProcedure(RecordingProcedure):
                  device_options: Mapping[str, Mapping[str, Any]] | None = None,
                  identify: bool = True, partial: bool = False,
                  force_channel: str | None = None, shaker: str | None = None,
-                 confirm_attach: bool = False, heartbeat: float = 0.5) -> None:
+                 confirm_attach: bool = False, heartbeat: float | None = None) -> None:
         super().__init__(listeners)
         self.path = Path(path)
         self.resume_file = resume
@@ -190,7 +192,9 @@ class ShakerProcedure(RecordingProcedure):
             dev = create_device(cfg, **opts)
             if not isinstance(dev, ExcitationDevice):
                 raise PlanError(f"{self.station.source}: {name!r} is not a shaker")
-            self.drive.drives.append(ShakerDrive(dev, self.plan, self.heartbeat))
+            heartbeat = (self.heartbeat if self.heartbeat is not None
+                         else float(cfg.options.get("heartbeat", 0.5)))
+            self.drive.drives.append(ShakerDrive(dev, self.plan, heartbeat))
         self.drive.should_stop = lambda: self.stop_asked
         self.drive.open()
         names = [c.name for c in fe.channels]

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from app.acquire.plan import TestPlan
 from app.acquire.procedure import StopRequestedError
+from app.acquire.streams import READ_TIMEOUT
 from drivers.base import AcquisitionFrontEnd, DeviceState, ExcitationDevice
 from drivers.errors import DeviceError, DeviceTimeoutError
 from drivers.shaker_scpi import ScpiShaker, ShakerError
@@ -293,7 +294,7 @@ class BlockStream:
     def read(self) -> None:
         """Read about 0.1 s into the buffer and feed the watchdog (device errors raise)."""
         n = max(1, int(self.fe.fs * self.CHUNK))
-        block = self.fe.read_block(n, timeout=2.0)
+        block = self.fe.read_block(n, timeout=READ_TIMEOUT)
         self.beat()
         rows = block.data[self.rows]
         if self.samples is not None:

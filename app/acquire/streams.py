@@ -28,9 +28,15 @@ from drivers.base import AcquisitionFrontEnd, StreamingFrontEnd, TimeBlock
 from drivers.errors import SyncError
 from drivers.sync import ClockFit, align, check_alignment, fit_clock, signal_delay
 
-__all__ = ["HitStreams", "RawHit"]
+__all__ = ["READ_TIMEOUT", "HitStreams", "RawHit"]
 
 logger = logging.getLogger(__name__)
+
+#: seconds a read of a chunk (0.1 s of samples) may take before it fails: a guard against a
+#: device that keeps answering but sends no samples. A device that stops answering is told
+#: by its driver's stall timeout (0.5 s, the mock benches' 2 s), counted while its reader
+#: listens, so a host too loaded to read for a while is not taken for a failure.
+READ_TIMEOUT = 10.0
 
 
 @dataclass(frozen=True)
@@ -166,12 +172,12 @@ class HitStreams:
 
     def read(self) -> None:
         """Read about 0.1 s from every stream (blocks until it is in; device errors raise)."""
-        ref = self.ref.read_block(max(1, int(self.ref.fs * self.CHUNK)), timeout=2.0)
+        ref = self.ref.read_block(max(1, int(self.ref.fs * self.CHUNK)), timeout=READ_TIMEOUT)
         self._ref.add(ref)
         force = ref.data[self.force_row]
         if self.separate:
             block = self.force_dev.read_block(max(1, int(self.force_dev.fs * self.CHUNK)),
-                                              timeout=2.0)
+                                              timeout=READ_TIMEOUT)
             self._force.add(block)
             f = block.data[self.force_row]
             n = ref.data.shape[1]

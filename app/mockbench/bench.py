@@ -29,7 +29,7 @@ from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.frontend_device import FrontEndDevice, shaker_force_inputs
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.operator import MockOperator, MockShakerOperator
-from hardware_mocks.physics import BenchPhysics
+from hardware_mocks.physics import HEARTBEAT, REPLY_TIMEOUT, STALL_TIMEOUT, BenchPhysics
 from hardware_mocks.shaker_device import bench_shakers, shaker_name
 
 __all__ = ["InProcessBench", "plan_for_bench"]
@@ -137,8 +137,10 @@ class InProcessBench:
         for k, (force, _) in enumerate(forces):
             chans.append({"name": force, "input": n_resp + k, "quantity": "force",
                           "sensitivity": 2.25, "range": 5.0})
+        patient = {"stall_timeout": STALL_TIMEOUT, "reply_timeout": REPLY_TIMEOUT}
         shaker_devices = {shaker_name(k): {
-            "backend": "shaker-scpi", "transport": {"url": dev.path, "baudrate": 115200}}
+            "backend": "shaker-scpi", "transport": {"url": dev.path, "baudrate": 115200},
+            "options": {"reply_timeout": REPLY_TIMEOUT, "heartbeat": HEARTBEAT}}
             for k, dev in enumerate(self.shakers)}
         self.station: StationConfig = parse_station({
             "station": {"name": f"in-process mock bench ({name})"},
@@ -146,9 +148,10 @@ class InProcessBench:
                 "frontend": {"backend": "frontend-can", "fs": fs_frontend,
                              "transport": {"interface": "virtual", "channel": channel,
                                            "fd": True},
-                             "channels": chans},
+                             "options": patient, "channels": chans},
                 "hammer": {"backend": "hammer-serial", "fs": fs_hammer,
                            "transport": {"url": self.hammer.path, "baudrate": 921600},
+                           "options": patient,
                            "channels": [{"name": "F", "input": 0, "quantity": "force",
                                          "sensitivity": 2.25, "range": 5.0}]},
                 **shaker_devices,

@@ -48,7 +48,7 @@ def test_engine_identified_within_tolerance_and_replay_is_identical(tmp_path: Pa
         proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator, rec])
         assert proc.geometry_report.cond_T < 20
         proc.start()
-        assert proc.wait(60) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
         model = bench.bench.model
     assert rec.events[-1] == ("finished", RunState.FINISHED)
     assert [e[1].index for e in rec.events if e[0] == "point"] == list(range(len(POINTS)))
@@ -104,7 +104,7 @@ def noisy_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Any, Any]
     with InProcessBench("engine-rigid", accel_noise=0.01, force_noise=0.1) as bench:
         proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
         proc.start()
-        assert proc.wait(60) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
         return path, proc.result, bench.bench.model
 
 

@@ -46,7 +46,7 @@ def test_overrides_during_a_run_and_from_the_command_line(tmp_path: Path, capsys
                                listeners=[bench.operator, ov])
         ov.proc = proc
         proc.start()
-        assert proc.wait(60) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
         points_visited = list(bench.operator.points)
     overridden = [h for h in ov.hits if h.override]
     assert [(h.hit_id, h.override) for h in overridden] == [(0, "accept"), (1, "reject")]
@@ -106,7 +106,7 @@ def test_accepting_a_record_with_lost_samples_is_refused(tmp_path: Path, capsys)
         proc = HammerProcedure(plan, bench.station, tmp_path / "run.h5", partial=True,
                                listeners=[bench.operator])
         proc.start()
-        assert proc.wait(30) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
     run = read_run(tmp_path / "run.h5")
     assert not run.records.accepted[0] and run.records.missing[0] > 0
     assert main(["acquire", "--resume", "--out", str(tmp_path / "run.h5"),

@@ -49,7 +49,7 @@ def test_hammer_streams_every_read_and_hits_are_cut_from_them(tmp_path: Path) ->
         proc = HammerProcedure(plan, bench.station, tmp_path / "run.h5", partial=True,
                                listeners=[bench.operator, rec, duck])
         proc.start()
-        assert proc.wait(30) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
     names = tuple(c.name for c in proc.rows)
     assert names[0] == "F_fe" and len(names) == 13
     assert all(b.names == names and b.fs == 1024.0 for b in rec.blocks)
@@ -75,7 +75,7 @@ def test_shaker_streams_ramps_and_blocks(tmp_path: Path) -> None:
         proc = ShakerProcedure(plan, bench.station, tmp_path / "shaker.h5", partial=True,
                                listeners=[bench.shaker_operator, rec])
         proc.start()
-        assert proc.wait(30) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
     assert all(b.data.shape == (13, 51) and b.fs == fs for b in rec.blocks)
     # ramp and settling were streamed too (dropped by the procedure, shown to listeners)
     assert rec.samples_before_first_hit >= (0.1 + 0.3) * fs

@@ -32,7 +32,7 @@ def test_serial_hammer_aligned_on_the_common_channel_identifies_the_mass(tmp_pat
         assert proc.force_alignment == "common-channel"
         assert proc.sync_channel is not None and proc.sync_channel.name == "F_fe"
         proc.start()
-        assert proc.wait(60) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
         model = bench.bench.model
     truth = inertia_properties(model.theta)
     assert proc.result is not None
@@ -67,7 +67,7 @@ def test_host_timed_force_is_refused_for_identification(tmp_path: Path) -> None:
                                identify=False, listeners=[bench.operator])
         assert proc.force_alignment == "host-timed"
         proc.start()
-        assert proc.wait(30) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
     run = read_run(tmp_path / "frfs.h5")
     assert run.records.force_alignment == "host-timed" and run.records.sync is None
     frf = run_measurement(run)[0].frf  # FRFs only

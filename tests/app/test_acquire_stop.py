@@ -54,12 +54,12 @@ def bench(tmp_path: Path) -> Iterator[Path]:
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
     try:
-        deadline = time.monotonic() + 60.0
+        # the bench writes its station file at once, when all its devices are up
+        deadline = time.monotonic() + 120.0  # only guards against a hang
         while not (station.exists() and "[devices.frontend]" in station.read_text()):
             if proc.poll() is not None or time.monotonic() > deadline:
                 pytest.fail("mock-bench did not start")
             time.sleep(0.05)
-        time.sleep(0.2)
         yield station
     finally:
         _end(proc)

@@ -3,6 +3,8 @@ the clock pairs (the CAN front end and the serial hammer share it)."""
 
 from __future__ import annotations
 
+import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -13,6 +15,7 @@ from drivers.base import ChannelConfig, StreamingFrontEnd
 from drivers.errors import DeviceTimeoutError
 from drivers.frontend_can import CanFrontEnd
 from drivers.hammer_serial import SerialHammer
+from drivers.stream import SampleBuffer
 
 
 class _Streamer(StreamingFrontEnd):
@@ -54,8 +57,52 @@ def test_blocks_and_clock_pairs_come_from_the_base() -> None:
         second = dev.read_block(2)
         assert second.first_sample == 4 and second.overloaded == ("a",)
         assert dev.clock_pairs() == [(10.0, 3), (10.5, 6)]
-        with pytest.raises(DeviceTimeoutError):
-            dev.read_block(1, timeout=0.2)  # nothing more arrives: the stall timeout
+        # nothing more arrives, and this reader never says it polled: the silence counts
+        # up to now, and the stall timeout (not the read's 30 s) ends the read
+        with pytest.raises(DeviceTimeoutError, match=r"no data for \d"):
+            dev.read_block(1, timeout=30.0)
+
+
+def test_a_reader_that_listens_and_hears_nothing_is_a_stall() -> None:
+    buf = SampleBuffer(1, "dev")
+    stop = threading.Event()
+
+    def listen() -> None:  # a reader polling an empty transport
+        while not stop.is_set():
+            started = time.monotonic()
+            stop.wait(0.01)
+            buf.polled(started)
+
+    reader = threading.Thread(target=listen)
+    reader.start()
+    try:
+        with pytest.raises(DeviceTimeoutError, match=r"dev: no data for 0\.[2-9]\d* s"):
+            buf.take(1, timeout=30.0, stall_timeout=0.2)
+    finally:
+        stop.set()
+        reader.join()
+
+
+def test_a_reader_that_did_not_run_is_not_a_silent_device() -> None:
+    """A loaded host, a stopped process: the reader polls no more for three stall times,
+    then finds what arrived meanwhile. The silence counts only while it listened."""
+    buf = SampleBuffer(1, "dev")
+    started = time.monotonic()
+    buf.append(np.array([[1.0]]))
+    buf.polled(started)  # the poll that brought the first sample
+
+    def starved_reader() -> None:
+        time.sleep(0.6)  # the reader gets no time (the scenario, not a wait for it)
+        buf.append(np.array([[2.0, 3.0]]))
+
+    reader = threading.Thread(target=starved_reader)
+    reader.start()
+    try:
+        data, first, missing, _ = buf.take(3, timeout=30.0, stall_timeout=0.2)
+    finally:
+        reader.join()
+    assert_array_equal(data, [[1.0, 2.0, 3.0]])
+    assert (first, missing) == (0, 0)
 
 
 def test_both_streaming_drivers_are_streaming_front_ends() -> None:

@@ -22,7 +22,7 @@ def engine_physics_factory():
 def no_thread_left() -> Iterator[None]:
     before = set(threading.enumerate())
     yield
-    deadline = time.monotonic() + 2.0
+    deadline = time.monotonic() + 30.0  # threads end at once; this guards against a hang
     left: list[threading.Thread] = []
     while time.monotonic() < deadline:
         left = [t for t in threading.enumerate() if t not in before and t.is_alive()]

@@ -7,6 +7,7 @@ import os
 import select
 import struct
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -14,11 +15,18 @@ import serial
 
 from hardware_mocks.hammer_device import HammerDevice, crc16_ccitt_false
 
+FRAME = bytes.fromhex("a5 5a 01 00")  # the start of a 32-bit sample frame
 
-def read_for(port: serial.Serial, seconds: float) -> bytes:
+
+END = bytes.fromhex("a5 5a 80 00")  # the start of the 16-bit end-of-stream frame
+
+
+def read_until(port: serial.Serial, done: Callable[[bytes], bool]) -> bytes:
+    """What the device sends until ``done(received)``; 30 s only guard against a hang."""
     out = b""
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
+    deadline = time.monotonic() + 30.0
+    while not done(out):
+        assert time.monotonic() < deadline, f"not done after 30 s: {out[-200:]!r}"
         out += port.read(max(1, port.in_waiting))
     return out
 
@@ -59,7 +67,7 @@ def test_stream_frames_have_the_documented_layout(port: serial.Serial) -> None:
     port.write(b"FMT 16\nRATE 1024\nSTART\n")
     assert port.read_until(b"\n") + port.read_until(b"\n") + port.read_until(b"\n") == \
         b"OK\nOK\nOK\n"
-    data = read_for(port, 0.1)
+    data = read_until(port, lambda got: len(got) >= 24)  # two frames and more
     # frame 0: sync, flags 0 (int16), reserved, seq 0, n = 4, 4 x int16, CRC
     assert data[:8] == bytes.fromhex("a5 5a 00 00 00 00 04 00")
     frame = data[:8 + 8 + 2]
@@ -68,23 +76,34 @@ def test_stream_frames_have_the_documented_layout(port: serial.Serial) -> None:
     assert data[18:24] == bytes.fromhex("a5 5a 00 00 01 00")  # next frame: seq 1
     port.write(b"RATE 2048\n")  # settings are refused while streaming
     port.write(b"STOP\n")
-    tail = read_for(port, 0.1)
+    tail = read_until(port, lambda got: END in got and got.endswith(b"OK\n"))
     assert b"ERR 3 busy\n" in tail
-    end = tail.index(bytes.fromhex("a5 5a 80 00"))
+    end = tail.index(END)
     assert tail[end + 6:end + 8] == b"\x00\x00"  # n = 0
     assert tail.endswith(b"OK\n")
 
 
-def test_frames_are_paced_by_the_device_clock(port: serial.Serial) -> None:
-    port.write(b"RATE 1024\nSTART\n")
-    port.read_until(b"\n")
-    port.read_until(b"\n")
-    t0 = time.monotonic()
-    data = read_for(port, 0.5)
-    elapsed = time.monotonic() - t0
-    n_frames = data.count(bytes.fromhex("a5 5a 01 00"))
-    assert abs(n_frames * 4 - 1024 * elapsed) < 1024 * 0.05  # within 50 ms of real time
-    port.write(b"STOP\n")
+def test_frames_are_paced_by_the_device_clock(engine_physics_factory) -> None:
+    """The device sends a frame once its samples are due on its own clock, and not before:
+    with that clock standing still, half a second of it at 1024 Hz is 128 frames of 4."""
+    host = [100.0]
+    dev = HammerDevice(engine_physics_factory(), frame_len=4, now=lambda: host[0])
+    try:
+        with serial.Serial(dev.path, timeout=0.05) as port:
+            port.write(b"RATE 1024\nSTART\n")
+            assert port.read_until(b"\n") + port.read_until(b"\n") == b"OK\nOK\n"
+            host[0] += 0.5  # samples 0..512 are due: 128 whole frames
+            data = b""
+            deadline = time.monotonic() + 30.0  # only guards against a hang
+            while data.count(FRAME) < 128 and time.monotonic() < deadline:
+                data += port.read(max(1, port.in_waiting))
+            port.write(b"STOP\n")  # the end frame follows whatever the device sent
+            data += port.read_until(b"OK\n")
+    finally:
+        dev.shutdown()
+    assert data.endswith(b"OK\n")
+    frames = data[:data.index(bytes.fromhex("a5 5a 81 00"))]  # up to the end-of-stream frame
+    assert frames.count(FRAME) == 128 and dev.frames_sent == 128 + 1  # and the end frame
 
 
 def test_host_closing_the_port_stops_the_stream(device: HammerDevice) -> None:
@@ -109,10 +128,12 @@ def test_raw_pty_has_no_echo(device: HammerDevice) -> None:
     fd = os.open(device.path, os.O_RDWR | os.O_NOCTTY)
     try:
         os.write(fd, b"ID?\n")
-        r, _, _ = select.select([fd], [], [], 1.0)
-        assert r
-        time.sleep(0.05)
-        assert os.read(fd, 100) == b"ID INSITU,HD-1,0001,1.3\n"
+        got = b""
+        while not got.endswith(b"\n"):  # the answer, however it comes in pieces
+            r, _, _ = select.select([fd], [], [], 30.0)  # only guards against a hang
+            assert r, got
+            got += os.read(fd, 100)
+        assert got == b"ID INSITU,HD-1,0001,1.3\n"  # no echo of the command before it
     finally:
         os.close(fd)
 

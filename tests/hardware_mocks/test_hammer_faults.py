@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -13,6 +12,7 @@ from drivers.base import ChannelConfig
 from drivers.errors import DeviceNotAvailableError, DeviceTimeoutError
 from drivers.hammer_serial import SerialHammer
 from hardware_mocks.hammer_device import HammerDevice
+from hardware_mocks.physics import STALL_TIMEOUT
 
 FS = 4096
 
@@ -24,7 +24,8 @@ def channel(range_v: float = 5.0) -> ChannelConfig:
 @pytest.fixture
 def rig(engine_physics_factory) -> Iterator[tuple[HammerDevice, SerialHammer]]:
     dev = HammerDevice(engine_physics_factory(), frame_len=64)
-    hammer = SerialHammer("hammer", dev.path, [channel()], fs=FS, stall_timeout=0.3)
+    hammer = SerialHammer("hammer", dev.path, [channel()], fs=FS,
+                          stall_timeout=STALL_TIMEOUT)
     hammer.open()
     hammer.start()
     yield dev, hammer
@@ -93,10 +94,10 @@ def test_device_that_stops_answering_times_out(rig: tuple[HammerDevice, SerialHa
     dev, hammer = rig
     hammer.read_block(256, timeout=2.0)
     dev.faults.silent = True
-    t0 = time.monotonic()
-    with pytest.raises(DeviceTimeoutError, match="no data for"):
+    # the stall timeout ends the read ("no data for"), not the 20 s read timeout ("only ...
+    # samples within 20 s")
+    with pytest.raises(DeviceTimeoutError, match=r"no data for \d+\.\d\d s \(device stopped"):
         hammer.read_block(FS * 10, timeout=20.0)
-    assert time.monotonic() - t0 < 1.0  # stall_timeout 0.3 s, not the 20 s read timeout
     with pytest.raises(DeviceTimeoutError):
         hammer.stop()
 
@@ -105,10 +106,8 @@ def test_unplugged_mid_run_is_not_available(rig: tuple[HammerDevice, SerialHamme
     dev, hammer = rig
     hammer.read_block(256, timeout=2.0)
     dev.unplug()
-    t0 = time.monotonic()
-    with pytest.raises(DeviceNotAvailableError, match="unplugged"):
+    with pytest.raises(DeviceNotAvailableError, match="unplugged"):  # not the read timeout
         hammer.read_block(FS * 10, timeout=20.0)
-    assert time.monotonic() - t0 < 1.0
 
 
 def test_overload_is_flagged(engine_physics_factory) -> None:

@@ -11,11 +11,14 @@ from drivers.base import ChannelConfig
 from drivers.frontend_can import CanFrontEnd
 from drivers.shaker_scpi import ScpiShaker
 from hardware_mocks.frontend_device import FORCE, FrontEndDevice, shaker_force
-from hardware_mocks.physics import BenchPhysics
+from hardware_mocks.physics import HEARTBEAT, REPLY_TIMEOUT, BenchPhysics
 from hardware_mocks.shaker_device import ShakerDevice
 from processing.spectral import coherence, h1, welch_spectra
 
 FS = 512.0
+#: the drivers of the mock shakers: a mock bench's watchdog and answer times (the mocks are
+#: threads of this loaded process)
+PATIENT = {"heartbeat": HEARTBEAT, "reply_timeout": REPLY_TIMEOUT}
 
 
 def test_random_excitation_gives_the_models_frf(engine_physics_factory,
@@ -26,7 +29,7 @@ def test_random_excitation_gives_the_models_frf(engine_physics_factory,
     chans.append(ChannelConfig("F", 12, "force", 2.25, range_v=5.0))
     with ShakerDevice(physics, exc=exc, force_per_volt=50.0) as shaker_dev, \
             FrontEndDevice(physics, channel=channel) as fe_dev:
-        shaker = ScpiShaker("shaker", shaker_dev.path, ramp=0.1)
+        shaker = ScpiShaker("shaker", shaker_dev.path, ramp=0.1, **PATIENT)
         # the mock simulates the shaker's past (one impulse response long) when it starts:
         # allow it more than the default 0.5 s of silence on a loaded machine
         fe = CanFrontEnd("fe", chans, fs=FS, stall_timeout=5.0,
@@ -43,10 +46,11 @@ def test_random_excitation_gives_the_models_frf(engine_physics_factory,
         finally:
             fe.shutdown()
             shaker.shutdown()
-        deadline = time.monotonic() + 2.0
+        deadline = time.monotonic() + 30.0  # only guards against a hang
         while shaker_dev.output and time.monotonic() < deadline:  # OUTP OFF on its way
             time.sleep(0.01)
         assert fe_dev.frames_sent > 0 and not shaker_dev.output
+        assert not shaker_dev.errors  # driven all along (its watchdog never fired)
     assert block.complete and fe.health.ok()
     force = block.channel("F")
     assert force.std() == pytest.approx(0.5 * 50.0, rel=0.05)  # level 0.5 V RMS x 50 N/V
@@ -108,7 +112,8 @@ def test_two_shakers_each_on_its_own_force_input(engine_physics_factory,
     with ShakerDevice(physics, exc=excs[0], seed=0, sensor=0) as dev1, \
             ShakerDevice(physics, exc=excs[1], seed=1, sensor=1) as dev2, \
             FrontEndDevice(physics, channel=channel, wiring=wiring) as fe_dev:
-        shakers = [ScpiShaker(f"shaker{k}", d.path, ramp=0.1) for k, d in enumerate((dev1, dev2))]
+        shakers = [ScpiShaker(f"shaker{k}", d.path, ramp=0.1, **PATIENT)
+                   for k, d in enumerate((dev1, dev2))]
         # the mock simulates both shakers' past (one impulse response long) when it starts:
         # allow it more than the default 0.5 s of silence on a loaded machine
         fe = CanFrontEnd("fe", chans, fs=FS, stall_timeout=5.0,
@@ -129,6 +134,7 @@ def test_two_shakers_each_on_its_own_force_input(engine_physics_factory,
             for s in shakers:
                 s.shutdown()
         assert fe_dev.frames_sent > 0
+        assert not dev1.errors and not dev2.errors  # driven all along
     assert block.complete and fe.health.ok()
     f1, f2 = block.channel("F1"), block.channel("F2")
     # 0.5 V RMS x 50 N/V each (23.7 N seen once on a loaded machine)

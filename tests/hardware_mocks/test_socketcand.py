@@ -15,6 +15,7 @@ from drivers.base import ChannelConfig
 from drivers.errors import DeviceNotAvailableError, DeviceTimeoutError
 from drivers.frontend_can import CanFrontEnd
 from hardware_mocks.frontend_device import FrontEndDevice
+from hardware_mocks.physics import REPLY_TIMEOUT, STALL_TIMEOUT
 from hardware_mocks.socketcand import SocketcandServer, format_frame, parse_send
 
 
@@ -26,16 +27,20 @@ def served(request: pytest.FixtureRequest) -> Iterator[tuple[SocketcandServer, c
         yield server, device_bus
 
 
+#: seconds a socket read may wait: only guards against a hang
+HANG = 30.0
+
+
 def recv_exact(sock: socket.socket, expected: bytes) -> bytes:
     got = b""
-    deadline = time.monotonic() + 2.0
+    deadline = time.monotonic() + HANG
     while len(got) < len(expected) and time.monotonic() < deadline:
         got += sock.recv(len(expected) - len(got))
     return got
 
 
 def raw_session(server: SocketcandServer) -> socket.socket:
-    sock = socket.create_connection(("127.0.0.1", server.port), timeout=2.0)
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=HANG)
     assert recv_exact(sock, b"< hi >") == b"< hi >"
     sock.sendall(b"< open can0 >")
     assert recv_exact(sock, b"< ok >") == b"< ok >"
@@ -46,7 +51,7 @@ def raw_session(server: SocketcandServer) -> socket.socket:
 
 def test_handshake_errors_and_echo(served: tuple[SocketcandServer, can.BusABC]) -> None:
     server, _ = served
-    with socket.create_connection(("127.0.0.1", server.port), timeout=2.0) as sock:
+    with socket.create_connection(("127.0.0.1", server.port), timeout=HANG) as sock:
         assert recv_exact(sock, b"< hi >") == b"< hi >"
         sock.sendall(b"< open can9 >")
         assert recv_exact(sock, b"< error could not open bus >") == b"< error could not open bus >"
@@ -63,9 +68,11 @@ def test_send_elements_reach_the_bus(served: tuple[SocketcandServer, can.BusABC]
         sock.sendall(b"< send 100 8 6 0 0 0 0 0 0 0 >< send 1ABCDEF0 2 ff 1 >")
         sock.sendall(b"< fdsend 200 01 12 0 1 2 3 4 5 6 7 8 9 a b >")
         sock.sendall(b"< send 100 9 0 0 0 0 0 0 0 0 0 >< send 100 3 1 2 >")  # ignored: bad length
-        msgs = [bus.recv(1.0) for _ in range(3)]
-        assert bus.recv(0.1) is None
+        sock.sendall(b"< send 7FF 1 5a >")  # the next one the bus gets: nothing in between
+        msgs = [bus.recv(HANG) for _ in range(4)]
     assert all(m is not None for m in msgs)
+    assert (msgs[3].arbitration_id, bytes(msgs[3].data)) == (0x7FF, b"\x5a")
+    msgs = msgs[:3]
     a, b, c = msgs
     assert a is not None and b is not None and c is not None
     assert (a.arbitration_id, a.is_extended_id, bytes(a.data)) == (
@@ -76,14 +83,13 @@ def test_send_elements_reach_the_bus(served: tuple[SocketcandServer, can.BusABC]
 
 def test_bus_frames_reach_the_client(served: tuple[SocketcandServer, can.BusABC]) -> None:
     server, bus = served
-    with raw_session(server) as sock:
-        time.sleep(0.1)  # the server's grace after < rawmode >
+    with raw_session(server) as sock:  # frames sent now wait in the server for its grace
         bus.send(can.Message(arbitration_id=0x101, data=bytes.fromhex("0300"),
                              is_extended_id=False, timestamp=1712345678.5))
         bus.send(can.Message(arbitration_id=0x200, data=bytes(range(12)), is_fd=True,
                              bitrate_switch=True, is_extended_id=False))
         got = b""
-        deadline = time.monotonic() + 2.0
+        deadline = time.monotonic() + HANG
         while got.count(b">") < 2 and time.monotonic() < deadline:
             got += sock.recv(4096)
     text = got.decode("ascii")
@@ -113,15 +119,15 @@ def test_python_can_client_drives_the_front_end_with_classic_frames(
     server, _ = served
     physics = engine_physics_factory()
     with FrontEndDevice(physics, channel=f"sc-{request.node.name}") as dev:
-        fe = CanFrontEnd("fe", chans(), fs=512, frame="classic", stall_timeout=0.5, bus_kwargs={
+        fe = CanFrontEnd("fe", chans(), fs=512, frame="classic", bus_kwargs={
             "interface": "socketcand", "host": "127.0.0.1", "port": server.port,
-            "channel": "can0"})
+            "channel": "can0"}, stall_timeout=STALL_TIMEOUT, reply_timeout=REPLY_TIMEOUT)
         try:
             fe.open()
             assert fe.identity == "INSITU,FE-16,4242,2.4"
             fe.start()
             physics.hit(exc=0, peak=200.0)
-            block = fe.read_block(512, timeout=3.0)
+            block = fe.read_block(512, timeout=HANG)
             assert block.complete and fe.health.ok() and dev.frames_sent >= 2 * 512
             assert abs(block.data).max() > 0.1  # the hit's accelerations came through
         finally:
@@ -134,9 +140,10 @@ def test_can_fd_does_not_pass_python_cans_client(
     """python-can 4.6.1 drops < fdframe > elements: FD sample frames never arrive."""
     server, _ = served
     with FrontEndDevice(engine_physics_factory(), channel=f"sc-{request.node.name}"):
-        fe = CanFrontEnd("fe", chans(), fs=512, frame="fd", stall_timeout=0.3, bus_kwargs={
+        # status frames come, samples never: the read's own timeout ends it, not a stall
+        fe = CanFrontEnd("fe", chans(), fs=512, frame="fd", bus_kwargs={
             "interface": "socketcand", "host": "127.0.0.1", "port": server.port,
-            "channel": "can0"})
+            "channel": "can0"}, stall_timeout=STALL_TIMEOUT, reply_timeout=REPLY_TIMEOUT)
         try:
             fe.open()
             fe.start()

@@ -88,15 +88,15 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     assert station.station is not None
     n_channels = sum(len(d.channels) for d in station.station.devices.values())
     assert n_channels >= 13 and station.channels.rowCount() == n_channels
-    with qtbot.waitSignal(window.runner.done, timeout=20000):
+    with qtbot.waitSignal(window.runner.done, timeout=120000):
         station.check_button.click()
-    qtbot.waitUntil(lambda: _text(station.devices, 0, 4) == "OK", timeout=5000)
+    qtbot.waitUntil(lambda: _text(station.devices, 0, 4) == "OK", timeout=120000)
     station.monitor_button.click()
     assert station.stream is not None
-    qtbot.waitUntil(lambda: station.levels.frames_new > 3, timeout=10000)
+    qtbot.waitUntil(lambda: station.levels.frames_new > 3, timeout=120000)
     station.tap_button.click()
     force = list(station.stream.source.names).index("F")  # the hammer
-    qtbot.waitUntil(lambda: station.levels.peak_percent()[force] > 1.0, timeout=10000)
+    qtbot.waitUntil(lambda: station.levels.peak_percent()[force] > 1.0, timeout=120000)
     qtbot.wait(300)  # let the response ring in the traces (the bars: the last 0.5 s)
     _screenshot(window, station, "station", tmp_path)
 
@@ -119,7 +119,7 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     assert station.stream is None  # live levels released the devices
     assert not acq.start_button.isEnabled() and acq.stop_button.isEnabled()
     table = acq.hits_table
-    qtbot.waitUntil(lambda: table.rowCount() >= 3, timeout=30000)
+    qtbot.waitUntil(lambda: table.rowCount() >= 3, timeout=120000)
     assert _verdict_cells(window, 1)[0].startswith("double hit")
     assert _verdict_cells(window, 2) == ("accepted", "-", "yes")
     # the operator tries the overrides: keep the double hit and reject the repeat ...
@@ -127,7 +127,7 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     acq.accept_button.click()
     table.selectRow(2)
     acq.reject_button.click()
-    qtbot.waitUntil(lambda: _verdict_cells(window, 2)[1] == "reject", timeout=10000)
+    qtbot.waitUntil(lambda: _verdict_cells(window, 2)[1] == "reject", timeout=120000)
     assert _verdict_cells(window, 1)[1:] == ("accept", "yes")
     assert _verdict_cells(window, 2)[2] == "no"
     # ... then thinks better of it and goes back to the automatic verdicts: the clean repeat
@@ -137,12 +137,12 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
         table.selectRow(row)
         acq.clear_button.click()
     qtbot.waitUntil(lambda: _verdict_cells(window, 1)[1] == "-"
-                    and _verdict_cells(window, 2)[1] == "-", timeout=10000)
+                    and _verdict_cells(window, 2)[1] == "-", timeout=120000)
     assert _verdict_cells(window, 1)[2] == "no" and _verdict_cells(window, 2)[2] == "yes"
-    qtbot.waitUntil(lambda: acq.state is not RunState.RUNNING, timeout=60000)
+    qtbot.waitUntil(lambda: acq.state is not RunState.RUNNING, timeout=120000)
     assert acq.state is RunState.FINISHED, (acq.next_label.text(), window.messages.text)
     qtbot.waitUntil(lambda: window.session.analysis is not None
-                    and window.session.path == run, timeout=30000)
+                    and window.session.path == run, timeout=120000)
     assert acq.progress_bar.value() == 6
     n_hits = table.rowCount()  # 7, or more if the loaded machine made a hit arrive late
     assert n_hits >= 7
@@ -193,7 +193,7 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
 
     # replay: the recorded run opens through File > Open into the same views
     choose_file(tmp_path / "copy.h5")
-    with qtbot.waitSignal(again.session.analysis_changed, timeout=30000) as blocker:
+    with qtbot.waitSignal(again.session.analysis_changed, timeout=120000) as blocker:
         again.open_action.trigger()
     replayed = blocker.args[0]
     assert replayed.result is not None and replayed.frf.H.shape == (12, 6, 800)
@@ -213,21 +213,21 @@ def test_pause_resume_stop_keeps_the_hits(qtbot, make_window, tmp_path: Path) ->
     acq = window.acquisition_view
     acq.run_path.setText(str(tmp_path / "stopped.h5"))
     acq.start_button.click()
-    qtbot.waitUntil(lambda: acq.hits_table.rowCount() >= 1, timeout=30000)
+    qtbot.waitUntil(lambda: acq.hits_table.rowCount() >= 1, timeout=120000)
     # an override and its undo ("Automatic verdict") while the run goes on
     acq.hits_table.selectRow(0)
     acq.reject_button.click()
-    qtbot.waitUntil(lambda: _verdict_cells(window, 0)[1:] == ("reject", "no"), timeout=10000)
+    qtbot.waitUntil(lambda: _verdict_cells(window, 0)[1:] == ("reject", "no"), timeout=120000)
     acq.hits_table.selectRow(0)
     acq.clear_button.click()
-    qtbot.waitUntil(lambda: _verdict_cells(window, 0)[1:] == ("-", "yes"), timeout=10000)
+    qtbot.waitUntil(lambda: _verdict_cells(window, 0)[1:] == ("-", "yes"), timeout=120000)
     acq.pause_button.click()
-    qtbot.waitUntil(lambda: acq.state is RunState.PAUSED, timeout=20000)
+    qtbot.waitUntil(lambda: acq.state is RunState.PAUSED, timeout=120000)
     assert acq.resume_button.isEnabled() and not acq.pause_button.isEnabled()
     assert acq.next_label.text().startswith("Paused: paused by the operator")
     acq.resume_button.click()
-    qtbot.waitUntil(lambda: acq.state is RunState.RUNNING, timeout=20000)
-    with qtbot.waitSignal(acq.bridge.finished, timeout=20000):
+    qtbot.waitUntil(lambda: acq.state is RunState.RUNNING, timeout=120000)
+    with qtbot.waitSignal(acq.bridge.finished, timeout=120000):
         acq.stop_button.click()
     assert acq.state is RunState.STOPPED
     assert window.messages.level == "warning" and "saved in" in window.messages.text

@@ -30,7 +30,7 @@ def _open(qtbot, window: MainWindow, monkeypatch: pytest.MonkeyPatch,
         return str(path), ""
 
     monkeypatch.setattr(QtWidgets.QFileDialog, "getOpenFileName", staticmethod(answer))
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000) as blocker:
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000) as blocker:
         window.open_action.trigger()
     a = blocker.args[0]
     assert isinstance(a, Analysis)

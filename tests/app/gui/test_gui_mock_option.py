@@ -26,7 +26,7 @@ def test_mock_bench_not_offered_where_it_cannot_run(qtbot, make_window,
         assert not w.isEnabled() and w.toolTip() == WHY
     assert window.messages.text.startswith("No station yet: open a station file")
     assert station.name_label.text() == "No station: open a station file"
-    with qtbot.waitSignal(station.message, timeout=2000) as blocker:
+    with qtbot.waitSignal(station.message, timeout=60000) as blocker:
         station.use_mock("engine-rigid")  # e.g. the last session's station was the mock
     assert blocker.args == ["error", WHY]
     assert station.mock is None and station.station is None

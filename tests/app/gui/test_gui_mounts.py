@@ -67,7 +67,7 @@ def test_mounts_in_plan_and_results(qtbot, make_window, choose_file, tmp_path: P
     assert "determines 9 of 9 rates" in plan.mounts_label.text()
     # open the FRFs: the results show the modes, decoupling, rates and arrows
     choose_file(uff)
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000):
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
         window.open_action.trigger()
     res = window.results_view
     ms = res.mount_system
@@ -145,11 +145,11 @@ def test_run_file_mounts_are_loaded_with_the_run(qtbot, make_window, choose_file
     with InProcessBench("engine-rigid") as bench:
         proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
         proc.start()
-        assert proc.wait(60) is RunState.FINISHED, proc.message
+        assert proc.wait(300) is RunState.FINISHED, proc.message
     write_mounts(path, load_mounts(toml))
     window: MainWindow = make_window()
     choose_file(path)
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000):
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
         window.open_action.trigger()
     assert window.session.mounts is not None
     assert _col(window.plan_view.mounts_table, 0) == ["mount 1", "mount 2", "mount 3"]
@@ -178,7 +178,7 @@ def test_rubber_mounts_in_results(qtbot, make_window, choose_file, tmp_path: Pat
     choose_file(toml)
     window.plan_view.mounts_button.click()
     choose_file(uff)
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000):
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
         window.open_action.trigger()
     res = window.results_view
     ms = res.mount_system

@@ -37,7 +37,7 @@ def _bench_uff(tmp_path: Path, name: str = "engine-rigid", noise: float = 0.0) -
 def _open(qtbot, window: MainWindow, choose_file: Callable[..., None],
           path: Path) -> Analysis:
     choose_file(path)
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=30000) as blocker:
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000) as blocker:
         window.open_action.trigger()
     a = blocker.args[0]
     assert isinstance(a, Analysis)
@@ -80,7 +80,7 @@ def test_replay_identify_band_export(qtbot, make_window, choose_file,
     assert window.checks_view.overall.text().startswith("FAIL: coherence")
 
     # the operator narrows the bands: re-identified off the GUI thread with those bands
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=30000) as blocker:
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000) as blocker:
         results.set_bands((50.0, 80.0), (2.0, 30.0))
     b = blocker.args[0]
     assert b.result is not None and not results.auto_bands.isChecked()
@@ -89,12 +89,12 @@ def test_replay_identify_band_export(qtbot, make_window, choose_file,
     assert b.result.properties.mass == pytest.approx(model.mass, rel=1e-4)
     assert results.mass_lo.value() == pytest.approx(50.0)
     # an impossible band is a message in the window, not a traceback
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=30000):
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
         results.set_bands((50.0, 900.0), (2.0, 30.0))
     assert window.messages.level == "error"
     assert "outside the data" in window.messages.text
     assert results.verdict.text().startswith("Identification failed")
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=30000):
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
         results.set_bands((50.0, 80.0), (2.0, 30.0))
     assert window.session.analysis is not None and window.session.analysis.result is not None
 
@@ -131,7 +131,7 @@ def test_bad_file_and_bad_geometry_show_messages(qtbot, make_window, choose_file
     bad = tmp_path / "broken.uff"
     bad.write_text("    -1\n    58\nnot a uff file\n")
     choose_file(bad)
-    with qtbot.waitSignal(window.session.message, timeout=10000,
+    with qtbot.waitSignal(window.session.message, timeout=300000,
                           check_params_cb=lambda level, text: level == "error"):
         window.open_action.trigger()
     assert window.messages.text.startswith("cannot open the file: ")

@@ -32,7 +32,7 @@ def test_results_view_and_report_show_uncertainty(qtbot, make_window, choose_fil
     write_frf_uff(uff, get_bench("engine-rigid").frfset(noise=0.01, seed=2))
     window: MainWindow = make_window()
     choose_file(uff)
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=60000) as blocker:
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000) as blocker:
         window.open_action.trigger()
     a: Analysis = blocker.args[0]
     assert a.result is not None
