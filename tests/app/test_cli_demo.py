@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import threading
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -12,6 +13,20 @@ import app.cli.demo as demo
 import app.mockbench.bench as mockbench
 from app.cli.main import main
 from app.io.runfile import read_run
+
+#: the demo's plan cut to six forces spanning the rigid-body motions (the least that
+#: identifies; 18 records of real-time data would take the whole plan's time)
+POINTS = [0, 1, 4, 8, 12, 15]
+
+
+def six_point_plans(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The demo acquires :data:`POINTS` of its bench's plan."""
+    made = mockbench.plan_for_bench
+
+    def few(name: str, **kw: Any) -> Any:
+        return made(name, points=POINTS, **kw)
+
+    monkeypatch.setattr(mockbench, "plan_for_bench", few)
 
 
 def _silent_bench(monkeypatch: pytest.MonkeyPatch, heal_after: float | None) -> None:
@@ -42,12 +57,13 @@ def test_demo_resumes_a_paused_simulated_bench(monkeypatch: pytest.MonkeyPatch,
                                                tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     _silent_bench(monkeypatch, heal_after=1.0)
+    six_point_plans(monkeypatch)
     out = tmp_path / "demo.h5"
     assert main(["demo", "--bench", "engine-rigid", "--length", "0.5", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "resuming the simulated bench (1 of 3)" in text
     run = read_run(out)
-    assert run.state == "finished" and int(run.records.accepted.sum()) == 18
+    assert run.state == "finished" and int(run.records.accepted.sum()) == len(POINTS)
 
 
 def test_demo_stops_when_the_bench_stays_silent(monkeypatch: pytest.MonkeyPatch,
@@ -55,6 +71,7 @@ def test_demo_stops_when_the_bench_stays_silent(monkeypatch: pytest.MonkeyPatch,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setattr(demo, "RESUME_DELAY", 0.05)
     _silent_bench(monkeypatch, heal_after=None)
+    six_point_plans(monkeypatch)
     out = tmp_path / "demo.h5"
     assert main(["demo", "--bench", "engine-rigid", "--length", "0.5", "--out", str(out)]) == 2
     err = capsys.readouterr().err

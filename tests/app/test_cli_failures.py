@@ -14,6 +14,7 @@ from app.io.runfile import read_run
 from drivers.errors import DeviceNotAvailableError
 from drivers.transports import CanLink
 from hardware_mocks.bench_process import MockBench
+from tests.app.test_cli_demo import POINTS, six_point_plans
 
 PLAN = Path(__file__).resolve().parents[2] / "docs" / "mock_bench_plan.toml"
 
@@ -120,11 +121,13 @@ def test_piped_output_keeps_every_digit_and_shows_progress(
     assert "Stiffness" in out and "…" not in out  # no cell cut at 80 columns
     monkeypatch.chdir(tmp_path)
     (tmp_path / "demo-run.h5").write_bytes(b"")  # the default name is taken: the next one
+    six_point_plans(monkeypatch)
     assert main(["demo", "--bench", "engine-rigid", "--length", "0.5"]) == 0
     out = capsys.readouterr().out
-    assert out.count("of 18 done)") == 18  # one line per point in a log, not silence
+    n = len(POINTS)
+    assert out.count(f"of {n} done)") == n  # one line per point in a log, not silence
     assert "run file demo-run-2.h5 kept" in out and "…" not in out
-    assert len(read_run(tmp_path / "demo-run-2.h5", with_data=False).records) == 18
+    assert len(read_run(tmp_path / "demo-run-2.h5", with_data=False).records) == n
 
 
 def test_a_log_message_holding_a_traceback_is_one_line_without_it() -> None:

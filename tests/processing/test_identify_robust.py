@@ -61,30 +61,27 @@ def test_rigid_exact_with_the_upper_residual_candidate() -> None:
 
 
 def test_point_refinement_settles() -> None:
-    """More rounds never make it worse: 30 rounds end (converged or stopped, with the
-    reason) with errors no worse than 5 rounds, corrections that stay within the +-3 mm
-    errors' reach, and response points closer to the truth than the nominal ones."""
+    """More rounds never make it worse: on a draw of the noisy row, 30 rounds end (converged
+    or stopped, with the reason) with errors no worse than 5 rounds, corrections that stay
+    within the +-3 mm errors' reach, and response points closer to the truth than the
+    nominal ones (RMS error 0.72x). With the ridge on each step and every round kept, this
+    draw's points drifted away (1.8x) and its inertia error went from 0.82 % to 1.9 %. The
+    claims on the medians over draws are checked by ``benchmarks/identify_draws.py N refine``."""
     bench = get_bench("engine-rigid")
     true = bench.frfset().resp_xyz
-    e5, e30, loc = [], [], []
-    for s in range(4):
-        f = bench.frfset(0.02, 0.003, seed=100 + s)
-        r5 = identify(f, IdentifyOptions(refine_points=5))
-        r30 = identify(f, IdentifyOptions(refine_points=30))
-        assert r30.point_corrections is not None
-        assert any(w.startswith("point refinement: ") for w in r30.warnings)
-        assert np.abs(r30.point_corrections).max() < 0.006
-        before = np.sqrt(np.mean((f.resp_xyz - true) ** 2))
-        after = np.sqrt(np.mean((f.resp_xyz - r30.point_corrections - true) ** 2))
-        loc.append(after / before)
-        e5.append(errors(bench, r5))
-        e30.append(errors(bench, r30))
-    assert np.median(loc) < 0.8
-    m5, m30 = _median(e5), _median(e30)
-    for k in m5:
-        assert m30[k] <= 1.2 * m5[k] + 1e-3, (k, m5[k], m30[k])
-    within(m30, mass=0.3, cog=1.5, inertia=1.2, stiffness=1.5)
-
+    f = bench.frfset(0.02, 0.003, seed=9106)  # a seed of the tests' own
+    r5 = identify(f, IdentifyOptions(refine_points=5))
+    r30 = identify(f, IdentifyOptions(refine_points=30))
+    assert r30.point_corrections is not None
+    assert any(w.startswith("point refinement: ") for w in r30.warnings)
+    assert np.abs(r30.point_corrections).max() < 0.006
+    before = np.sqrt(np.mean((f.resp_xyz - true) ** 2))
+    after = np.sqrt(np.mean((f.resp_xyz - r30.point_corrections - true) ** 2))
+    assert after / before < 0.8
+    e5, e30 = errors(bench, r5), errors(bench, r30)
+    for k in e5:
+        assert e30[k] <= 1.2 * e5[k] + 1e-3, (k, e5[k], e30[k])
+    within(e30, mass=0.3, cog=1.5, inertia=1.2, stiffness=1.5)
 
 
 def test_line_operators_of_a_zero_line() -> None:
