@@ -314,9 +314,11 @@ class _ImpactColumn:
 
     def column(self, s: Settings) -> Column | None:
         """The averaged hits (None when no run is usable)."""
-        if not self.results:
+        results, self.results = self.results, []  # each run's spectra freed once merged
+        if not results:
             return None
-        res = merge_results(self.results)
+        res = merge_results(results)
+        del results
         assert res.H is not None and res.coherence is not None
         return res.H, res.coherence, res.freq, res.units
 
@@ -354,9 +356,11 @@ class _RandomColumn:
         H, coh = frf(sp, s.estimator)
         self.reports.append(RunReport(f"excitation node {self.key[0]}: {sp.n_averages} averages"
                                       + (f" ({'; '.join(self.notes)})" if self.notes else "")))
-        units = self.units
-        joined = (UnitSpectra.concat([u for u in units if u is not None])
-                  if all(u is not None for u in units) else None)
+        units, self.units = self.units, []  # each run's units freed once joined
+        parts = [u for u in units if u is not None]
+        del units
+        joined = (None if len(parts) < len(self.spectra) else parts[0] if len(parts) == 1
+                  else UnitSpectra.concat(parts))
         return H, coh, sp.freq, joined
 
 
