@@ -267,22 +267,32 @@ def _run_setup(run: RunData) -> tuple[TestPlan, list[str], NDArray[np.float64]]:
             np.array([c.range_v * 1000.0 / c.sensitivity for c in rows]))
 
 
-def analyse_records(run: RunData) -> tuple[TestPlan, RunAnalysis]:
+def _records(run: RunData, loader: RecordLoader | None) -> RecordLoader:
+    """``loader``, or the run's records held in memory read as a loader reads them."""
+    rec = run.records
+    return loader or (lambda ids: ((i, rec.data[i]) for i in ids))
+
+
+def analyse_records(run: RunData, loader: RecordLoader | None = None,
+                    ) -> tuple[TestPlan, RunAnalysis]:
     """Recompute every stored record's verdict and spectra (no FRF set, no identification);
-    ``RunAnalysis.point(j)`` is then point ``j``'s FRF column or None."""
+    ``RunAnalysis.point(j)`` is then point ``j``'s FRF column or None. ``loader`` reads the
+    records (one at a time, e.g. :func:`app.io.runfile.iter_record_data`; default: the
+    run's ``records.data``)."""
     plan, names, ranges = _run_setup(run)
     rec = run.records
-    ana = RunAnalysis(plan, names, ranges,
-                      loader=lambda ids: ((i, rec.data[i]) for i in ids))
-    for i in range(len(rec)):
-        res = ana.add(i, int(rec.point[i]), rec.data[i], rec.override[i])
+    load = _records(run, loader)
+    ana = RunAnalysis(plan, names, ranges, loader=load)
+    for i, data in load(range(len(rec))):
+        res = ana.add(i, int(rec.point[i]), data, rec.override[i])
         auto = res is not None and bool(res.verdicts) and res.verdicts[0].accepted
         used = auto if not rec.override[i] else rec.override[i] == "accept" and res is not None
         ana.set_used(i, bool(used))
     return plan, ana
 
 
-def analyse_blocks(run: RunData) -> tuple[TestPlan, BlockAnalysis]:
+def analyse_blocks(run: RunData, loader: RecordLoader | None = None,
+                   ) -> tuple[TestPlan, BlockAnalysis]:
     """A shaker run's :func:`analyse_records`: every stored block judged again and averaged.
 
     A block rejected live for what its samples cannot show (the shaker's output went
@@ -290,10 +300,10 @@ def analyse_blocks(run: RunData) -> tuple[TestPlan, BlockAnalysis]:
     """
     plan, names, ranges = _run_setup(run)
     rec = run.records
-    blocks = BlockAnalysis(plan, names, ranges,
-                           loader=lambda ids: ((i, rec.data[i]) for i in ids))
-    for i in range(len(rec)):
-        v = blocks.add(i, int(rec.point[i]), rec.data[i], rec.override[i])
+    load = _records(run, loader)
+    blocks = BlockAnalysis(plan, names, ranges, loader=load)
+    for i, data in load(range(len(rec))):
+        v = blocks.add(i, int(rec.point[i]), data, rec.override[i])
         auto = bool(rec.auto_accepted[i]) and v is not None and v[0]
         used = (rec.override[i] == "accept") if rec.override[i] else auto
         blocks.set_used(i, v is not None and used)
@@ -357,19 +367,20 @@ def analysis_measurement(ana: RecordAnalysis, geometry: Geometry,
     return dataclasses.replace(m, source=source)
 
 
-def run_measurement(run: RunData, max_averages: int | None = None) -> tuple[
-    Measurement, RecordAnalysis
-]:
+def run_measurement(run: RunData, max_averages: int | None = None,
+                    loader: RecordLoader | None = None,
+                    ) -> tuple[Measurement, RecordAnalysis]:
     """The measurement of a run file's stored records, every record judged again
-    (:func:`analysis_measurement` of :func:`analyse_records` or :func:`analyse_blocks`),
-    and the analysis it comes from (the identification refuses a run whose force was
-    aligned by host timing only: :func:`check_identifiable`)."""
+    (:func:`analysis_measurement` of :func:`analyse_records` or :func:`analyse_blocks`,
+    the records read with ``loader`` when given), and the analysis it comes from (the
+    identification refuses a run whose force was aligned by host timing only:
+    :func:`check_identifiable`)."""
     if run.method == "shaker":
-        _, blocks = analyse_blocks(run)
+        _, blocks = analyse_blocks(run, loader)
         resp = run.channels[blocks.plan.n_references:]
         ana: RecordAnalysis = blocks
     else:
-        _, ana = analyse_records(run)
+        _, ana = analyse_records(run, loader)
         resp = run.channels[1:]
     try:
         m = analysis_measurement(ana, run.geometry, np.array([c.node for c in resp]),

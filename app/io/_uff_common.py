@@ -107,13 +107,12 @@ def _check_complete(p: Path) -> None:
                          "export the file again")
 
 
-def load_sets(path: str | Path, only: Iterable[int] | None = None) -> list[Dataset]:
-    """Read the datasets of a universal file, raising InputError on any failure.
+def open_uff(path: str | Path) -> tuple[pyuff.UFF, list[int]]:
+    """A universal file indexed by pyuff (its datasets' places and types, none parsed) and
+    the type of each dataset; InputError for a missing, empty, truncated or unreadable file.
 
-    Parameters
-    ----------
-    path : file name
-    only : dataset numbers to read (all when None); the others are skipped unread.
+    pyuff holds the file's bytes only while it indexes them; read the datasets one at a time
+    with :func:`read_set` to keep memory to one dataset.
     """
     p = Path(path)
     if not p.exists():
@@ -123,24 +122,47 @@ def load_sets(path: str | Path, only: Iterable[int] | None = None) -> list[Datas
     try:
         uff = pyuff.UFF(str(p))
         types = [int(t) for t in uff.get_set_types()]
-        if not types:
-            raise InputError(
-                f"{p.name} holds no UFF datasets (no '    -1' delimiters): "
-                "is it a universal file?"
-            )
-        _check_complete(p)
-        wanted = set(only) if only is not None else None
-        index = [i for i, t in enumerate(types) if wanted is None or t in wanted]
-        if not index:
-            return []
-        sets = as_list(uff.read_sets(setn=index))
-    except InputError:
-        raise
     except Exception as err:  # pyuff raises bare Exception for every parse error
+        raise _unreadable(p, err) from err
+    if not types:
         raise InputError(
-            f"cannot read UFF file {p.name}: {err} (pyuff could not parse it): "
-            "check that it is a complete universal file"
-        ) from err
+            f"{p.name} holds no UFF datasets (no '    -1' delimiters): "
+            "is it a universal file?"
+        )
+    _check_complete(p)
+    return uff, types
+
+
+def _unreadable(p: Path, err: Exception) -> InputError:
+    return InputError(
+        f"cannot read UFF file {p.name}: {err} (pyuff could not parse it): "
+        "check that it is a complete universal file"
+    )
+
+
+def read_set(uff: pyuff.UFF, index: int, header_only: bool = False) -> Dataset:
+    """Dataset ``index`` (from 0) of a file :func:`open_uff` indexed, parsed by pyuff alone
+    (``header_only``: a dataset 58's header, its ``x`` and ``data`` None); InputError when
+    pyuff cannot parse it."""
+    try:
+        ds = uff.read_sets(setn=index, header_only=header_only)
+    except Exception as err:  # pyuff raises bare Exception for every parse error
+        raise _unreadable(Path(uff.get_file_name()), err) from err
+    return as_list(ds)[0]
+
+
+def load_sets(path: str | Path, only: Iterable[int] | None = None) -> list[Dataset]:
+    """Read the datasets of a universal file, raising InputError on any failure.
+
+    Parameters
+    ----------
+    path : file name
+    only : dataset numbers to read (all when None); the others are skipped unread.
+    """
+    p = Path(path)
+    uff, types = open_uff(p)
+    wanted = set(only) if only is not None else None
+    sets = [read_set(uff, i) for i, t in enumerate(types) if wanted is None or t in wanted]
     log.debug("read %d datasets from %s", len(sets), p)
     return sets
 

@@ -16,11 +16,11 @@ binary files then store every sample time.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Literal, overload
+from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,7 +30,8 @@ from app.io._uff_common import (
     UnitFactors,
     dof_direction,
     exponents,
-    load_sets,
+    open_uff,
+    read_set,
     read_units,
     record_label,
     sample_axis,
@@ -127,19 +128,20 @@ def _rate(ds: Dataset, x: NDArray[np.float64], where: str) -> float:
 
 def _run(
     load_case: int,
-    items: list[tuple[int, Dataset]],
+    records: Iterable[tuple[int, Dataset]],
     units: UnitFactors,
     rotations: dict[int, NDArray[np.float64]],
 ) -> TimeRun:
-    """One run from its records; InputError names the load case and the problem."""
+    """One run from its records, the force first then the responses (none: a run of its
+    force alone), each parsed when reached and dropped once converted; InputError names
+    the load case and the problem."""
     lc = f"load case {load_case}"
-    force, responses = _force_and_responses(lc, items)
     rates, signals = [], []
     resp_nodes: list[int] = []
     resp_dirs: list[NDArray[np.float64]] = []
     seen: set[tuple[int, int]] = set()
     exc_node, exc_dir = 0, np.zeros(3)
-    for i, ds in [force, *responses]:
+    for i, ds in records:
         where = f"{lc}: {record_label(i, ds)}"
         kind, rate, signal = _time_signal(ds, units, where)
         rates.append(rate)
@@ -162,9 +164,9 @@ def _run(
         force=signals[0],
         exc_node=exc_node,
         exc_dir=exc_dir,
-        responses=np.vstack(signals[1:]),
+        responses=np.vstack(signals[1:]) if len(signals) > 1 else np.zeros((0, signals[0].size)),
         resp_nodes=np.array(resp_nodes, dtype=np.int64),
-        resp_dirs=np.array(resp_dirs),
+        resp_dirs=np.array(resp_dirs).reshape(-1, 3),
     )
 
 
@@ -272,7 +274,15 @@ def read_time_uff(
         sample rates or lengths, with NaN values or an unknown ordinate type. The
         message names the load case.
     """
-    runs, problems, _ = _read(Path(path))
+    runs: list[TimeRun] = []
+    problems: list[Problem] = []
+    f = read_time_file(path)
+    for load_case in f.load_cases:
+        try:
+            runs.append(f.read_run(load_case))
+        except InputError as err:
+            log.info("%s: %s", f.path.name, err)
+            problems.append((load_case, str(err)))
     if strict:
         if problems:
             more = f" ({len(problems) - 1} more run(s) with problems)" if len(problems) > 1 else ""
@@ -283,60 +293,74 @@ def read_time_uff(
 
 @dataclass(frozen=True)
 class TimeFile:
-    """A time-data UFF file read in one pass: its good runs, the problems of the others
-    (``(load_case, message)``) and its datasets, for :meth:`geometry`."""
+    """A time-data UFF file indexed from its headers: its runs' load cases in order of first
+    appearance and its other datasets (units, nodes, coordinate systems); each run's samples
+    are read when asked for (:meth:`read_run`), so memory holds one run, never the file.
 
-    runs: list[TimeRun]
-    problems: list[Problem]
+    Attributes
+    ----------
+    path : the file
+    load_cases : the runs' load case numbers, in order of first appearance
+    datasets : the datasets other than dataset 58 (parsed), for :meth:`geometry`
+    units : the file's unit factors (dataset 164)
+    """
+
+    path: Path
+    load_cases: tuple[int, ...]
     datasets: list[Dataset]
+    units: UnitFactors
+    uff: Any = field(repr=False)  # the pyuff.UFF index
+    records: dict[int, list[tuple[int, Dataset]]] = field(repr=False)  # headers by load case
+    rotations: dict[int, NDArray[np.float64]] = field(repr=False)
 
     def geometry(self) -> Geometry:
         """The file's node geometry (m); InputError when it has none."""
         return read_geometry(self.datasets)[0]
 
+    def read_run(self, load_case: int, force_only: bool = False) -> TimeRun:
+        """Run ``load_case`` read from the file, one record at a time (``force_only``: its
+        force record alone, the run's responses then empty).
+
+        Raises
+        ------
+        InputError
+            The run's problem, named as :func:`read_time_uff` names it: the checks run in
+            the same order, so a force-only read that passes can still fail in full.
+        """
+        force, responses = _force_and_responses(f"load case {load_case}",
+                                                self.records[load_case])
+        chosen = [force] if force_only else [force, *responses]
+        data = ((i, read_set(self.uff, i)) for i, _ in chosen)
+        return _run(load_case, data, self.units, self.rotations)
+
 
 def read_time_file(path: str | Path) -> TimeFile:
-    """The runs, their problems and the datasets of a time-data UFF file, parsed once
-    (:func:`read_time_uff` with ``strict=False``; :meth:`TimeFile.geometry` the nodes of
-    :func:`app.io.uff_geometry.read_geometry_uff`).
+    """A time-data UFF file indexed from its headers (:class:`TimeFile`): its runs are then
+    read one at a time with :meth:`TimeFile.read_run` (:func:`read_time_uff` reads them all;
+    :meth:`TimeFile.geometry` the nodes of :func:`app.io.uff_geometry.read_geometry_uff`).
 
     Raises
     ------
     InputError
-        As :func:`read_time_uff`.
+        Missing or unparsable file, no time records, a bad geometry/units dataset.
     """
-    return TimeFile(*_read(Path(path)))
-
-
-def _read(p: Path) -> tuple[list[TimeRun], list[Problem], list[Dataset]]:
-    """The good runs of ``p``, the problems of the others, and its datasets."""
-    sets = load_sets(p)
+    p = Path(path)
+    uff, types = open_uff(p)
+    headers = [(i, read_set(uff, i, header_only=t == 58)) for i, t in enumerate(types)]
+    sets = [ds for (_, ds), t in zip(headers, types, strict=True) if t != 58]
     units = read_units(sets)
     has_nodes = any(ds.get("type") in (15, 2411) for ds in sets)
     rotations = read_geometry(sets)[1] if has_nodes else {}
-    records = [
-        (i, ds)
-        for i, ds in enumerate(sets)
-        if ds.get("type") == 58 and ds.get("func_type") == _TIME
-    ]
-    if not records:
+    groups: dict[int, list[tuple[int, Dataset]]] = {}
+    for i, ds in headers:
+        if ds.get("type") == 58 and ds.get("func_type") == _TIME:
+            groups.setdefault(int(ds.get("load_case_id", 0)), []).append((i, ds))
+    if not groups:
         raise InputError(
             f"{p.name} has no time records (dataset 58 with function type 1): "
             "give a file of time records, or give an FRF file to insitu identify"
         )
-    groups: dict[int, list[tuple[int, Dataset]]] = {}
-    for i, ds in records:
-        groups.setdefault(int(ds.get("load_case_id", 0)), []).append((i, ds))
-    runs: list[TimeRun] = []
-    problems: list[Problem] = []
-    for load_case, items in groups.items():
-        try:
-            runs.append(_run(load_case, items, units, rotations))
-        except InputError as err:
-            problems.append((load_case, str(err)))
-    for _, message in problems:  # the caller gets them (strict=False) or the first raises
-        log.info("%s: %s", p.name, message)
-    return runs, problems, sets
+    return TimeFile(p, tuple(groups), sets, units, uff, groups, rotations)
 
 
 def write_time_uff(

@@ -4,6 +4,8 @@ Every stored hit or block is processed again with the plan's settings and the op
 overrides by the live acquisition's own code (:func:`app.acquire.analysis.run_measurement`,
 which the live run's own result comes from too), so the FRFs, their provenance and the fit
 are the live run's. ``Settings.run_points`` says what a point without a used record does.
+The records are read from the file one at a time (:func:`app.io.runfile.iter_record_data`),
+as the analysis reaches them: memory holds a record and the points' spectra, not the run.
 """
 
 from __future__ import annotations
@@ -14,13 +16,14 @@ from pathlib import Path
 import numpy as np
 
 from app.acquire.analysis import (
+    RecordLoader,
     analyse_records,
     analysis_measurement,
     anti_aliased,
     check_identifiable,
     run_measurement,
 )
-from app.io.runfile import RunData, read_run
+from app.io.runfile import RunData, iter_record_data, read_run
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings
 from processing.data import InputError
@@ -40,15 +43,20 @@ def open_run_file(path: Path, s: Settings) -> Measurement:
     the first ``s.averages`` used records of each point averaged), on the lines up to
     ``s.fmax`` (default fs / 2.56), with the checks reported.
     """
-    run = read_run(path)
+    run = read_run(path, with_data=False)
     if len(run.records) == 0:
         raise OpenError(f"{path}: the run holds no hit yet: record hits (insitu acquire)")
     if s.run_points == "usable":
         return _usable_points(run, path, s)
     check_identifiable(run)
-    m = anti_aliased(run_measurement(run)[0])
+    m = anti_aliased(run_measurement(run, loader=_loader(path))[0])
     return dataclasses.replace(m, provenance=dataclasses.replace(m.provenance,
                                                                  run_state=run.state))
+
+
+def _loader(path: Path) -> RecordLoader:
+    """Reads the run file's records ``ids`` one at a time."""
+    return lambda ids: iter_record_data(path, ids)
 
 
 def _usable_points(run: RunData, path: Path, s: Settings) -> Measurement:
@@ -57,9 +65,9 @@ def _usable_points(run: RunData, path: Path, s: Settings) -> Measurement:
     fmax = s.fmax if s.fmax is not None else run.records.fs / 2.56
     reports: list[RunReport] = []
     if run.method != "hammer":  # shaker runs: the run's own FRFs (every point needed)
-        m = run_measurement(run, s.averages)[0]
+        m = run_measurement(run, s.averages, _loader(path))[0]
     else:
-        plan, ana = analyse_records(run)
+        plan, ana = analyse_records(run, _loader(path))
         rec = run.records
         good: list[int] = []
         for j, point in enumerate(plan.excitations):

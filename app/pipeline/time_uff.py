@@ -8,20 +8,24 @@ per-hit checks, force and exponential windows). A bad run is reported and left o
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from app.io.uff_time import TimeRun, read_time_file
+from app.io.uff_time import TimeFile, TimeRun, read_time_file
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
 from processing.excitation import (
+    ShakerSignal,
     burst_onsets,
     burst_records,
     burst_ringing,
@@ -31,6 +35,7 @@ from processing.excitation import (
 )
 from processing.impact import (
     MIN_PRETRIGGER,
+    ExcitationGuess,
     ImpactDefaults,
     ImpactResult,
     ImpactSettings,
@@ -172,93 +177,201 @@ def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
     return res
 
 
-def _consistent(runs: list[TimeRun], reports: list[RunReport]) -> list[TimeRun]:
-    """The runs with the first run's sample rate and response DOFs; the others reported."""
-    first = runs[0]
-    good: list[TimeRun] = []
-    for r in runs:
-        if r.fs != first.fs or not (np.array_equal(r.resp_nodes, first.resp_nodes)
-                                    and np.allclose(r.resp_dirs, first.resp_dirs)):
-            what = (f"sample rate {r.fs:g} Hz differs from load case {first.load_case}'s "
-                    f"{first.fs:g} Hz" if r.fs != first.fs else
-                    f"response DOFs differ from load case {first.load_case}'s")
-            reports.append(RunReport(f"load case {r.load_case}: {what}: process such runs in "
-                                     "separate files", skipped=True))
-        else:
-            good.append(r)
-    return good
+@dataclass(frozen=True)
+class _Layout:
+    """The first good run's load case, sample rate (Hz) and response DOFs: every run used
+    shares them."""
+
+    load_case: int
+    fs: float
+    resp_nodes: NDArray[np.int64]
+    resp_dirs: NDArray[np.float64]
+
+    def mismatch(self, r: TimeRun) -> RunReport | None:
+        """The report leaving ``r`` out when its rate or response DOFs differ, else None."""
+        if r.fs == self.fs and (np.array_equal(r.resp_nodes, self.resp_nodes)
+                                and np.allclose(r.resp_dirs, self.resp_dirs)):
+            return None
+        what = (f"sample rate {r.fs:g} Hz differs from load case {self.load_case}'s "
+                f"{self.fs:g} Hz" if r.fs != self.fs else
+                f"response DOFs differ from load case {self.load_case}'s")
+        return RunReport(f"load case {r.load_case}: {what}: process such runs in separate "
+                         "files", skipped=True)
 
 
-def _impact_column(key: DofKey, members: list[TimeRun], s: Settings,
-                   reports: list[RunReport], levels: dict[int, float]) -> Column | None:
-    """The averaged hits of one excitation DOF's runs (None when none is usable)."""
-    results: list[ImpactResult] = []
-    for r in members:
+@dataclass(frozen=True)
+class _Force:
+    """What the settings read from one run's force: its load case, sample rate (Hz),
+    length (samples) and, when a setting is to be read from the data, the excitation it
+    suggests and the shaker signal's kind (:func:`processing.excitation.shaker_signal`)."""
+
+    load_case: int
+    fs: float
+    n_samples: int
+    guess: ExcitationGuess | None
+    signal: ShakerSignal | None
+
+
+class _Passes:
+    """The runs of a time UFF file as the passes over it read them, one run at a time.
+
+    ``bad`` maps the load case of each run found bad so far to its problem (kept from one
+    attempt to the next); ``good`` holds the runs read whole without a problem. A run found
+    bad by a whole read after its force counted in a setting (``late``) makes the caller
+    start again without it, so the settings and FRFs come from the good runs alone, as if
+    every run had been checked first.
+    """
+
+    def __init__(self, file: TimeFile, bad: dict[int, str], good: set[int]) -> None:
+        self.file, self.bad, self.good = file, bad, good
+        self.late = False
+
+    def forces(self, s: Settings) -> list[_Force]:
+        """Each run's force read alone (a bad one goes to ``bad``), what the settings need
+        of it kept."""
+        guess = s.excitation is None and not s.hammer_given
+        signal = ((s.excitation == "random" or guess)
+                  and not (s.records is not None and s.nperseg is not None)
+                  and not (s.welch_given or s.records == "welch"))
+        seen = []
+        for lc in self.file.load_cases:
+            if lc in self.bad:
+                continue
+            try:
+                r = self.file.read_run(lc, force_only=True)
+            except InputError as err:
+                self.bad[lc] = str(err)
+                continue
+            seen.append(_Force(lc, r.fs, r.n_samples, excitation_type(r.force) if guess else None,
+                               shaker_signal(r.force, r.fs) if signal else None))
+            del r
+        return seen
+
+    def runs(self) -> Iterator[TimeRun]:
+        """The runs not known bad, read whole one at a time, in the file's order."""
+        for lc in self.file.load_cases:
+            if lc in self.bad:
+                continue
+            try:
+                run = self.file.read_run(lc)
+            except InputError as err:
+                self.bad[lc] = str(err)
+                self.late = True
+                continue
+            self.good.add(lc)
+            yield run
+            del run  # before the next run is read
+
+    def check_all(self) -> None:
+        """Read whole every run not read whole yet (before a refusal: its reports name
+        every bad run)."""
+        for lc in self.file.load_cases:
+            if lc not in self.bad and lc not in self.good:
+                try:
+                    self.file.read_run(lc)
+                    self.good.add(lc)
+                except InputError as err:
+                    self.bad[lc] = str(err)
+                    self.late = True
+
+    def problems(self) -> list[RunReport]:
+        """One skipped report per bad run, in the file's order."""
+        return [RunReport(self.bad[lc], skipped=True) for lc in self.file.load_cases
+                if lc in self.bad]
+
+
+class _ImpactColumn:
+    """One excitation DOF's hits, its runs added one at a time: the first ``s.averages``
+    accepted hits of the point averaged."""
+
+    def __init__(self, key: DofKey) -> None:
+        self.key = key
+        self.results: list[ImpactResult] = []
+        self.reports: list[RunReport] = []
+
+    def add(self, r: TimeRun, s: Settings, levels: dict[int, float]) -> None:
         left = None
         if s.averages is not None:  # the first N accepted hits of the point
-            left = s.averages - sum(one.n_accepted for one in results)
+            left = s.averages - sum(one.n_accepted for one in self.results)
             if left == 0:
-                reports.append(RunReport(f"load case {r.load_case} (node {key[0]}): not used, "
-                                         f"the first {s.averages} accepted hits of the point "
-                                         "are averaged"))
-                continue
+                self.reports.append(RunReport(
+                    f"load case {r.load_case} (node {self.key[0]}): not used, the first "
+                    f"{s.averages} accepted hits of the point are averaged"))
+                return
         try:
             one = _impact(r, s, levels, left)
         except InputError as err:
-            reports.append(RunReport(str(err), skipped=True))
-            continue
-        results.append(one)
+            self.reports.append(RunReport(str(err), skipped=True))
+            return
+        self.results.append(one)
         bad = [v for v in one.rejected if not v.reason.startswith("not used")]
         n_unused = len(one.rejected) - len(bad)
-        reports.append(RunReport(
-            f"load case {r.load_case} (node {key[0]}): {one.n_accepted} hits accepted"
+        self.reports.append(RunReport(
+            f"load case {r.load_case} (node {self.key[0]}): {one.n_accepted} hits accepted"
             + (", rejected: " + "; ".join(f"hit {v.index + 1}: {v.reason}" for v in bad)
                if bad else "")
             + (f"; {n_unused} more not used (--averages {s.averages})" if n_unused else "")))
-    if not results:
-        return None
-    res = merge_results(results)
-    assert res.H is not None and res.coherence is not None
-    return res.H, res.coherence, res.freq, res.units
+
+    def column(self, s: Settings) -> Column | None:
+        """The averaged hits (None when no run is usable)."""
+        results, self.results = self.results, []  # each run's spectra freed once merged
+        if not results:
+            return None
+        res = merge_results(results)
+        del results
+        assert res.H is not None and res.coherence is not None
+        return res.H, res.coherence, res.freq, res.units
 
 
-def _random_column(key: DofKey, members: list[TimeRun], s: Settings,
-                   reports: list[RunReport], levels: dict[int, float]) -> Column | None:
-    """The Welch average over one excitation DOF's runs (None when none is usable)."""
-    spectra, units, notes = [], [], []
-    for r in members:
+class _RandomColumn:
+    """One excitation DOF's Welch average, its runs added one at a time."""
+
+    def __init__(self, key: DofKey) -> None:
+        self.key = key
+        self.spectra: list[CrossSpectra] = []
+        self.units: list[UnitSpectra | None] = []
+        self.notes: list[str] = []
+        self.reports: list[RunReport] = []
+
+    def add(self, r: TimeRun, s: Settings, levels: dict[int, float]) -> None:
         try:
             if not np.any(r.force):
                 raise InputError(f"load case {r.load_case}: the force channel is zero "
                                  "throughout: check the shaker's force channel")
             sp_r, units_r, note = _random_spectra(r, s)
-            spectra.append(sp_r)
-            units.append(units_r)
+            self.spectra.append(sp_r)
+            self.units.append(units_r)
             if note:
-                notes.append(f"load case {r.load_case}: {note}")
+                self.notes.append(f"load case {r.load_case}: {note}")
         except InputError as err:
-            reports.append(RunReport(str(err), skipped=True))
-    if not spectra:
-        return None
-    sp = spectra[0]
-    for other in spectra[1:]:
-        sp = combine(sp, other)
-    H, coh = frf(sp, s.estimator)
-    reports.append(RunReport(f"excitation node {key[0]}: {sp.n_averages} averages"
-                             + (f" ({'; '.join(notes)})" if notes else "")))
-    joined = (UnitSpectra.concat([u for u in units if u is not None])
-              if all(u is not None for u in units) else None)
-    return H, coh, sp.freq, joined
+            self.reports.append(RunReport(str(err), skipped=True))
+
+    def column(self, s: Settings) -> Column | None:
+        """The Welch average over the runs (None when no run is usable)."""
+        if not self.spectra:
+            return None
+        sp = self.spectra[0]
+        for other in self.spectra[1:]:
+            sp = combine(sp, other)
+        H, coh = frf(sp, s.estimator)
+        self.reports.append(RunReport(f"excitation node {self.key[0]}: {sp.n_averages} averages"
+                                      + (f" ({'; '.join(self.notes)})" if self.notes else "")))
+        units, self.units = self.units, []  # each run's units freed once joined
+        parts = [u for u in units if u is not None]
+        del units
+        joined = (None if len(parts) < len(self.spectra) else parts[0] if len(parts) == 1
+                  else UnitSpectra.concat(parts))
+        return H, coh, sp.freq, joined
 
 
-def _excitation(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]]:
+def _excitation(runs: list[_Force], s: Settings) -> tuple[Settings, list[RunReport]]:
     """``s`` with its excitation read from the data when not given, and the line saying so."""
     if s.excitation is not None:
         return s, []
     if s.hammer_given:
         return dataclasses.replace(s, excitation="impact"), [RunReport(
             "excitation impact (a hammer option is given; --excitation random to change)")]
-    guesses = [excitation_type(r.force) for r in runs]
+    guesses = [r.guess for r in runs if r.guess is not None]
     n_imp = sum(g.kind == "impact" for g in guesses)
     kind: Literal["impact", "random"] = "impact" if 2 * n_imp > len(guesses) else "random"
     k = float(np.median([g.kurtosis for g in guesses]))
@@ -276,7 +389,7 @@ def _excitation(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunRep
 WELCH = (2048, 0.5, "hann")
 
 
-def _shaker(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]]:
+def _shaker(runs: list[_Force], s: Settings) -> tuple[Settings, list[RunReport]]:
     """``s`` with how random-excitation records are cut (``records``, ``nperseg``,
     ``overlap``, ``window``) read from the forces when not given, and the line saying so."""
     if s.records is not None and s.nperseg is not None:
@@ -285,7 +398,7 @@ def _shaker(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]
         return dataclasses.replace(s, records="welch", nperseg=s.nperseg or WELCH[0],
                                    overlap=WELCH[1] if s.overlap is None else s.overlap,
                                    window=s.window or WELCH[2]), []
-    sig = [shaker_signal(r.force, r.fs) for r in runs]
+    sig = [r.signal for r in runs if r.signal is not None]
     kind = Counter(g.kind for g in sig).most_common(1)[0][0]
     same = [g for g in sig if g.kind == kind]
     fs = runs[0].fs
@@ -313,7 +426,7 @@ def _shaker(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]
                   f"{ov * 100:.0f} % overlap (--nperseg, --overlap, --window to change)")]
 
 
-def _burst_carryover(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[RunReport]]:
+def _burst_carryover(runs: _Passes, s: Settings) -> tuple[Settings, list[RunReport]]:
     """``s`` with ``carryover`` resolved for random excitation: for burst records, on when
     the responses still ring at the records' ends (:data:`CARRY_GATE`, median over the
     runs) unless given, and the line saying so; a ``--carryover`` given for other records
@@ -324,8 +437,11 @@ def _burst_carryover(runs: list[TimeRun], s: Settings) -> tuple[Settings, list[R
     L = s.nperseg
     if s.carryover is not None or L is None:
         return s, []
-    rings = [burst_ringing(_stacked(r), r.fs, st, L) for r in runs
-             if (st := _burst_starts(r, L)).size]
+    rings = []
+    for r in runs.runs():
+        if (st := _burst_starts(r, L)).size:
+            rings.append(burst_ringing(_stacked(r), r.fs, st, L))
+        del r  # before the next run is read
     ring = float(np.median(rings)) if rings else 0.0
     on = ring >= CARRY_GATE
     return dataclasses.replace(s, carryover=on), [RunReport(
@@ -347,33 +463,33 @@ def _record(d: list[ImpactDefaults], decay: float, pre: float) -> float:
     return float(max(min(want, limit), min(x.record for x in d)))
 
 
-def _impact_defaults(runs: list[TimeRun], pre: float) -> dict[int, ImpactDefaults]:
+def _impact_defaults(runs: _Passes, pre: float) -> dict[int, ImpactDefaults]:
     """Each run's defaults read from its data (:func:`processing.impact.impact_defaults`) for
     a pre-trigger of ``pre`` s, by load case; a run without an impact is left out (its
     processing reports it)."""
     found: dict[int, ImpactDefaults] = {}
-    for r in runs:
-        try:
+    for r in runs.runs():
+        with contextlib.suppress(InputError):
             found[r.load_case] = impact_defaults(r.force, r.responses, r.fs, pre)
-        except InputError:
-            continue
+        del r  # before the next run is read
     return found
 
 
-def _resolve(runs: list[TimeRun], s: Settings,
+def _resolve(forces: list[_Force], runs: _Passes, s: Settings,
              ) -> tuple[Settings, dict[int, float], list[RunReport]]:
-    """The settings with every default read from the data, the runs' trigger levels (N, by
-    load case) and one line per default chosen."""
-    s, lines = _excitation(runs, s)
+    """The settings with every default read from the data (``forces``; the runs read whole
+    again when a default needs their responses), the runs' trigger levels (N, by load case)
+    and one line per default chosen."""
+    s, lines = _excitation(forces, s)
     if s.excitation != "impact":
-        s, more = _shaker(runs, s)
+        s, more = _shaker(forces, s)
         s, bursts = _burst_carryover(runs, s)
         return s, {}, lines + more + bursts
     pre = s.pretrigger if s.pretrigger is not None else PRETRIGGER
     found = _impact_defaults(runs, pre)
     if s.pretrigger is None and found:  # hold the force's ringing before a pulse
         before = max(x.ring_before for x in found.values())
-        chosen = pretrigger_for(before, runs[0].fs)
+        chosen = pretrigger_for(before, forces[0].fs)
         if chosen != pre:
             pre, found = chosen, _impact_defaults(runs, chosen)
         lines.append(RunReport(
@@ -440,34 +556,53 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
     provenance) are each run's verdicts, each bad run (skipped), the coherence gate and the
     rigidity check. Raises :class:`OpenError` (one line) when no run is usable or a setting
     fits no run.
+
+    The file is read one run at a time (:class:`_Passes`): the forces alone for the
+    settings read from the data, each run whole again for the defaults that need its
+    responses (hammer tests, burst records), then each run whole once for its spectra.
+    Memory holds one run and the spectra, never the file's samples.
     """
-    data = read_time_file(path)  # parsed once: runs, their problems, the datasets
-    runs = data.runs
-    reports = [RunReport(msg, skipped=True) for _, msg in data.problems]
+    file = read_time_file(path)  # headers only: every run read when a pass reaches it
+    bad: dict[int, str] = {}
+    good: set[int] = set()
+    while True:  # again without a run found bad after its force counted in a setting
+        m = _attempt(path, file, _Passes(file, bad, good), s)
+        if m is not None:
+            return m
+
+
+def _attempt(path: Path, file: TimeFile, runs: _Passes, s: Settings) -> Measurement | None:
+    """:func:`open_time_uff` with the runs known bad so far left out; None when a run is
+    found bad after its force counted in a setting."""
+    forces = runs.forces(s)
     levels: dict[int, float] = {}
-    if runs:  # options that depend on the data: once for the file, not once per run
+    chosen: list[RunReport] = []
+    if forces:  # options that depend on the data: once for the file, not once per run
         try:
-            s.check_rate(runs[0].fs, max(r.n_samples / r.fs for r in runs))
+            s.check_rate(forces[0].fs, max(r.n_samples / r.fs for r in forces))
         except InputError as err:
-            raise OpenError(str(err), reports) from err
-        s, levels, chosen = _resolve(runs, s)
-        reports = chosen + reports
-    if (runs and s.excitation == "random" and s.nperseg is not None
-            and max(r.n_samples for r in runs) < s.nperseg):
-        raise OpenError(f"the longest run has {max(r.n_samples for r in runs)} samples, fewer "
-                        f"than --nperseg {s.nperseg}: lower --nperseg", reports)
-    good = _consistent(runs, reports) if runs else []
-    groups: dict[DofKey, list[TimeRun]] = {}  # one column per excitation DOF, in order
-    for r in good:
-        groups.setdefault((int(r.exc_node), tuple(np.round(r.exc_dir, 6))), []).append(r)
-    column = _impact_column if s.excitation == "impact" else _random_column
-    cols = {key: col for key, members in groups.items()
-            if (col := column(key, members, s, reports, levels)) is not None}
-    if not cols:
+            runs.check_all()
+            if runs.late:
+                return None
+            raise OpenError(str(err), runs.problems()) from err
+        s, levels, chosen = _resolve(forces, runs, s)
+        if runs.late:
+            return None
+    longest = max((r.n_samples for r in forces), default=0)
+    if forces and s.excitation == "random" and s.nperseg is not None and longest < s.nperseg:
+        runs.check_all()
+        if runs.late:
+            return None
+        raise OpenError(f"the longest run has {longest} samples, fewer than --nperseg "
+                        f"{s.nperseg}: lower --nperseg", chosen + runs.problems())
+    cols, first, more = _columns(runs, s, levels)
+    if runs.late:
+        return None
+    reports = chosen + runs.problems() + more
+    if not cols or first is None:
         raise OpenError(f"{path}: no usable time run ({n_skipped(reports)} bad run(s), see "
                         "above)", reports)
-    first = runs[0]
-    geometry = data.geometry()
+    geometry = file.geometry()
     keys = list(cols)
     fmax = s.fmax if s.fmax is not None else first.fs / 2.56
     out, _ = assemble(cols[keys[0]][2], [cols[k][0] for k in keys],
@@ -491,6 +626,30 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
         else None, force_band_top=top, anti_alias_fmax=fmax,
         window="" if s.excitation == "impact" else str(s.window), reports=tuple(reports)),
         Path(path).name)
+
+
+def _columns(runs: _Passes, s: Settings, levels: dict[int, float],
+             ) -> tuple[dict[DofKey, Column], _Layout | None, list[RunReport]]:
+    """One FRF column per excitation DOF (in order of first appearance; a DOF without a
+    usable run has none), each run read whole once and added to its DOF's column; the first
+    good run's layout; the reports: the runs left out for another rate or other response
+    DOFs, then each column's."""
+    make = _ImpactColumn if s.excitation == "impact" else _RandomColumn
+    groups: dict[DofKey, _ImpactColumn | _RandomColumn] = {}
+    first: _Layout | None = None
+    left_out: list[RunReport] = []
+    for r in runs.runs():
+        if first is None:
+            first = _Layout(r.load_case, r.fs, r.resp_nodes, r.resp_dirs)
+        why = first.mismatch(r)
+        if why is not None:
+            left_out.append(why)
+        else:
+            key = (int(r.exc_node), tuple(np.round(r.exc_dir, 6)))
+            groups.setdefault(key, make(key)).add(r, s, levels)
+        del r  # before the next run is read
+    cols = {key: col for key, g in groups.items() if (col := g.column(s)) is not None}
+    return cols, first, left_out + [line for g in groups.values() for line in g.reports]
 
 
 #: fewest lines left by :func:`_from_signal`

@@ -36,22 +36,37 @@ def test_an_frf_uff_is_no_time_uff(tmp_path: Path) -> None:
     assert detect_format(tmp_path / "missing.uff") == FRF_UFF  # its reader says what is wrong
 
 
-def test_a_time_uff_is_parsed_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_time_uff_is_indexed_once_and_its_responses_read_once(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     runs, geometry = engine_runs(1024.0)
     path = tmp_path / "t.uff"
     write_time_uff(path, runs, geometry)
-    calls: list[object] = []
-    real = uff_common.load_sets
+    indexed: list[str] = []
+    reads: list[int] = []  # the dataset of each read of samples (headers not counted)
+    real = uff_common.pyuff.UFF
 
-    def counted(*args: object, **kwargs: object) -> object:
-        calls.append(args)
-        return real(*args, **kwargs)  # type: ignore[arg-type]
+    class Counted(real):  # type: ignore[misc, valid-type]
+        def __init__(self, filename: str) -> None:
+            indexed.append(filename)
+            super().__init__(filename)
 
-    for module in ("app.io.uff_time", "app.io.uff_geometry", "app.io.uff"):
-        monkeypatch.setattr(f"{module}.load_sets", counted)
+        def read_sets(self, setn: int, header_only: bool = False) -> object:
+            if not header_only:
+                reads.append(setn)
+            return super().read_sets(setn=setn, header_only=header_only)
+
+    monkeypatch.setattr(uff_common.pyuff, "UFF", Counted)
     m = load(path, Settings(excitation="random", nperseg=64))
-    assert len(calls) == 1  # detection read headers only; runs and geometry in one parse
+    assert indexed == [str(path)]  # detection read headers only; the file indexed once
     assert m.frf.H.shape[:2] == (12, 3) and m.provenance.estimated
+    # units and geometry first, then per run its force and 12 responses: the settings read
+    # the forces alone, the spectra each run whole, once
+    types = list(real(str(path)).get_set_types())
+    first = types.index(58)
+    assert types[first:] == [58] * 39
+    forces = [first + 13 * k for k in range(3)]
+    assert sorted(reads) == sorted([*range(first), *forces, *range(first, first + 39)])
     data = read_time_file(path)
-    assert [r.load_case for r in data.runs] == [1, 2, 7] and data.problems == []
+    assert data.load_cases == (1, 2, 7)
+    assert [data.read_run(lc).load_case for lc in data.load_cases] == [1, 2, 7]
     np.testing.assert_allclose(data.geometry().xyz, geometry.xyz, atol=1e-15)
