@@ -52,6 +52,7 @@ from processing.stages import (
     rigid_band_tops,
     settle_mass_band,
     solve,
+    stiffness_operators,
     upper_residual,
     weigh_lines,
 )
@@ -154,8 +155,9 @@ def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stage
                       elastic_top=d.elastic_top)
     bands = choose_bands(problem, *d.rigid_tops)
     weights = weigh_lines(problem, bands)
-    bands, weights = settle_mass_band(problem, bands, weights)
-    fitted = solve(problem, bands, weights)
+    ops = stiffness_operators(problem, bands)  # the settling keeps the stiffness band
+    bands, weights = settle_mass_band(problem, bands, weights, ops)
+    fitted = solve(problem, bands, weights, ops)
     refuse_implausible_mass(problem, bands, weights, fitted)
     return Stages(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
 
