@@ -27,7 +27,7 @@ Re-identification
 
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,8 +35,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from processing.data import InputError
-from processing.inertia import MASS_BASIS, mass_matrix
-from processing.massline import MassLineProblem, stack_real
+from processing.inertia import MASS_BASIS
+from processing.massline import stack_real
 from processing.physical import constrain_physical
 from processing.problem import Problem, h1_variances, typical_rms
 from processing.results import UNCERTAIN_KEYS
@@ -45,21 +45,31 @@ from processing.stages import (
     Bands,
     Fit,
     LineWeights,
-    StiffnessStep,
-    iterate,
     leakage_shapes,
     upper_residual,
 )
-from processing.stiffness import DAMPING_BLOCKS, DUPLICATION, line_operators
+from processing.stiffness import (
+    DAMPING_BLOCKS,
+    DUPLICATION,
+    stiffness_normal,
+    vech_index,
+    vech_normal,
+)
 from processing.uncertainty import derived_of_draws, draw_covariance
 from processing.units import TimeUnits, UnitKind
 
-__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "resample", "weighted_accelerances"]
+__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "Progress", "resample", "resampled_frfs",
+           "weighted_accelerances"]
 
 #: resamples when none are asked for
 DEFAULT_RESAMPLES = 200
 #: most FRF values (resamples x columns x lines x responses) formed at once (memory bound)
 CHUNK_VALUES = 4_000_000
+#: the resamples are solved in at least this many chunks (each reported to ``progress``)
+PROGRESS_STEPS = 4
+
+#: ``progress(done, total)``: how many of the resamples are solved
+Progress = Callable[[int, int], None]
 
 # --- resampling ------------------------------------------------------------------------------
 
@@ -221,7 +231,7 @@ def _mix(S: NDArray[Any], lines: NDArray[np.int64], cw: NDArray[np.float64]) -> 
     return np.asarray((part.T @ cw).reshape(lines.size, S.shape[1], cw.shape[1]))
 
 
-def _resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
+def resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
         NDArray[np.float64]]) -> tuple[NDArray[np.complex128], NDArray[np.float64]] | None:
     """FRFs and coherence (n_exc, n_lines, n_resp, n) of the n resamples on ``lines`` (Hz):
     each column's units weighted by how often each was drawn; None when a column lacks a
@@ -412,40 +422,160 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
     return theta, K, C
 
 
+def _mass_basis_moments(s2: NDArray[np.float64]) -> tuple[NDArray[np.float64],
+                                                           NDArray[np.float64]]:
+    """The (100, 36) map from vec of the 6x6 moment ``G = sum x x^T`` to the 10x10 normal
+    matrix of the mass-line least squares, and the (10, 36) map ``MBs`` from vec W to its
+    right-hand side, for row scales ``s2``."""
+    MBs = MASS_BASIS * s2[None, :, None]
+    return (np.einsum("pia,qib->pqab", MBs, MASS_BASIS).reshape(100, 36),
+            MBs.reshape(10, 36))
+
+
+def _masses(theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Mass matrices (n, 6, 6) of parameters theta (n, 10)."""
+    return np.asarray((theta @ MASS_BASIS.reshape(10, 36)).reshape(-1, 6, 6))
+
+
+class _MassLines:
+    """The mass-line problems of resamples with leakage shapes: :class:`MassLineProblem`
+    vectorised over resamples (accelerances Xm (n, 6, n_e, n_l), column weights ``wm_``
+    (n, n_e, n_l), the kept real-stacked shapes ``Sh`` (n_s, 2 n_l))."""
+
+    def __init__(self, Xm: NDArray[np.complex128], wm_: NDArray[np.float64],
+                 Sh: NDArray[np.float64], s2: NDArray[np.float64]) -> None:
+        n = Xm.shape[0]
+        self.Xr, self.Sh = stack_real(Xm), Sh
+        self.wf = np.concatenate([wm_, wm_], axis=-1)  # (n, n_e, 2 n_l)
+        self.sw = np.sqrt(self.wf)
+        # per resample and column: the weighted shapes orthonormalised, X without them
+        Q = np.linalg.qr(Sh.T[None, None] * self.sw[..., None])[0]  # (n, n_e, 2 n_l, n_s)
+        Xw = np.swapaxes(self.Xr * self.sw[:, None], 1, 2)  # (n, n_e, 6, 2 n_l)
+        Xw = Xw - (Xw @ Q) @ np.swapaxes(Q, -1, -2)
+        self.Xp = np.swapaxes(Xw, 1, 2).reshape(n, 6, -1)
+        op, MBs = _mass_basis_moments(s2)
+        G = self.Xp @ np.swapaxes(self.Xp, 1, 2)
+        self.normal = (G.reshape(n, 36) @ op.T).reshape(n, 10, 10)
+        try:
+            self.solver = np.linalg.solve(self.normal, np.broadcast_to(MBs, (n, 10, 36)))
+        except np.linalg.LinAlgError:  # singular: the minimum-norm solution
+            self.solver = np.linalg.pinv(self.normal) @ MBs
+        # the leakage coefficients' normal matrices, per resample and column
+        self.leak_normal = np.einsum("sl,nkl,tl->nkst", Sh, self.wf, Sh)
+
+    def solve(self, B: NDArray[Any], idx: NDArray[np.intp]) -> tuple[
+        NDArray[np.float64], NDArray[np.float64]
+    ]:
+        """theta (m, 10) and the leakage coefficients (m, 6, n_e, n_s) of resamples ``idx``
+        for right-hand sides B (m, 6, n_e, n_l) (:meth:`MassLineProblem.solve`)."""
+        m = idx.size
+        Bs = stack_real(B)
+        W = (Bs * self.sw[idx, None]).reshape(m, 6, -1) @ np.swapaxes(self.Xp[idx], 1, 2)
+        theta = np.einsum("npq,nq->np", self.solver[idx], W.reshape(m, 36))
+        R = Bs - (_masses(theta) @ self.Xr[idx].reshape(m, 6, -1)).reshape(Bs.shape)
+        r = np.einsum("nikl,nkl,sl->niks", R, self.wf[idx], self.Sh)
+        return theta, np.linalg.solve(self.leak_normal[idx, None], r[..., None])[..., 0]
+
+
+def _stiffness_fits(problem: Problem, model: str, w: NDArray[np.float64],
+                    Xs: NDArray[np.complex128], ws_: NDArray[np.float64],
+                    M: NDArray[np.float64]) -> tuple[
+    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
+]:
+    """K, C, D (m, 6, 6) of the improved method's stiffness step for mass matrices M (m, 6,
+    6) on stiffness lines Xs (m, 6, n_e, n_l) at ``w`` (n_l,) rad/s with column weights
+    ``ws_`` (m, n_e, n_l)
+    (:func:`processing.stiffness.fit_stiffness` with its moments, vectorised over
+    resamples)."""
+    m, a, T = Xs.shape[0], problem.window_decay, problem.T
+    Xf = Xs.reshape(m, 6, -1)
+    Xw = np.conj(Xf) * ws_.reshape(m, 1, -1)
+    wl = np.broadcast_to(w, Xs.shape[2:]).ravel()
+    XfT = np.swapaxes(Xf, 1, 2)
+    G, Q = [], []
+    for _ in range(4):  # powers 0..3 of w
+        G.append(Xw @ XfT)
+        Q.append(Xw.reshape(Xs.shape).sum(axis=-1) @ T.T)
+        Xw = Xw * wl
+    R0, R1 = ((G[q + 2] - a**2 * G[q] - 2j * a * G[q + 1]) @ np.swapaxes(M, 1, 2)
+              - (Q[q + 2] - a**2 * Q[q] - 2j * a * Q[q + 1]) for q in (0, 1))
+    s2 = (np.ones(6) if problem.row_scale is None
+          else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
+    parts_rhs = (R0.real, R1.imag, R0.imag)
+    blocks = DAMPING_BLOCKS[model]
+    r = np.concatenate([np.swapaxes(parts_rhs[b] * s2, 1, 2).reshape(m, 36) for b in blocks],
+                       axis=1)
+    N = stiffness_normal(G[0], G[1], G[2], s2, model)  # type: ignore[arg-type]
+    if problem.solver.symmetric:
+        first, second, off, back = vech_index(len(blocks))
+        v = np.linalg.solve(vech_normal(N), (r[:, first] + np.where(off, r[:, second], 0.0))
+                            [..., None])[:, back, 0]
+    else:
+        v = np.linalg.solve(N, r[..., None])[..., 0]
+    parts = [np.zeros((m, 6, 6))] * 3
+    for k, b in enumerate(blocks):
+        parts[b] = v[:, 36 * k:36 * (k + 1)].reshape(m, 6, 6)
+    return parts[0] - a * parts[1], parts[1], parts[2]
+
+
 def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: Bands,
-                    X: NDArray[np.complex128], wm_: NDArray[np.float64],
-                    ws_: NDArray[np.float64]) -> Triple:
-    """:func:`_solve_batch` for a fit with leakage shapes (the cleaning of the accelerances
-    makes the iteration non-linear): the iteration itself, from the main fit's solution,
-    resample by resample."""
-    msel, ins = weights.mass_lines, bands.in_stiffness
-    shapes = leakage_shapes(problem, bands)
-    if not shapes:  # the upper residual the fit chose
-        shapes = [upper_residual(problem.w)]
-    stacked = np.array([stack_real(sh[msel]) for sh in shapes])
-    solver = dataclasses.replace(problem.solver, tol=max(problem.solver.tol, 1e-9))
-    out = []
-    for Xb, wmb, wsb in zip(X, wm_, ws_, strict=True):  # not affine: one at a time
-        weights = dataclasses.replace(weights, mass=wmb, stiffness=wsb)
-        pb = dataclasses.replace(problem, X=Xb, solver=solver)
-        ops = (fitted.operators if problem.improved
-               else line_operators(Xb[..., ins], problem.T, problem.w[ins]))
-        step = StiffnessStep(pb, weights, ops, weights.stiffness_lines[ins])
-        step.model = fitted.damping_model
-        ml = MassLineProblem(Xb[..., msel], weights=weights.mass, row_scale=problem.row_scale,
-                             shapes=stacked)
-        Xs = Xb[..., weights.stiffness_lines]
-        _, theta, K, C, _D, Xc, _, _ = iterate(pb, weights, ml, step, shapes, (fitted.theta, Xs))
-        if problem.options.physical:  # K, C on the cleaned lines, as the main fit
-            theta = constrain_physical(theta, ml.normal)
-            K, C, _D = step(mass_matrix(theta), Xc)
-        out.append((theta, K, C))
-    return np.array([o[0] for o in out]), np.array([o[1] for o in out]), np.array(
-        [o[2] for o in out])
+                    Xm: NDArray[np.complex128], Xs: NDArray[np.complex128],
+                    wm_: NDArray[np.float64], ws_: NDArray[np.float64]) -> Triple:
+    """:func:`_solve_batch` for a fit with leakage shapes (improved method: the cleaning of
+    the accelerances makes the iteration non-linear): the iteration of
+    :func:`processing.stages.iterate` itself, from the main fit's solution, for every
+    resample at once (accelerances Xm (n, 6, n_e, n_lm) on the mass lines, Xs on the
+    stiffness lines, with their column weights ``wm_``, ``ws_``); each resample stops where
+    its own theta converges."""
+    msel, ssel, a = weights.mass_lines, weights.stiffness_lines, problem.window_decay
+    ml0 = fitted.mass_line
+    assert ml0 is not None and ml0.shapes is not None
+    shapes = leakage_shapes(problem, bands) or [upper_residual(problem.w)]
+    shp = np.array(shapes)[ml0.shape_index]  # (n_s, n_f) the kept shapes
+    shp_m, shp_s = shp[:, msel], shp[:, ssel]
+    s2 = (np.ones(6) if problem.row_scale is None
+          else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
+    wm, ws, n = problem.w[msel], problem.w[ssel], Xm.shape[0]
+    lines = _MassLines(Xm, wm_, ml0.shapes, s2)
+    model = "viscous" if a else fitted.damping_model
+    tol = max(problem.solver.tol, 1e-9)
+    theta = np.broadcast_to(fitted.theta, (n, 10)).copy()
+    K, C, D = _stiffness_fits(problem, model, ws, Xs, ws_, _masses(theta))
+    Xcm, Xcs = Xm.copy(), Xs.copy()
+    idx = np.arange(n)
+    for _ in range(problem.solver.max_iter):
+        Kx, Cx = K[idx], C[idx]
+        Xf = Xcm[idx].reshape(idx.size, 6, -1)
+        if a:  # B = T + K*_m X / w^2 with the windowed K*_m
+            KX = ((Kx + a * Cx) @ Xf).reshape(idx.size, *Xm.shape[1:])
+            KX = KX + 1j * wm * (Cx @ Xf).reshape(KX.shape)
+            B = problem.T[:, :, None] - KX / (1j * wm + a) ** 2 + 0j
+        else:
+            KD = Kx if model == "viscous" else Kx + 1j * D[idx]
+            KX = (KD @ Xf).reshape(idx.size, *Xm.shape[1:])
+            B = problem.T[:, :, None] + (KX + 1j * wm * (Cx @ Xf).reshape(KX.shape)) / wm**2
+        new, leakage = lines.solve(B, idx)
+        M = _masses(new)
+        # B - M X = -M Y b: clean X of the fitted leakage
+        Yk = -np.einsum("nia,naks->niks", np.linalg.pinv(M), leakage)
+        Xcm[idx], Xcs[idx] = Xm[idx] - Yk @ shp_m, Xs[idx] - Yk @ shp_s
+        K[idx], C[idx], D[idx] = _stiffness_fits(problem, model, ws, Xcs[idx], ws_[idx], M)
+        change = np.max(np.abs(new - theta[idx]) / np.maximum(
+            np.abs(new), 1e-12 * np.abs(new[:, :1])), axis=1)
+        theta[idx] = new
+        idx = idx[change >= tol]
+        if not idx.size:
+            break
+    if problem.options.physical:  # K, C on the cleaned lines, as the main fit
+        theta = np.array([constrain_physical(t, N) for t, N in zip(theta, lines.normal,
+                                                                   strict=True)])
+        K, C, _D = _stiffness_fits(problem, model, ws, Xcs, ws_, _masses(theta))
+    return theta, K, C
 
 
 def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
-             units: TimeUnits, n: int = DEFAULT_RESAMPLES, seed: int = 0) -> Bootstrap | str:
+             units: TimeUnits, n: int = DEFAULT_RESAMPLES, seed: int = 0,
+             progress: Progress | None = None) -> Bootstrap | str:
     """Bootstrap the main fit over the time data's units; or, when it cannot run, why not.
 
     Parameters
@@ -454,6 +584,8 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     units : the units of the problem's columns, in its column order
     n : resamples (at least 2)
     seed : of the resampling (the same seed gives the same resamples)
+    progress : called with (resamples done, n) before the first chunk of resamples and
+        after each (at least :data:`PROGRESS_STEPS` of them)
     """
     if n < 2:
         raise InputError(f"the bootstrap needs at least 2 resamples, got {n}")
@@ -468,7 +600,7 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
               .astype(float) for c in units.columns]
     # the units must give the FRFs the fit used (the nominal: every unit once)
     lines = problem.freq[used]
-    nominal = _resampled_frfs(units, lines, [np.ones((1, c.n_units)) for c in units.columns])
+    nominal = resampled_frfs(units, lines, [np.ones((1, c.n_units)) for c in units.columns])
     if nominal is None:
         return f"no bootstrap over {units.kind}s: their lines differ from the FRFs'"
     ref = problem.H[..., used]
@@ -481,21 +613,25 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     shapes = fitted.mass_line is not None and fitted.mass_line.shapes is not None
     # resamples in chunks: the FRFs of a chunk hold at most CHUNK_VALUES values
     size = len(units.columns) * lines.size * problem.H.shape[0]
-    step = max(1, min(n, CHUNK_VALUES // max(size, 1)))
+    step = max(1, min(n, CHUNK_VALUES // max(size, 1), -(-n // PROGRESS_STEPS)))
     out = []
     for lo in range(0, n, step):
-        drawn = _resampled_frfs(units, lines, [c[lo:lo + step] for c in counts])
+        if progress is not None:
+            progress(lo, n)
+        drawn = resampled_frfs(units, lines, [c[lo:lo + step] for c in counts])
         assert drawn is not None
         X, colw = weighted_accelerances(problem, used, *drawn)  # (m, l, 6, e), (m, e, l)
         wm_ = colw[..., mass] * (weights.mass > 0)  # a column the main fit dropped stays out
         ws_ = colw[..., stiff] * (weights.stiffness > 0)
         if shapes:
-            Xall = np.broadcast_to(problem.X, (X.shape[0], *problem.X.shape)).copy()
-            Xall[..., used] = np.transpose(X, (0, 2, 3, 1))
-            out.append(_solve_iterated(problem, weights, fitted, bands, Xall, wm_, ws_))
+            Xt = np.transpose(X, (0, 2, 3, 1))  # (m, 6, e, l)
+            out.append(_solve_iterated(problem, weights, fitted, bands, Xt[..., mass],
+                                       Xt[..., stiff], wm_, ws_))
         else:
             out.append(_solve_batch(problem, weights, fitted, X[:, mass], X[:, stiff], wm_,
                                     ws_))
+    if progress is not None:
+        progress(n, n)
     theta, K, C = (np.concatenate([o[k] for o in out]) for k in range(3))
     labels = units.labels()
     groups = tuple(lab for lab, c in zip(labels, units.columns, strict=True)

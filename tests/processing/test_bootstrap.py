@@ -213,7 +213,7 @@ def test_resampled_frfs_follow_the_estimator(estimator: str) -> None:
     col = UnitSpectra(np.arange(n_f, dtype=float), np.abs(F) ** 2, np.conj(F)[:, None] * X,
                       np.abs(X) ** 2, np.ones(n_u))
     units = TimeUnits("hit", (col,), np.array([1]), np.array([[0.0, 0.0, 1.0]]), estimator)
-    H, G = bsm._resampled_frfs(units, col.freq[2:], [np.ones((2, n_u))])
+    H, G = bsm.resampled_frfs(units, col.freq[2:], [np.ones((2, n_u))])
     want, coh = frf(col.mean(), estimator)
     assert_allclose(np.moveaxis(H[0, ..., 0], 0, 1), want[:, 0, 2:], rtol=1e-10)
     assert_allclose(np.moveaxis(G[0, ..., 1], 0, 1), coh[:, 0, 2:], rtol=1e-10)
