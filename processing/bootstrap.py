@@ -477,26 +477,14 @@ class _MassLines:
         return theta, np.linalg.solve(self.leak_normal[idx, None], r[..., None])[..., 0]
 
 
-def _stiffness_fits(problem: Problem, model: str, w: NDArray[np.float64],
-                    Xs: NDArray[np.complex128], ws_: NDArray[np.float64],
-                    M: NDArray[np.float64]) -> tuple[
+def _stiffness_solve(problem: Problem, model: str, G: list[NDArray[np.complex128]],
+                     Q: list[NDArray[np.complex128]], M: NDArray[np.float64]) -> tuple[
     NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
 ]:
     """K, C, D (m, 6, 6) of the improved method's stiffness step for mass matrices M (m, 6,
-    6) on stiffness lines Xs (m, 6, n_e, n_l) at ``w`` (n_l,) rad/s with column weights
-    ``ws_`` (m, n_e, n_l)
-    (:func:`processing.stiffness.fit_stiffness` with its moments, vectorised over
-    resamples)."""
-    m, a, T = Xs.shape[0], problem.window_decay, problem.T
-    Xf = Xs.reshape(m, 6, -1)
-    Xw = np.conj(Xf) * ws_.reshape(m, 1, -1)
-    wl = np.broadcast_to(w, Xs.shape[2:]).ravel()
-    XfT = np.swapaxes(Xf, 1, 2)
-    G, Q = [], []
-    for _ in range(4):  # powers 0..3 of w
-        G.append(Xw @ XfT)
-        Q.append(Xw.reshape(Xs.shape).sum(axis=-1) @ T.T)
-        Xw = Xw * wl
+    6) from the stiffness moments G0..G3, Q0..Q3 (m, 6, 6) of :class:`processing.stiffness.
+    StiffnessMoments` (:func:`processing.stiffness.fit_stiffness`, vectorised)."""
+    m, a = M.shape[0], problem.window_decay
     R0, R1 = ((G[q + 2] - a**2 * G[q] - 2j * a * G[q + 1]) @ np.swapaxes(M, 1, 2)
               - (Q[q + 2] - a**2 * Q[q] - 2j * a * Q[q + 1]) for q in (0, 1))
     s2 = (np.ones(6) if problem.row_scale is None
@@ -516,6 +504,48 @@ def _stiffness_fits(problem: Problem, model: str, w: NDArray[np.float64],
     for k, b in enumerate(blocks):
         parts[b] = v[:, 36 * k:36 * (k + 1)].reshape(m, 6, 6)
     return parts[0] - a * parts[1], parts[1], parts[2]
+
+
+class _StiffnessLines:
+    """The stiffness moments of resamples' stiffness lines Xs (n, 6, n_e, n_l) at ``w``
+    (n_l,) rad/s with column weights ``ws_`` (n, n_e, n_l), cleaned of leakage ``Y shp``
+    (Y (n, 6, n_e, n_s) real, the shapes ``shp`` (n_s, n_l)): formed from the moments of Xs,
+    of Xs with the shapes and of the shapes, computed once, so that an iteration's
+    cleaning costs sums over columns and shapes only (``Xc = Xs - Y shp``:
+    ``G(Xc) = G(Xs) - P Y^T - (P Y^T)^H + Y S Y^T``)."""
+
+    def __init__(self, w: NDArray[np.float64], Xs: NDArray[np.complex128],
+                 ws_: NDArray[np.float64], shp: NDArray[np.complex128],
+                 T: NDArray[np.float64]) -> None:
+        n = Xs.shape[0]
+        self.T = T
+        self.A, self.P, self.S, self.x, self.c = [], [], [], [], []
+        Xf = np.swapaxes(Xs.reshape(n, 6, -1), 1, 2)
+        for p in range(4):  # powers 0..3 of w
+            wt = ws_ * w**p  # (n, n_e, n_l)
+            Xw = np.conj(Xs) * wt[:, None]
+            self.A.append(Xw.reshape(n, 6, -1) @ Xf)
+            self.P.append(Xw @ shp.T)  # (n, 6, n_e, n_s)
+            self.S.append(np.einsum("nel,sl,tl->nest", wt, np.conj(shp), shp))
+            self.x.append(Xw.sum(axis=-1))  # (n, 6, n_e)
+            self.c.append(wt @ np.conj(shp).T)  # (n, n_e, n_s)
+
+    def moments(self, idx: NDArray[np.intp], Y: NDArray[np.float64] | None) -> tuple[
+        list[NDArray[np.complex128]], list[NDArray[np.complex128]]
+    ]:
+        """G0..G3 and Q0..Q3 (m, 6, 6) of resamples ``idx`` cleaned of ``Y shp`` (none when
+        Y is None)."""
+        G, Q = [], []
+        for p in range(4):
+            A, x = self.A[p][idx], self.x[p][idx]
+            if Y is not None:
+                t2 = np.einsum("nies,njes->nij", self.P[p][idx], Y)
+                A = A - t2 - np.conj(np.swapaxes(t2, 1, 2)) + np.einsum(
+                    "nies,nest,njet->nij", Y, self.S[p][idx], Y)
+                x = x - np.einsum("nies,nes->nie", Y, self.c[p][idx])
+            G.append(A)
+            Q.append(x @ self.T.T)
+        return G, Q
 
 
 def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: Bands,
@@ -540,8 +570,10 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     model = "viscous" if a else fitted.damping_model
     tol = max(problem.solver.tol, 1e-9)
     theta = np.broadcast_to(fitted.theta, (n, 10)).copy()
-    K, C, D = _stiffness_fits(problem, model, ws, Xs, ws_, _masses(theta))
-    Xcm, Xcs = Xm.copy(), Xs.copy()
+    stiff = _StiffnessLines(ws, Xs, ws_, shp_s, problem.T)
+    K, C, D = _stiffness_solve(problem, model, *stiff.moments(np.arange(n), None),
+                               _masses(theta))
+    Xcm, Y = Xm.copy(), np.zeros((n, 6, Xm.shape[2], shp.shape[0]))
     idx = np.arange(n)
     for _ in range(problem.solver.max_iter):
         Kx, Cx = K[idx], C[idx]
@@ -558,8 +590,8 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
         M = _masses(new)
         # B - M X = -M Y b: clean X of the fitted leakage
         Yk = -np.einsum("nia,naks->niks", np.linalg.pinv(M), leakage)
-        Xcm[idx], Xcs[idx] = Xm[idx] - Yk @ shp_m, Xs[idx] - Yk @ shp_s
-        K[idx], C[idx], D[idx] = _stiffness_fits(problem, model, ws, Xcs[idx], ws_[idx], M)
+        Xcm[idx], Y[idx] = Xm[idx] - Yk @ shp_m, Yk
+        K[idx], C[idx], D[idx] = _stiffness_solve(problem, model, *stiff.moments(idx, Yk), M)
         change = np.max(np.abs(new - theta[idx]) / np.maximum(
             np.abs(new), 1e-12 * np.abs(new[:, :1])), axis=1)
         theta[idx] = new
@@ -569,7 +601,8 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     if problem.options.physical:  # K, C on the cleaned lines, as the main fit
         theta = np.array([constrain_physical(t, N) for t, N in zip(theta, lines.normal,
                                                                    strict=True)])
-        K, C, _D = _stiffness_fits(problem, model, ws, Xcs, ws_, _masses(theta))
+        K, C, _D = _stiffness_solve(problem, model, *stiff.moments(np.arange(n), Y),
+                                    _masses(theta))
     return theta, K, C
 
 
