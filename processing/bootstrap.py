@@ -440,40 +440,59 @@ def _masses(theta: NDArray[np.float64]) -> NDArray[np.float64]:
 class _MassLines:
     """The mass-line problems of resamples with leakage shapes: :class:`MassLineProblem`
     vectorised over resamples (accelerances Xm (n, 6, n_e, n_l), column weights ``wm_``
-    (n, n_e, n_l), the kept real-stacked shapes ``Sh`` (n_s, 2 n_l))."""
+    (n, n_e, n_l), the kept real-stacked shapes ``Sh`` (n_s, 2 n_l)), for right-hand sides
+    ``B = T + sum_k L_k (f_k Xc)`` (6x6 ``L_k`` times the accelerances cleaned of leakage,
+    ``Xc = Xm - Y shp``, on each line scaled by ``f_k`` (n_k, n_l), e.g. K, C, D and
+    ``1 / w^2``, ``j / w``, ``j / w^2``). B is linear in Xc and Xc in Y: its moments with
+    the regressors and the shapes are formed once from those of Xm and of the shapes
+    ``shp`` (n_s, n_l), so that each solve costs sums over columns and shapes only."""
 
     def __init__(self, Xm: NDArray[np.complex128], wm_: NDArray[np.float64],
-                 Sh: NDArray[np.float64], s2: NDArray[np.float64]) -> None:
-        n = Xm.shape[0]
-        self.Xr, self.Sh = stack_real(Xm), Sh
-        self.wf = np.concatenate([wm_, wm_], axis=-1)  # (n, n_e, 2 n_l)
-        self.sw = np.sqrt(self.wf)
+                 Sh: NDArray[np.float64], s2: NDArray[np.float64], T: NDArray[np.float64],
+                 f: NDArray[np.complex128], shp: NDArray[np.complex128]) -> None:
+        n, n_l = Xm.shape[0], Xm.shape[-1]
+        Xr = stack_real(Xm)
+        wf = np.concatenate([wm_, wm_], axis=-1)  # (n, n_e, 2 n_l)
+        sw = np.sqrt(wf)
         # per resample and column: the weighted shapes orthonormalised, X without them
-        Q = np.linalg.qr(Sh.T[None, None] * self.sw[..., None])[0]  # (n, n_e, 2 n_l, n_s)
-        Xw = np.swapaxes(self.Xr * self.sw[:, None], 1, 2)  # (n, n_e, 6, 2 n_l)
-        Xw = Xw - (Xw @ Q) @ np.swapaxes(Q, -1, -2)
-        self.Xp = np.swapaxes(Xw, 1, 2).reshape(n, 6, -1)
+        Q = np.linalg.qr(Sh.T[None, None] * sw[..., None])[0]  # (n, n_e, 2 n_l, n_s)
+        Xw = np.swapaxes(Xr * sw[:, None], 1, 2)  # (n, n_e, 6, 2 n_l)
+        Xp = np.swapaxes(Xw - (Xw @ Q) @ np.swapaxes(Q, -1, -2), 1, 2)  # (n, 6, n_e, 2 n_l)
         op, MBs = _mass_basis_moments(s2)
-        G = self.Xp @ np.swapaxes(self.Xp, 1, 2)
-        self.normal = (G.reshape(n, 36) @ op.T).reshape(n, 10, 10)
+        Xpf = Xp.reshape(n, 6, -1)
+        self.normal = ((Xpf @ np.swapaxes(Xpf, 1, 2)).reshape(n, 36) @ op.T).reshape(n, 10, 10)
         try:
             self.solver = np.linalg.solve(self.normal, np.broadcast_to(MBs, (n, 10, 36)))
         except np.linalg.LinAlgError:  # singular: the minimum-norm solution
             self.solver = np.linalg.pinv(self.normal) @ MBs
         # the leakage coefficients' normal matrices, per resample and column
-        self.leak_normal = np.einsum("sl,nkl,tl->nkst", Sh, self.wf, Sh)
+        self.leak_normal = np.einsum("sl,nkl,tl->nkst", Sh, wf, Sh, optimize=True)
+        wS = wf[..., None] * Sh.T  # (n, n_e, 2 n_l, n_s)
+        fX = stack_real(f[:, None, None, :] * Xm[:, None])  # (n, n_k, 6, n_e, 2 n_l)
+        fS = stack_real(f[:, None] * shp)  # (n_k, n_s, 2 n_l)
+        # W = sum_l B Xp^T (weighted) and r = sum_l (B - M Xm) wf Sh, term by term
+        self.WT = np.einsum("ie,nel,njel->nij", T, sw[..., :n_l], Xp[..., :n_l], optimize=True)
+        self.WX = np.einsum("nkiel,njel->nkij", fX * sw[:, None, None], Xp, optimize=True)
+        self.WY = np.einsum("ksl,nel,njel->nkesj", fS, sw, Xp, optimize=True)
+        self.rT = np.einsum("ie,nels->nies", T, wS[:, :, :n_l], optimize=True)
+        self.rM = np.einsum("nael,nels->naes", Xr, wS, optimize=True)
+        self.rX = np.einsum("nkiel,nels->nkies", fX, wS, optimize=True)
+        self.rY = np.einsum("ktl,nels->nkets", fS, wS, optimize=True)
 
-    def solve(self, B: NDArray[Any], idx: NDArray[np.intp]) -> tuple[
-        NDArray[np.float64], NDArray[np.float64]
-    ]:
+    def solve(self, idx: NDArray[np.intp], L: NDArray[np.float64], Y: NDArray[np.float64],
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """theta (m, 10) and the leakage coefficients (m, 6, n_e, n_s) of resamples ``idx``
-        for right-hand sides B (m, 6, n_e, n_l) (:meth:`MassLineProblem.solve`)."""
-        m = idx.size
-        Bs = stack_real(B)
-        W = (Bs * self.sw[idx, None]).reshape(m, 6, -1) @ np.swapaxes(self.Xp[idx], 1, 2)
-        theta = np.einsum("npq,nq->np", self.solver[idx], W.reshape(m, 36))
-        R = Bs - (_masses(theta) @ self.Xr[idx].reshape(m, 6, -1)).reshape(Bs.shape)
-        r = np.einsum("nikl,nkl,sl->niks", R, self.wf[idx], self.Sh)
+        for the matrices L (m, n_k, 6, 6) and the cleaning Y (m, 6, n_e, n_s)
+        (:meth:`MassLineProblem.solve` of B)."""
+        m, (_, k, n_e, n_s, _) = idx.size, self.WY.shape
+        WY = self.WY[idx].reshape(m, k, n_e * n_s, 6)
+        WX = self.WX[idx] - Y.reshape(m, 1, 6, -1) @ WY  # (m, k, 6, 6)
+        W = self.WT[idx] + (L @ WX).sum(axis=1)
+        theta = (self.solver[idx] @ W.reshape(m, 36, 1))[..., 0]
+        Yt = np.swapaxes(Y, 1, 2)[:, None]  # (m, 1, n_e, 6, n_s)
+        rX = self.rX[idx] - np.swapaxes(Yt @ self.rY[idx], 2, 3)  # (m, k, 6, n_e, n_s)
+        r = (self.rT[idx] - (_masses(theta) @ self.rM[idx].reshape(m, 6, -1)).reshape(Y.shape)
+             + (L @ rX.reshape(m, k, 6, -1)).sum(axis=1).reshape(Y.shape))
         return theta, np.linalg.solve(self.leak_normal[idx, None], r[..., None])[..., 0]
 
 
@@ -526,7 +545,7 @@ class _StiffnessLines:
             Xw = np.conj(Xs) * wt[:, None]
             self.A.append(Xw.reshape(n, 6, -1) @ Xf)
             self.P.append(Xw @ shp.T)  # (n, 6, n_e, n_s)
-            self.S.append(np.einsum("nel,sl,tl->nest", wt, np.conj(shp), shp))
+            self.S.append(np.einsum("nel,sl,tl->nest", wt, np.conj(shp), shp, optimize=True))
             self.x.append(Xw.sum(axis=-1))  # (n, 6, n_e)
             self.c.append(wt @ np.conj(shp).T)  # (n, n_e, n_s)
 
@@ -539,10 +558,13 @@ class _StiffnessLines:
         for p in range(4):
             A, x = self.A[p][idx], self.x[p][idx]
             if Y is not None:
-                t2 = np.einsum("nies,njes->nij", self.P[p][idx], Y)
-                A = A - t2 - np.conj(np.swapaxes(t2, 1, 2)) + np.einsum(
-                    "nies,nest,njet->nij", Y, self.S[p][idx], Y)
-                x = x - np.einsum("nies,nes->nie", Y, self.c[p][idx])
+                m = idx.size
+                Yf = Y.reshape(m, 6, -1)
+                t2 = self.P[p][idx].reshape(m, 6, -1) @ np.swapaxes(Yf, 1, 2)
+                YS = np.swapaxes(np.swapaxes(Y, 1, 2) @ self.S[p][idx], 1, 2)  # (m, 6, e, s)
+                A = A - t2 - np.conj(np.swapaxes(t2, 1, 2)) + YS.reshape(m, 6, -1) @ np.swapaxes(
+                    Yf, 1, 2)
+                x = x - (Y * self.c[p][idx][:, None]).sum(axis=-1)
             G.append(A)
             Q.append(x @ self.T.T)
         return G, Q
@@ -566,31 +588,28 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     s2 = (np.ones(6) if problem.row_scale is None
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
     wm, ws, n = problem.w[msel], problem.w[ssel], Xm.shape[0]
-    lines = _MassLines(Xm, wm_, ml0.shapes, s2)
     model = "viscous" if a else fitted.damping_model
+    # B = T + K*_m Xc / w^2 as sum_k L_k (f_k Xc): with an exponential window's decay a,
+    # (K + a C + j w C) Xc / -s^2, else (K + j w C + j D) Xc / w^2
+    s_2 = (1j * wm + a) ** -2
+    f = (np.array([-s_2, -(a + 1j * wm) * s_2]) if a
+         else np.array([wm**-2 + 0j, 1j / wm, 1j / wm**2]))
+    lines = _MassLines(Xm, wm_, ml0.shapes, s2, problem.T, f, shp_m)
     tol = max(problem.solver.tol, 1e-9)
     theta = np.broadcast_to(fitted.theta, (n, 10)).copy()
     stiff = _StiffnessLines(ws, Xs, ws_, shp_s, problem.T)
     K, C, D = _stiffness_solve(problem, model, *stiff.moments(np.arange(n), None),
                                _masses(theta))
-    Xcm, Y = Xm.copy(), np.zeros((n, 6, Xm.shape[2], shp.shape[0]))
+    Y = np.zeros((n, 6, Xm.shape[2], shp.shape[0]))
     idx = np.arange(n)
     for _ in range(problem.solver.max_iter):
-        Kx, Cx = K[idx], C[idx]
-        Xf = Xcm[idx].reshape(idx.size, 6, -1)
-        if a:  # B = T + K*_m X / w^2 with the windowed K*_m
-            KX = ((Kx + a * Cx) @ Xf).reshape(idx.size, *Xm.shape[1:])
-            KX = KX + 1j * wm * (Cx @ Xf).reshape(KX.shape)
-            B = problem.T[:, :, None] - KX / (1j * wm + a) ** 2 + 0j
-        else:
-            KD = Kx if model == "viscous" else Kx + 1j * D[idx]
-            KX = (KD @ Xf).reshape(idx.size, *Xm.shape[1:])
-            B = problem.T[:, :, None] + (KX + 1j * wm * (Cx @ Xf).reshape(KX.shape)) / wm**2
-        new, leakage = lines.solve(B, idx)
+        L = np.stack([K[idx], C[idx]] if a else [K[idx], C[idx], D[idx]], axis=1)
+        new, leakage = lines.solve(idx, L, Y[idx])
         M = _masses(new)
         # B - M X = -M Y b: clean X of the fitted leakage
-        Yk = -np.einsum("nia,naks->niks", np.linalg.pinv(M), leakage)
-        Xcm[idx], Y[idx] = Xm[idx] - Yk @ shp_m, Yk
+        Yk = -(np.linalg.pinv(M) @ leakage.reshape(leakage.shape[0], 6, -1)).reshape(
+            leakage.shape)
+        Y[idx] = Yk
         K[idx], C[idx], D[idx] = _stiffness_solve(problem, model, *stiff.moments(idx, Yk), M)
         change = np.max(np.abs(new - theta[idx]) / np.maximum(
             np.abs(new), 1e-12 * np.abs(new[:, :1])), axis=1)
