@@ -21,8 +21,11 @@ Re-identification
     affine map of theta for fixed data (the mass-line solve is linear in K, C, D and the
     stiffness step affine in M), so each resample's fixed point is found exactly from
     eleven evaluations of one iteration step and one 10x10 solve; with leakage shapes the
-    iteration itself runs, from the main fit's solution. The FRFs of all resamples and
-    their rigid-body accelerances are formed at once (vectorised over resamples).
+    iteration itself runs, from the main fit's solution, for the resamples of a chunk at
+    once, each stopping where it converges (what does not depend on the resample, and the
+    moments of the accelerances with the leakage shapes, formed once). The FRFs of all
+    resamples and their rigid-body accelerances are formed at once (vectorised over
+    resamples).
 """
 
 from __future__ import annotations
