@@ -14,7 +14,18 @@ fit's covariance std (``fit``'s uncertainty without the bootstrap) is given besi
 Cost: ``fit`` with the default uncertainty (covariance part) against the same with the
 bootstrap of 200 resamples, best of repeats, on the first test of each kind.
 
-Run: ``.venv/bin/python benchmarks/bootstrap.py [--tests 40] [--kind hammer|shaker|both]``.
+Speed (``--speed``): the bootstrap as :func:`processing.identify.fit` runs it
+(:func:`processing.bootstrap.resample`, the resamples solved as array operations) against a
+plain per-resample loop kept here (:func:`reference_resample`: each resample's FRFs formed
+and identified alone with the fit's own stages, :class:`processing.stages.StiffnessStep`,
+:class:`processing.massline.MassLineProblem` and :func:`processing.stages.iterate`, as the
+bootstrap did before), on the same resamples, taking turns, medians of the wall clock over
+repeats; and how far their resamples and statistics differ. Cases: the first hammer test of
+the calibration, and a run file (``--run RUN.h5``, e.g. ``insitu acquire --mock --hits 3``).
+
+Run: ``.venv/bin/python benchmarks/bootstrap.py [--tests 40] [--kind hammer|shaker|both]``;
+``.venv/bin/python benchmarks/bootstrap.py --speed [--run RUN.h5] [--repeats 5] [--out
+benchmarks/results/bootstrap-speed.md]``.
 """
 
 from __future__ import annotations
@@ -26,7 +37,10 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
+import datetime  # noqa: E402
+import platform  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -38,12 +52,22 @@ from hardware_mocks.reference.timedata import (  # noqa: E402
     hammer_test,
     shaker_test,
 )
-from processing.bootstrap import Bootstrap  # noqa: E402
+from processing.bootstrap import (  # noqa: E402
+    Bootstrap,
+    resample,
+    resampled_frfs,
+    weighted_accelerances,
+)
 from processing.data import FRFSet, Geometry  # noqa: E402
-from processing.identify import IdentifyOptions, bootstrap_identify, fit  # noqa: E402
+from processing.identify import IdentifyOptions, Stages, bootstrap_identify, fit, stages  # noqa: E402
 from processing.impact import ImpactSettings, merge_results, process_impacts  # noqa: E402
+from processing.inertia import mass_matrix  # noqa: E402
+from processing.massline import MassLineProblem, stack_real  # noqa: E402
 from processing.measurement import Measurement, Provenance  # noqa: E402
+from processing.physical import constrain_physical  # noqa: E402
 from processing.spectral import SpectralAccumulator, frf  # noqa: E402
+from processing.stages import StiffnessStep, iterate, leakage_shapes, upper_residual  # noqa: E402
+from processing.stiffness import line_operators  # noqa: E402
 from processing.uncertainty import derived_of_draws  # noqa: E402
 from processing.units import TimeUnits, welch_units  # noqa: E402
 
@@ -175,6 +199,121 @@ def cost(kind: str, repeats: int = 5) -> dict[str, float]:
     return times
 
 
+def reference_resample(st: Stages, units: TimeUnits, boot: Bootstrap) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray
+]:
+    """The resamples of ``boot`` solved one at a time: each one's FRFs and accelerances
+    formed alone, then the fit's iteration (:func:`processing.stages.iterate`, from the
+    main fit's solution, tolerance at least 1e-9) with its lines, weights, leakage shapes
+    and damping model held fixed. theta (n, 10), K, C (n, 6, 6)."""
+    problem, bands, weights, fitted = st.problem, st.bands, st.weights, st.fitted
+    used = weights.mass_lines | weights.stiffness_lines
+    idx = np.flatnonzero(used)
+    mass = np.isin(idx, np.flatnonzero(weights.mass_lines))
+    stiff = np.isin(idx, np.flatnonzero(weights.stiffness_lines))
+    msel, ins = weights.mass_lines, bands.in_stiffness
+    modelled = fitted.mass_line is not None and fitted.mass_line.shapes is not None
+    shapes = (leakage_shapes(problem, bands) or [upper_residual(problem.w)]) if modelled else []
+    stacked = np.array([stack_real(sh[msel]) for sh in shapes]) if shapes else None
+    solver = dataclasses.replace(problem.solver, tol=max(problem.solver.tol, 1e-9))
+    counts = np.split(boot.counts, np.cumsum(boot.units)[:-1], axis=1)
+    out = []
+    for r in range(boot.n):  # one resample at a time
+        drawn = resampled_frfs(units, problem.freq[used], [c[r:r + 1] for c in counts])
+        assert drawn is not None
+        X, colw = weighted_accelerances(problem, used, *drawn)
+        Xb = problem.X.copy()
+        Xb[..., used] = np.transpose(X[0], (1, 2, 0))
+        wb = dataclasses.replace(weights, mass=colw[0][..., mass] * (weights.mass > 0),
+                                 stiffness=colw[0][..., stiff] * (weights.stiffness > 0))
+        pb = dataclasses.replace(problem, X=Xb, solver=solver)
+        ops = (fitted.operators if problem.improved
+               else line_operators(Xb[..., ins], problem.T, problem.w[ins]))
+        step = StiffnessStep(pb, wb, ops, wb.stiffness_lines[ins])
+        step.model = fitted.damping_model
+        ml = MassLineProblem(Xb[..., msel], weights=wb.mass, row_scale=problem.row_scale,
+                             shapes=stacked)
+        _, theta, K, C, _D, Xc, _, _ = iterate(pb, wb, ml, step, shapes,
+                                               (fitted.theta, step.lines))
+        if problem.options.physical:
+            theta = constrain_physical(theta, ml.normal)
+            K, C, _D = step(mass_matrix(theta), Xc)
+        out.append((theta, K, C))
+    return tuple(np.array([o[k] for o in out]) for k in range(3))  # type: ignore[return-value]
+
+
+def _statistics(theta: np.ndarray, K: np.ndarray, C: np.ndarray) -> dict[str, np.ndarray]:
+    """Std and 2.5 / 97.5 percentiles over the resamples of every derived number."""
+    out = {}
+    for k, v in derived_of_draws(theta, K, C).items():
+        out[f"std {k}"] = np.std(v, axis=0, ddof=1)
+        out[f"q {k}"] = np.percentile(v, [2.5, 97.5], axis=0)
+    return out
+
+
+def speed(m: Measurement, n: int = 200, repeats: int = 5) -> dict[str, Any]:
+    """Wall-clock medians over ``repeats`` (taking turns) of the bootstrap's ``n``
+    resamples, vectorised and by the reference loop, the same resamples (seed 0), and the
+    largest differences of their resamples and statistics (relative to each number's
+    largest magnitude over the resamples)."""
+    st = stages(m, IdentifyOptions())
+    units = m.time_units
+    assert units is not None
+    times: dict[str, list[float]] = {"vectorised": [], "reference loop": []}
+    boot = ref = None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        boot = resample(st.problem, st.bands, st.weights, st.fitted, units, n)
+        times["vectorised"].append(time.perf_counter() - t0)
+        assert isinstance(boot, Bootstrap), boot
+        t0 = time.perf_counter()
+        ref = reference_resample(st, units, boot)
+        times["reference loop"].append(time.perf_counter() - t0)
+    assert isinstance(boot, Bootstrap) and ref is not None
+    diff = {}
+    for name, a, b in (("theta", boot.theta, ref[0]), ("K", boot.K, ref[1]),
+                       ("C", boot.C, ref[2])):
+        diff[f"resamples {name}"] = float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
+    got, want = _statistics(boot.theta, boot.K, boot.C), _statistics(*ref)
+    diff["statistics"] = max(float(np.max(np.abs(got[k] - want[k])) / max(
+        float(np.max(np.abs(want[k]))), 1e-300)) for k in want)
+    med = {k: float(np.median(v)) for k, v in times.items()}
+    shapes = st.fitted.mass_line is not None and st.fitted.mass_line.shapes is not None
+    return {"times": med, "ratio": med["reference loop"] / med["vectorised"], "diff": diff,
+            "path": "iterated (leakage shapes)" if shapes else "affine (no leakage shapes)",
+            "size": f"{m.frf.H.shape[0]} x {m.frf.H.shape[1]} FRFs, "
+                    f"{min(boot.units)}-{max(boot.units)} {boot.kind}s a point"}
+
+
+def speed_report(run: Path | None, repeats: int, n: int = 200) -> str:
+    """The speed comparison of each case, as markdown."""
+    cases: list[tuple[str, Measurement]] = [
+        ("reference scenario, hammer test 0 (5 hits a point)", hammer_frfs(scenario(), 0))]
+    if run is not None:
+        from app.pipeline import RUN_FILE, load
+
+        cases.append((f"run file {run.name}", load(run, fmt=RUN_FILE)))
+    load1, load5, _ = os.getloadavg()
+    lines = [f"`benchmarks/bootstrap.py --speed{' --run ' + str(run) if run else ''} "
+             f"--repeats {repeats}`, {datetime.date.today().isoformat()}, "
+             f"{platform.machine()} {os.cpu_count()} cores, load average "
+             f"{load1:.2f} (1 min) {load5:.2f} (5 min) at the end, one BLAS thread",
+             "", "```"]
+    for label, m in cases:
+        r = speed(m, n, repeats)
+        t = r["times"]
+        lines += [f"{label}: {r['size']}, {r['path']}, {n} resamples",
+                  f"  vectorised {t['vectorised']:.3f} s, reference loop "
+                  f"{t['reference loop']:.3f} s (medians of {repeats}, taking turns): "
+                  f"{r['ratio']:.1f}x",
+                  "  largest relative difference: " + ", ".join(
+                      f"{k} {v:.1e}" for k, v in r["diff"].items())]
+    load1, load5, _ = os.getloadavg()
+    lines[0] = lines[0].rsplit(", load", 1)[0] + (
+        f", load average {load1:.2f} (1 min) {load5:.2f} (5 min) at the end, one BLAS thread")
+    return "\n".join([*lines, "```", ""])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tests", type=int, default=40)
@@ -182,7 +321,18 @@ def main() -> None:
     ap.add_argument("--clean", action="store_true",
                     help="white noise only (no force offset, response drift, IEPE settling)")
     ap.add_argument("--no-cost", action="store_true", help="calibration only")
+    ap.add_argument("--speed", action="store_true",
+                    help="vectorised bootstrap against the per-resample loop only")
+    ap.add_argument("--run", type=Path, help="with --speed: a run file as a further case")
+    ap.add_argument("--repeats", type=int, default=5, help="with --speed: repeats")
+    ap.add_argument("--out", type=Path, help="with --speed: also write the output here")
     args = ap.parse_args()
+    if args.speed:
+        text = speed_report(args.run, args.repeats)
+        print(text)
+        if args.out is not None:
+            args.out.write_text(text)
+        return
     for kind in ("hammer", "shaker") if args.kind == "both" else (args.kind,):
         if not args.no_cost:
             c = cost(kind)

@@ -21,13 +21,16 @@ Re-identification
     affine map of theta for fixed data (the mass-line solve is linear in K, C, D and the
     stiffness step affine in M), so each resample's fixed point is found exactly from
     eleven evaluations of one iteration step and one 10x10 solve; with leakage shapes the
-    iteration itself runs, from the main fit's solution. The FRFs of all resamples and
-    their rigid-body accelerances are formed at once (vectorised over resamples).
+    iteration itself runs, from the main fit's solution, for the resamples of a chunk at
+    once, each stopping where it converges (what does not depend on the resample, and the
+    moments of the accelerances with the leakage shapes, formed once). The FRFs of all
+    resamples and their rigid-body accelerances are formed at once (vectorised over
+    resamples).
 """
 
 from __future__ import annotations
 
-import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,8 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from processing.data import InputError
-from processing.inertia import MASS_BASIS, mass_matrix
-from processing.massline import MassLineProblem, stack_real
+from processing.inertia import MASS_BASIS
+from processing.massline import stack_real
 from processing.physical import constrain_physical
 from processing.problem import Problem, h1_variances, typical_rms
 from processing.results import UNCERTAIN_KEYS
@@ -44,21 +47,31 @@ from processing.stages import (
     Bands,
     Fit,
     LineWeights,
-    StiffnessStep,
-    iterate,
     leakage_shapes,
     upper_residual,
 )
-from processing.stiffness import DAMPING_BLOCKS, DUPLICATION, line_operators
+from processing.stiffness import (
+    DAMPING_BLOCKS,
+    DUPLICATION,
+    stiffness_normal,
+    vech_index,
+    vech_normal,
+)
 from processing.uncertainty import derived_of_draws, draw_covariance
 from processing.units import TimeUnits, UnitKind
 
-__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "resample", "weighted_accelerances"]
+__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "Progress", "resample", "resampled_frfs",
+           "weighted_accelerances"]
 
 #: resamples when none are asked for
 DEFAULT_RESAMPLES = 200
 #: most FRF values (resamples x columns x lines x responses) formed at once (memory bound)
 CHUNK_VALUES = 4_000_000
+#: the resamples are solved in at least this many chunks (each reported to ``progress``)
+PROGRESS_STEPS = 4
+
+#: ``progress(done, total)``: how many of the resamples are solved
+Progress = Callable[[int, int], None]
 
 # --- resampling ------------------------------------------------------------------------------
 
@@ -220,7 +233,7 @@ def _mix(S: NDArray[Any], lines: NDArray[np.int64], cw: NDArray[np.float64]) -> 
     return np.asarray((part.T @ cw).reshape(lines.size, S.shape[1], cw.shape[1]))
 
 
-def _resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
+def resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
         NDArray[np.float64]]) -> tuple[NDArray[np.complex128], NDArray[np.float64]] | None:
     """FRFs and coherence (n_exc, n_lines, n_resp, n) of the n resamples on ``lines`` (Hz):
     each column's units weighted by how often each was drawn; None when a column lacks a
@@ -413,40 +426,212 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
     return theta, K, C
 
 
+def _mass_basis_moments(s2: NDArray[np.float64]) -> tuple[NDArray[np.float64],
+                                                           NDArray[np.float64]]:
+    """The (100, 36) map from vec of the 6x6 moment ``G = sum x x^T`` to the 10x10 normal
+    matrix of the mass-line least squares, and the (10, 36) map ``MBs`` from vec W to its
+    right-hand side, for row scales ``s2``."""
+    MBs = MASS_BASIS * s2[None, :, None]
+    return (np.einsum("pia,qib->pqab", MBs, MASS_BASIS).reshape(100, 36),
+            MBs.reshape(10, 36))
+
+
+def _masses(theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Mass matrices (n, 6, 6) of parameters theta (n, 10)."""
+    return np.asarray((theta @ MASS_BASIS.reshape(10, 36)).reshape(-1, 6, 6))
+
+
+class _MassLines:
+    """The mass-line problems of resamples with leakage shapes: :class:`MassLineProblem`
+    vectorised over resamples (accelerances Xm (n, 6, n_e, n_l), column weights ``wm_``
+    (n, n_e, n_l), the kept real-stacked shapes ``Sh`` (n_s, 2 n_l)), for right-hand sides
+    ``B = T + sum_k L_k (f_k Xc)`` (6x6 ``L_k`` times the accelerances cleaned of leakage,
+    ``Xc = Xm - Y shp``, on each line scaled by ``f_k`` (n_k, n_l), e.g. K, C, D and
+    ``1 / w^2``, ``j / w``, ``j / w^2``). B is linear in Xc and Xc in Y: its moments with
+    the regressors and the shapes are formed once from those of Xm and of the shapes
+    ``shp`` (n_s, n_l), so that each solve costs sums over columns and shapes only."""
+
+    def __init__(self, Xm: NDArray[np.complex128], wm_: NDArray[np.float64],
+                 Sh: NDArray[np.float64], s2: NDArray[np.float64], T: NDArray[np.float64],
+                 f: NDArray[np.complex128], shp: NDArray[np.complex128]) -> None:
+        n, n_l = Xm.shape[0], Xm.shape[-1]
+        Xr = stack_real(Xm)
+        wf = np.concatenate([wm_, wm_], axis=-1)  # (n, n_e, 2 n_l)
+        sw = np.sqrt(wf)
+        # per resample and column: the weighted shapes orthonormalised, X without them
+        Q = np.linalg.qr(Sh.T[None, None] * sw[..., None])[0]  # (n, n_e, 2 n_l, n_s)
+        Xw = np.swapaxes(Xr * sw[:, None], 1, 2)  # (n, n_e, 6, 2 n_l)
+        Xp = np.swapaxes(Xw - (Xw @ Q) @ np.swapaxes(Q, -1, -2), 1, 2)  # (n, 6, n_e, 2 n_l)
+        op, MBs = _mass_basis_moments(s2)
+        Xpf = Xp.reshape(n, 6, -1)
+        self.normal = ((Xpf @ np.swapaxes(Xpf, 1, 2)).reshape(n, 36) @ op.T).reshape(n, 10, 10)
+        try:
+            self.solver = np.linalg.solve(self.normal, np.broadcast_to(MBs, (n, 10, 36)))
+        except np.linalg.LinAlgError:  # singular: the minimum-norm solution
+            self.solver = np.linalg.pinv(self.normal) @ MBs
+        # the leakage coefficients' normal matrices, per resample and column
+        self.leak_normal = np.einsum("sl,nkl,tl->nkst", Sh, wf, Sh, optimize=True)
+        wS = wf[..., None] * Sh.T  # (n, n_e, 2 n_l, n_s)
+        fX = stack_real(f[:, None, None, :] * Xm[:, None])  # (n, n_k, 6, n_e, 2 n_l)
+        fS = stack_real(f[:, None] * shp)  # (n_k, n_s, 2 n_l)
+        # W = sum_l B Xp^T (weighted) and r = sum_l (B - M Xm) wf Sh, term by term
+        self.WT = np.einsum("ie,nel,njel->nij", T, sw[..., :n_l], Xp[..., :n_l], optimize=True)
+        self.WX = np.einsum("nkiel,njel->nkij", fX * sw[:, None, None], Xp, optimize=True)
+        self.WY = np.einsum("ksl,nel,njel->nkesj", fS, sw, Xp, optimize=True)
+        self.rT = np.einsum("ie,nels->nies", T, wS[:, :, :n_l], optimize=True)
+        self.rM = np.einsum("nael,nels->naes", Xr, wS, optimize=True)
+        self.rX = np.einsum("nkiel,nels->nkies", fX, wS, optimize=True)
+        self.rY = np.einsum("ktl,nels->nkets", fS, wS, optimize=True)
+
+    def solve(self, idx: NDArray[np.intp], L: NDArray[np.float64], Y: NDArray[np.float64],
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """theta (m, 10) and the leakage coefficients (m, 6, n_e, n_s) of resamples ``idx``
+        for the matrices L (m, n_k, 6, 6) and the cleaning Y (m, 6, n_e, n_s)
+        (:meth:`MassLineProblem.solve` of B)."""
+        m, (_, k, n_e, n_s, _) = idx.size, self.WY.shape
+        WY = self.WY[idx].reshape(m, k, n_e * n_s, 6)
+        WX = self.WX[idx] - Y.reshape(m, 1, 6, -1) @ WY  # (m, k, 6, 6)
+        W = self.WT[idx] + (L @ WX).sum(axis=1)
+        theta = (self.solver[idx] @ W.reshape(m, 36, 1))[..., 0]
+        Yt = np.swapaxes(Y, 1, 2)[:, None]  # (m, 1, n_e, 6, n_s)
+        rX = self.rX[idx] - np.swapaxes(Yt @ self.rY[idx], 2, 3)  # (m, k, 6, n_e, n_s)
+        r = (self.rT[idx] - (_masses(theta) @ self.rM[idx].reshape(m, 6, -1)).reshape(Y.shape)
+             + (L @ rX.reshape(m, k, 6, -1)).sum(axis=1).reshape(Y.shape))
+        return theta, np.linalg.solve(self.leak_normal[idx, None], r[..., None])[..., 0]
+
+
+def _stiffness_solve(problem: Problem, model: str, G: list[NDArray[np.complex128]],
+                     Q: list[NDArray[np.complex128]], M: NDArray[np.float64]) -> tuple[
+    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
+]:
+    """K, C, D (m, 6, 6) of the improved method's stiffness step for mass matrices M (m, 6,
+    6) from the stiffness moments G0..G3, Q0..Q3 (m, 6, 6) of :class:`processing.stiffness.
+    StiffnessMoments` (:func:`processing.stiffness.fit_stiffness`, vectorised)."""
+    m, a = M.shape[0], problem.window_decay
+    R0, R1 = ((G[q + 2] - a**2 * G[q] - 2j * a * G[q + 1]) @ np.swapaxes(M, 1, 2)
+              - (Q[q + 2] - a**2 * Q[q] - 2j * a * Q[q + 1]) for q in (0, 1))
+    s2 = (np.ones(6) if problem.row_scale is None
+          else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
+    parts_rhs = (R0.real, R1.imag, R0.imag)
+    blocks = DAMPING_BLOCKS[model]
+    r = np.concatenate([np.swapaxes(parts_rhs[b] * s2, 1, 2).reshape(m, 36) for b in blocks],
+                       axis=1)
+    N = stiffness_normal(G[0], G[1], G[2], s2, model)  # type: ignore[arg-type]
+    if problem.solver.symmetric:
+        first, second, off, back = vech_index(len(blocks))
+        v = np.linalg.solve(vech_normal(N), (r[:, first] + np.where(off, r[:, second], 0.0))
+                            [..., None])[:, back, 0]
+    else:
+        v = np.linalg.solve(N, r[..., None])[..., 0]
+    parts = [np.zeros((m, 6, 6))] * 3
+    for k, b in enumerate(blocks):
+        parts[b] = v[:, 36 * k:36 * (k + 1)].reshape(m, 6, 6)
+    return parts[0] - a * parts[1], parts[1], parts[2]
+
+
+class _StiffnessLines:
+    """The stiffness moments of resamples' stiffness lines Xs (n, 6, n_e, n_l) at ``w``
+    (n_l,) rad/s with column weights ``ws_`` (n, n_e, n_l), cleaned of leakage ``Y shp``
+    (Y (n, 6, n_e, n_s) real, the shapes ``shp`` (n_s, n_l)): formed from the moments of Xs,
+    of Xs with the shapes and of the shapes, computed once, so that an iteration's
+    cleaning costs sums over columns and shapes only (``Xc = Xs - Y shp``:
+    ``G(Xc) = G(Xs) - P Y^T - (P Y^T)^H + Y S Y^T``)."""
+
+    def __init__(self, w: NDArray[np.float64], Xs: NDArray[np.complex128],
+                 ws_: NDArray[np.float64], shp: NDArray[np.complex128],
+                 T: NDArray[np.float64]) -> None:
+        n = Xs.shape[0]
+        self.T = T
+        self.A, self.P, self.S, self.x, self.c = [], [], [], [], []
+        Xf = np.swapaxes(Xs.reshape(n, 6, -1), 1, 2)
+        for p in range(4):  # powers 0..3 of w
+            wt = ws_ * w**p  # (n, n_e, n_l)
+            Xw = np.conj(Xs) * wt[:, None]
+            self.A.append(Xw.reshape(n, 6, -1) @ Xf)
+            self.P.append(Xw @ shp.T)  # (n, 6, n_e, n_s)
+            self.S.append(np.einsum("nel,sl,tl->nest", wt, np.conj(shp), shp, optimize=True))
+            self.x.append(Xw.sum(axis=-1))  # (n, 6, n_e)
+            self.c.append(wt @ np.conj(shp).T)  # (n, n_e, n_s)
+
+    def moments(self, idx: NDArray[np.intp], Y: NDArray[np.float64] | None) -> tuple[
+        list[NDArray[np.complex128]], list[NDArray[np.complex128]]
+    ]:
+        """G0..G3 and Q0..Q3 (m, 6, 6) of resamples ``idx`` cleaned of ``Y shp`` (none when
+        Y is None)."""
+        G, Q = [], []
+        for p in range(4):
+            A, x = self.A[p][idx], self.x[p][idx]
+            if Y is not None:
+                m = idx.size
+                Yf = Y.reshape(m, 6, -1)
+                t2 = self.P[p][idx].reshape(m, 6, -1) @ np.swapaxes(Yf, 1, 2)
+                YS = np.swapaxes(np.swapaxes(Y, 1, 2) @ self.S[p][idx], 1, 2)  # (m, 6, e, s)
+                A = A - t2 - np.conj(np.swapaxes(t2, 1, 2)) + YS.reshape(m, 6, -1) @ np.swapaxes(
+                    Yf, 1, 2)
+                x = x - (Y * self.c[p][idx][:, None]).sum(axis=-1)
+            G.append(A)
+            Q.append(x @ self.T.T)
+        return G, Q
+
+
 def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: Bands,
-                    X: NDArray[np.complex128], wm_: NDArray[np.float64],
-                    ws_: NDArray[np.float64]) -> Triple:
-    """:func:`_solve_batch` for a fit with leakage shapes (the cleaning of the accelerances
-    makes the iteration non-linear): the iteration itself, from the main fit's solution,
-    resample by resample."""
-    msel, ins = weights.mass_lines, bands.in_stiffness
-    shapes = leakage_shapes(problem, bands)
-    if not shapes:  # the upper residual the fit chose
-        shapes = [upper_residual(problem.w)]
-    stacked = np.array([stack_real(sh[msel]) for sh in shapes])
-    solver = dataclasses.replace(problem.solver, tol=max(problem.solver.tol, 1e-9))
-    out = []
-    for Xb, wmb, wsb in zip(X, wm_, ws_, strict=True):  # not affine: one at a time
-        weights = dataclasses.replace(weights, mass=wmb, stiffness=wsb)
-        pb = dataclasses.replace(problem, X=Xb, solver=solver)
-        ops = (fitted.operators if problem.improved
-               else line_operators(Xb[..., ins], problem.T, problem.w[ins]))
-        step = StiffnessStep(pb, weights, ops, weights.stiffness_lines[ins])
-        step.model = fitted.damping_model
-        ml = MassLineProblem(Xb[..., msel], weights=weights.mass, row_scale=problem.row_scale,
-                             shapes=stacked)
-        Xs = Xb[..., weights.stiffness_lines]
-        _, theta, K, C, _D, Xc, _, _ = iterate(pb, weights, ml, step, shapes, (fitted.theta, Xs))
-        if problem.options.physical:  # K, C on the cleaned lines, as the main fit
-            theta = constrain_physical(theta, ml.normal)
-            K, C, _D = step(mass_matrix(theta), Xc)
-        out.append((theta, K, C))
-    return np.array([o[0] for o in out]), np.array([o[1] for o in out]), np.array(
-        [o[2] for o in out])
+                    Xm: NDArray[np.complex128], Xs: NDArray[np.complex128],
+                    wm_: NDArray[np.float64], ws_: NDArray[np.float64]) -> Triple:
+    """:func:`_solve_batch` for a fit with leakage shapes (improved method: the cleaning of
+    the accelerances makes the iteration non-linear): the iteration of
+    :func:`processing.stages.iterate` itself, from the main fit's solution, for every
+    resample at once (accelerances Xm (n, 6, n_e, n_lm) on the mass lines, Xs on the
+    stiffness lines, with their column weights ``wm_``, ``ws_``); each resample stops where
+    its own theta converges."""
+    msel, ssel, a = weights.mass_lines, weights.stiffness_lines, problem.window_decay
+    ml0 = fitted.mass_line
+    assert ml0 is not None and ml0.shapes is not None
+    shapes = leakage_shapes(problem, bands) or [upper_residual(problem.w)]
+    shp = np.array(shapes)[ml0.shape_index]  # (n_s, n_f) the kept shapes
+    shp_m, shp_s = shp[:, msel], shp[:, ssel]
+    s2 = (np.ones(6) if problem.row_scale is None
+          else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
+    wm, ws, n = problem.w[msel], problem.w[ssel], Xm.shape[0]
+    model = "viscous" if a else fitted.damping_model
+    # B = T + K*_m Xc / w^2 as sum_k L_k (f_k Xc): with an exponential window's decay a,
+    # (K + a C + j w C) Xc / -s^2, else (K + j w C + j D) Xc / w^2
+    s_2 = (1j * wm + a) ** -2
+    f = (np.array([-s_2, -(a + 1j * wm) * s_2]) if a
+         else np.array([wm**-2 + 0j, 1j / wm, 1j / wm**2]))
+    lines = _MassLines(Xm, wm_, ml0.shapes, s2, problem.T, f, shp_m)
+    tol = max(problem.solver.tol, 1e-9)
+    theta = np.broadcast_to(fitted.theta, (n, 10)).copy()
+    stiff = _StiffnessLines(ws, Xs, ws_, shp_s, problem.T)
+    K, C, D = _stiffness_solve(problem, model, *stiff.moments(np.arange(n), None),
+                               _masses(theta))
+    Y = np.zeros((n, 6, Xm.shape[2], shp.shape[0]))
+    idx = np.arange(n)
+    for _ in range(problem.solver.max_iter):
+        L = np.stack([K[idx], C[idx]] if a else [K[idx], C[idx], D[idx]], axis=1)
+        new, leakage = lines.solve(idx, L, Y[idx])
+        M = _masses(new)
+        # B - M X = -M Y b: clean X of the fitted leakage
+        Yk = -(np.linalg.pinv(M) @ leakage.reshape(leakage.shape[0], 6, -1)).reshape(
+            leakage.shape)
+        Y[idx] = Yk
+        K[idx], C[idx], D[idx] = _stiffness_solve(problem, model, *stiff.moments(idx, Yk), M)
+        change = np.max(np.abs(new - theta[idx]) / np.maximum(
+            np.abs(new), 1e-12 * np.abs(new[:, :1])), axis=1)
+        theta[idx] = new
+        idx = idx[change >= tol]
+        if not idx.size:
+            break
+    if problem.options.physical:  # K, C on the cleaned lines, as the main fit
+        theta = np.array([constrain_physical(t, N) for t, N in zip(theta, lines.normal,
+                                                                   strict=True)])
+        K, C, _D = _stiffness_solve(problem, model, *stiff.moments(np.arange(n), Y),
+                                    _masses(theta))
+    return theta, K, C
 
 
 def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
-             units: TimeUnits, n: int = DEFAULT_RESAMPLES, seed: int = 0) -> Bootstrap | str:
+             units: TimeUnits, n: int = DEFAULT_RESAMPLES, seed: int = 0,
+             progress: Progress | None = None) -> Bootstrap | str:
     """Bootstrap the main fit over the time data's units; or, when it cannot run, why not.
 
     Parameters
@@ -455,6 +640,8 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     units : the units of the problem's columns, in its column order
     n : resamples (at least 2)
     seed : of the resampling (the same seed gives the same resamples)
+    progress : called with (resamples done, n) before the first chunk of resamples and
+        after each (at least :data:`PROGRESS_STEPS` of them)
     """
     if n < 2:
         raise InputError(f"the bootstrap needs at least 2 resamples, got {n}")
@@ -469,7 +656,7 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
               .astype(float) for c in units.columns]
     # the units must give the FRFs the fit used (the nominal: every unit once)
     lines = problem.freq[used]
-    nominal = _resampled_frfs(units, lines, [np.ones((1, c.n_units)) for c in units.columns])
+    nominal = resampled_frfs(units, lines, [np.ones((1, c.n_units)) for c in units.columns])
     if nominal is None:
         return f"no bootstrap over {units.kind}s: their lines differ from the FRFs'"
     ref = problem.H[..., used]
@@ -482,21 +669,25 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     shapes = fitted.mass_line is not None and fitted.mass_line.shapes is not None
     # resamples in chunks: the FRFs of a chunk hold at most CHUNK_VALUES values
     size = len(units.columns) * lines.size * problem.H.shape[0]
-    step = max(1, min(n, CHUNK_VALUES // max(size, 1)))
+    step = max(1, min(n, CHUNK_VALUES // max(size, 1), -(-n // PROGRESS_STEPS)))
     out = []
     for lo in range(0, n, step):
-        drawn = _resampled_frfs(units, lines, [c[lo:lo + step] for c in counts])
+        if progress is not None:
+            progress(lo, n)
+        drawn = resampled_frfs(units, lines, [c[lo:lo + step] for c in counts])
         assert drawn is not None
         X, colw = weighted_accelerances(problem, used, *drawn)  # (m, l, 6, e), (m, e, l)
         wm_ = colw[..., mass] * (weights.mass > 0)  # a column the main fit dropped stays out
         ws_ = colw[..., stiff] * (weights.stiffness > 0)
         if shapes:
-            Xall = np.broadcast_to(problem.X, (X.shape[0], *problem.X.shape)).copy()
-            Xall[..., used] = np.transpose(X, (0, 2, 3, 1))
-            out.append(_solve_iterated(problem, weights, fitted, bands, Xall, wm_, ws_))
+            Xt = np.transpose(X, (0, 2, 3, 1))  # (m, 6, e, l)
+            out.append(_solve_iterated(problem, weights, fitted, bands, Xt[..., mass],
+                                       Xt[..., stiff], wm_, ws_))
         else:
             out.append(_solve_batch(problem, weights, fitted, X[:, mass], X[:, stiff], wm_,
                                     ws_))
+    if progress is not None:
+        progress(n, n)
     theta, K, C = (np.concatenate([o[k] for o in out]) for k in range(3))
     labels = units.labels()
     groups = tuple(lab for lab, c in zip(labels, units.columns, strict=True)

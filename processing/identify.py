@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from processing.bootstrap import DEFAULT_RESAMPLES, Bootstrap, resample
+from processing.bootstrap import DEFAULT_RESAMPLES, Bootstrap, Progress, resample
 from processing.data import FRFSet, InputError
 from processing.geometry import excitation_matrix
 from processing.measurement import Measurement
@@ -56,6 +56,7 @@ from processing.stages import (
     rigid_band_tops,
     settle_mass_band,
     solve,
+    stiffness_operators,
     upper_residual,
     weigh_lines,
 )
@@ -179,8 +180,9 @@ def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stage
                       elastic_top=d.elastic_top)
     bands = choose_bands(problem, *d.rigid_tops)
     weights = weigh_lines(problem, bands)
-    bands, weights = settle_mass_band(problem, bands, weights)
-    fitted = solve(problem, bands, weights)
+    ops = stiffness_operators(problem, bands)  # the settling keeps the stiffness band
+    bands, weights = settle_mass_band(problem, bands, weights, ops)
+    fitted = solve(problem, bands, weights, ops)
     refuse_implausible_mass(problem, bands, weights, fitted)
     return Stages(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
 
@@ -208,7 +210,8 @@ _COV_SOURCE = ("fit covariance: mass-line residual (block-robust over lines, ban
                "propagated to first order")
 
 
-def _bootstrap(st: Stages, units: TimeUnits) -> Bootstrap | str | None:
+def _bootstrap(st: Stages, units: TimeUnits, progress: Progress | None = None,
+               ) -> Bootstrap | str | None:
     """The bootstrap over the time data's hits or blocks (a :class:`Bootstrap`), or why it
     did not run (a line), or None when turned off (``options.bootstrap == 0``). By default it
     runs with 200 resamples when every point has at least :data:`MIN_UNITS` units."""
@@ -221,19 +224,20 @@ def _bootstrap(st: Stages, units: TimeUnits) -> Bootstrap | str | None:
             return (f"no bootstrap over {units.kind}s: a point has {least} (at least "
                     f"{MIN_UNITS} for the default; --bootstrap N runs it with 2)")
         n = DEFAULT_RESAMPLES
-    return resample(st.problem, st.bands, st.weights, st.fitted, units, n)
+    return resample(st.problem, st.bands, st.weights, st.fitted, units, n, progress=progress)
 
 
 def uncertainty(st: Stages,
                 node_ids: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
-                units: TimeUnits | None = None) -> Uncertainty | None:
+                units: TimeUnits | None = None,
+                progress: Progress | None = None) -> Uncertainty | None:
     """Standard deviations of every result: the fit's covariance
     (:mod:`processing.uncertainty`), plus the Monte Carlo of the stated test uncertainties
     (:mod:`processing.montecarlo`) when the options state any, and, for time data whose
     ``units`` are given, the bootstrap over hits or blocks (:mod:`processing.bootstrap`;
     it measures the FRF noise the covariance reads off the residual, so per number the
     larger of the two is kept, and it gives the asymmetric ``ci95``); None when the fit
-    kept no state for it."""
+    kept no state for it. ``progress(done, total)`` follows the bootstrap's resamples."""
     problem, bands, weights, fitted = st.problem, st.bands, st.weights, st.fitted
     if fitted.mass_line is None or fitted.mass_rhs is None or fitted.stiffness_map is None:
         return None
@@ -256,7 +260,7 @@ def uncertainty(st: Stages,
         extra = draw_variances(draws.theta, draws.K, draws.C, draws.z, draws.groups)
         extra_cov = draw_covariance(draws.theta, draws.K, draws.C)
         sources = (*sources, stated.describe())
-    boot = None if units is None else _bootstrap(st, units)
+    boot = None if units is None else _bootstrap(st, units, progress)
     if isinstance(boot, str):
         sources = (*sources, boot)
         boot = None
@@ -272,17 +276,18 @@ def uncertainty(st: Stages,
 
 
 def _fit_once(d: _Data, options: IdentifyOptions, solver: SolverSettings,
-              ) -> IdentificationResult:
+              progress: Progress | None = None) -> IdentificationResult:
     st = _stages(d, options, solver)
     frf = d.frf
-    unc = (uncertainty(st, (frf.resp_nodes, frf.exc_nodes), d.units)
+    unc = (uncertainty(st, (frf.resp_nodes, frf.exc_nodes), d.units, progress)
            if options.uncertainty else None)
     return assemble(st.problem, st.bands, st.weights, st.fitted, st.checks, unc)
 
 
 @one_blas_thread
 def fit(measurement: Measurement, options: IdentifyOptions | None = None,
-        solver: SolverSettings | None = None) -> IdentificationResult:
+        solver: SolverSettings | None = None, *,
+        progress: Progress | None = None) -> IdentificationResult:
     """Identify the ten inertia parameters and K, C at O from a measurement.
 
     Uses what the measurement carries besides H: its coherence (each FRF value weighed by
@@ -297,6 +302,8 @@ def fit(measurement: Measurement, options: IdentifyOptions | None = None,
     measurement : the FRFs and their provenance
     options : the user's choices (bands, method, physical constraint, uncertainty)
     solver : how the solver works (default :class:`SolverSettings`)
+    progress : ``progress(done, total)``, called as the bootstrap's resamples are solved
+        (for a view's progress bar; the result does not depend on it)
 
     Raises
     ------
@@ -311,7 +318,8 @@ def fit(measurement: Measurement, options: IdentifyOptions | None = None,
     """
     opt, sol = options or IdentifyOptions(), solver or SolverSettings()
     d = _data(measurement, opt, sol)
-    result = _refined(d, opt, sol) if opt.refine_points > 0 else _fit_once(d, opt, sol)
+    result = (_refined(d, opt, sol) if opt.refine_points > 0
+              else _fit_once(d, opt, sol, progress))
     if d.notes:
         result = dataclasses.replace(result, warnings=(*result.warnings, *d.notes))
     return result
@@ -370,7 +378,8 @@ def _refined(d: _Data, opt: IdentifyOptions, solver: SolverSettings) -> Identifi
 @one_blas_thread
 def bootstrap_identify(measurement: Measurement, options: IdentifyOptions | None = None,
                        n: int = DEFAULT_RESAMPLES, seed: int = 0,
-                       solver: SolverSettings | None = None) -> tuple[Fit, Bootstrap | str]:
+                       solver: SolverSettings | None = None,
+                       progress: Progress | None = None) -> tuple[Fit, Bootstrap | str]:
     """The fit of ``fit(measurement, options)`` (every stage, bands and model as it chooses
     them; no point refinement) and its bootstrap over the measurement's hits or blocks
     alone (without the other sources): for studies of the bootstrap itself."""
@@ -379,4 +388,5 @@ def bootstrap_identify(measurement: Measurement, options: IdentifyOptions | None
         raise InputError("the measurement carries no per-hit or per-block spectra for every "
                          "column (time data only)")
     st = stages(measurement, options, solver)
-    return st.fitted, resample(st.problem, st.bands, st.weights, st.fitted, units, n, seed)
+    return st.fitted, resample(st.problem, st.bands, st.weights, st.fitted, units, n, seed,
+                               progress)

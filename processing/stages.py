@@ -89,6 +89,7 @@ __all__ = [
     "rigid_band_tops",
     "settle_mass_band",
     "solve",
+    "stiffness_operators",
     "upper_residual",
     "weigh_lines",
 ]
@@ -297,6 +298,9 @@ class StiffnessStep:
                  stiff_in_band: NDArray[np.bool_]) -> None:
         self.problem = problem
         self.w = problem.w[weights.stiffness_lines]
+        #: the stiffness lines' X (not cleaned of leakage): one array, so that the fits that
+        #: share this step share its moments too
+        self.lines = problem.X[..., weights.stiffness_lines]
         self.weights = weights.stiffness
         self.mean = operators.mean_kc(stiff_in_band)
         self._moments: StiffnessMoments | None = None
@@ -376,7 +380,7 @@ def iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
     T, a = problem.T, problem.window_decay
     msel, ssel = weights.mass_lines, weights.stiffness_lines
     Xm, wm = problem.X[..., msel], problem.w[msel]
-    Xs = problem.X[..., ssel]
+    Xs = step.lines
     s_m = 1j * wm + a
     Xcm, Xcs = Xm, Xs
     K, C, D, theta = np.zeros((6, 6)), np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(10)
@@ -439,7 +443,7 @@ def _fit_model(problem: Problem, weights: LineWeights, step: StiffnessStep,
     """The mass-line model with the given leakage shapes, fitted (plain method without a
     window: the article's fixed point, solved directly); the iteration starts from
     ``start``'s estimates when given."""
-    msel, ssel = weights.mass_lines, weights.stiffness_lines
+    msel = weights.mass_lines
     ml = MassLineProblem(problem.X[..., msel], weights=weights.mass, row_scale=problem.row_scale,
                          shapes=np.array([stack_real(s[msel]) for s in shapes]) if shapes
                          else None)
@@ -447,7 +451,7 @@ def _fit_model(problem: Problem, weights: LineWeights, step: StiffnessStep,
         # the article's iteration is affine in theta here: its limit is solved directly
         mean = step.mean
         fit_ = ml.fixed_point_affine(problem.T, mean.w2, mean.KB, mean.C, problem.w[msel])
-        Xs = problem.X[..., ssel]
+        Xs = step.lines
         K, C, D = step(mass_matrix(fit_.theta), Xs)
         return _Candidate(ml, fit_, fit_.theta, K, C, Xs, 1, True, D)
     init = None if start is None else (start.theta, start.Xs)
@@ -500,9 +504,16 @@ BAND_TOLERANCE = 1.5
 SCORE_TOL, SCORE_ITER = 1e-4, 6
 
 
-def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tuple[
-    Bands, LineWeights
-]:
+def stiffness_operators(problem: Problem, bands: Bands) -> LineOperators:
+    """The per-line operators of eq. 14 on the stiffness band (:func:`processing.stiffness.
+    line_operators`), built once for :func:`settle_mass_band` and :func:`solve` (the
+    settling changes the mass line only)."""
+    ins = bands.in_stiffness
+    return line_operators(problem.X[..., ins], problem.T, problem.w[ins])
+
+
+def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights,
+                     operators: LineOperators | None = None) -> tuple[Bands, LineWeights]:
     """The automatic mass line's top chosen by the stability of the estimate.
 
     An elastic mode the residual does not show (its shape looks rigid at the sensors, or it
@@ -511,7 +522,8 @@ def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tu
     to the band's 16th line) are each fitted on the two halves of their
     lines; the widest whose halves disagree at most ``BAND_TOLERANCE`` times the least
     disagreement is kept, and the reason says so. Bands given in the options, the plain
-    method and mass lines under 32 lines are left as they are.
+    method and mass lines under 32 lines are left as they are. ``operators``: the
+    stiffness band's :func:`stiffness_operators` (built here when not given).
 
     Without modelled elastic leakage, the model the candidates are fitted with (an upper
     ``w^2`` residual or none) is one for all of them: the one whose half-band disagreement
@@ -536,9 +548,8 @@ def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tu
     # the candidates are compared, not reported: a loose convergence suffices
     rough = dataclasses.replace(problem, solver=dataclasses.replace(
         problem.solver, tol=SCORE_TOL, max_iter=SCORE_ITER))
-    step = StiffnessStep(rough, weights, line_operators(problem.X[..., ins], problem.T,
-                                                         problem.w[ins]),
-                          weights.stiffness_lines[ins])
+    ops = operators if operators is not None else stiffness_operators(problem, bands)
+    step = StiffnessStep(rough, weights, ops, weights.stiffness_lines[ins])
     shapes = leakage_shapes(problem, bands)
     models = [shapes] if shapes else [[], [upper_residual(problem.w)]]
     cands = []
@@ -566,7 +577,8 @@ def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights) -> tu
                                reason=reason), chosen
 
 
-def solve(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
+def solve(problem: Problem, bands: Bands, weights: LineWeights,
+          operators: LineOperators | None = None) -> Fit:
     """Inertia, K and C (and D): the article's fixed point solved directly (plain, no
     window), else the iteration of section 2.2; then projected onto consistent inertia if
     asked.
@@ -576,11 +588,13 @@ def solve(problem: Problem, bands: Bands, weights: LineWeights) -> Fit:
     two halves of the mass line agree). Improved method: at the converged mass matrix the
     damping model of ``K*`` (viscous C, structural D or both) is chosen by BIC over the
     stiffness lines; when it is not the viscous one the iteration is resumed with it.
+    ``operators``: the stiffness band's :func:`stiffness_operators` (built here when not
+    given).
     """
-    opt, T = problem.options, problem.T
+    opt = problem.options
     ssel = weights.stiffness_lines
     ins = bands.in_stiffness
-    ops = line_operators(problem.X[..., ins], T, problem.w[ins])  # eq. 14 operators, per line
+    ops = operators if operators is not None else stiffness_operators(problem, bands)
     step = StiffnessStep(problem, weights, ops, ssel[ins])
     shapes = leakage_shapes(problem, bands)
     best = _fit_model(problem, weights, step, shapes)

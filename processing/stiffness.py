@@ -10,6 +10,7 @@ the data by :func:`choose_damping` (docs/mounts.md).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -31,7 +32,10 @@ __all__ = [
     "fit_stiffness",
     "line_operators",
     "stiffness_moments",
+    "stiffness_normal",
     "stiffness_residual",
+    "vech_index",
+    "vech_normal",
 ]
 
 
@@ -132,6 +136,57 @@ DAMPING_BLOCKS: dict[str, tuple[int, ...]] = {"viscous": (0, 1), "hysteretic": (
                                               "both": (0, 1, 2)}
 
 
+@functools.cache
+def vech_index(k: int) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_],
+                                NDArray[np.intp]]:
+    """The duplication matrix of ``k`` stacked symmetric 6x6 blocks,
+    ``kron(eye(k), DUPLICATION)``, as indices: each vech entry's first and second place in
+    the vec (equal on the diagonal), whether they differ, and each vec entry's vech entry.
+    Products with it are then gathers and sums of the same terms the matrix product adds."""
+    iu, il = np.triu_indices(6)
+    first = np.concatenate([36 * t + 6 * iu + il for t in range(k)])
+    second = np.concatenate([36 * t + 6 * il + iu for t in range(k)])
+    back = np.empty(36 * k, dtype=np.intp)
+    back[first], back[second] = np.arange(21 * k), np.arange(21 * k)
+    return first, second, first != second, back
+
+
+@functools.cache
+def _dup_t(k: int) -> NDArray[np.float64]:
+    """``kron(eye(k), DUPLICATION).T`` (read only)."""
+    out = np.asarray(np.kron(np.eye(k), DUPLICATION).T, dtype=np.float64)
+    out.flags.writeable = False
+    return out
+
+
+def vech_normal(N: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``dup.T @ N @ dup`` for the duplication matrix ``dup`` of :func:`vech_index` (N
+    (..., 36 k, 36 k)), the rows summed first then the columns, as the product does."""
+    first, second, off, _ = vech_index(N.shape[-1] // 36)
+    R = N[..., first, :] + np.where(off[:, None], N[..., second, :], 0.0)
+    return np.asarray(R[..., first] + np.where(off, R[..., second], 0.0))
+
+
+def stiffness_normal(G0: NDArray[np.complex128], G1: NDArray[np.complex128],
+                     G2: NDArray[np.complex128], s2: NDArray[np.float64],
+                     model: DampingModel) -> NDArray[np.float64]:
+    """The normal matrix (..., 36 k, 36 k) of the stiffness fit of ``model``'s k blocks over
+    their stacked row-major vecs, from the moments G0..G2 (..., 6, 6) of
+    :class:`StiffnessMoments` (any leading axes) and the row scales ``s2``: row block i
+    holds ``s2_i`` times the Gram matrix of the regressors x (K), j w x (C), j x (D)."""
+    G0r, G0i, G1r, G1i = G0.real, G0.imag, G1.real, G1.imag
+    full = [[G0r, -G1i, -G0i], [G1i, G2.real, G1r], [G0i, G1r, G0r]]
+    b = DAMPING_BLOCKS[model]
+    k = len(b)
+    Nb = np.concatenate([np.concatenate([full[r][c] for c in b], axis=-1) for r in b],
+                        axis=-2)
+    Nb = Nb.reshape(*Nb.shape[:-2], k, 6, k, 6)
+    N = np.zeros((*Nb.shape[:-4], k, 6, 6, k, 6, 6))
+    for i in range(6):
+        N[..., :, i, :, :, i, :] = s2[i] * Nb
+    return np.asarray(N.reshape(*Nb.shape[:-4], 36 * k, 36 * k), dtype=np.float64)
+
+
 @dataclass(frozen=True)
 class StiffnessFit:
     """K and C (and D) at O fitted over a band, from ``n_equations`` real equations.
@@ -177,18 +232,12 @@ class StiffnessMoments:
         key = (s2.tobytes(), symmetric, model)
         S = self._solvers.get(key)
         if S is None:
-            G0r, G0i, G1r, G1i = self.G0.real, self.G0.imag, self.G1.real, self.G1.imag
-            # Gram blocks of the regressors x (K), j w x (C) and j x (D)
-            full = [[G0r, -G1i, -G0i], [G1i, self.G2.real, G1r], [G0i, G1r, G0r]]
-            b = DAMPING_BLOCKS[model]
-            n = len(b)
-            Nb = np.block([[full[r][c] for c in b] for r in b])
-            # full normal matrix over the stacked row-major vecs: row blocks s2_i * Nb
-            Nfull = np.einsum("i,ij,taub->tiaujb", s2, np.eye(6), Nb.reshape(n, 6, n, 6))
-            Nfull = Nfull.reshape(36 * n, 36 * n)
+            n = len(DAMPING_BLOCKS[model])
+            Nfull = stiffness_normal(self.G0, self.G1, self.G2, s2, model)
             if symmetric:  # unknowns [vech K; vech C; ...] through the duplication matrix
-                dup = np.kron(np.eye(n), DUPLICATION)
-                S = np.asarray(dup @ np.linalg.solve(dup.T @ Nfull @ dup, dup.T), dtype=float)
+                back = vech_index(n)[3]
+                S = np.asarray(np.linalg.solve(vech_normal(Nfull), _dup_t(n))[back],
+                               dtype=float)
             else:
                 S = np.asarray(np.linalg.inv(Nfull), dtype=float)
             self._solvers[key] = S

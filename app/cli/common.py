@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable, Iterator
+
 #: verb -> its one line of help: ``insitu --help`` lists them without importing the verbs
 VERB_HELP = {
     'identify': 'identify inertia parameters and K, C from a UFF file',
@@ -41,3 +44,30 @@ def in_flags(err: BaseException) -> str:
 
     cause = err if isinstance(err, SettingError) else err.__cause__
     return cause.worded(FLAGS) if isinstance(cause, SettingError) else str(err)
+
+
+@contextlib.contextmanager
+def fit_progress() -> Iterator[Callable[[int, int], None]]:
+    """A ``progress`` for :func:`processing.identify.fit`: while the bootstrap's resamples
+    are solved, a rich progress bar on stderr, gone when the block ends (nothing is drawn
+    when stderr is not a terminal)."""
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TaskID,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=Console(stderr=True), transient=True) as bars:
+        task: list[TaskID] = []
+
+        def update(done: int, total: int) -> None:
+            if not task:
+                task.append(bars.add_task("bootstrap resamples", total=total))
+            bars.update(task[0], completed=done, total=total)
+
+        yield update

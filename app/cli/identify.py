@@ -22,7 +22,7 @@ from typing import Any
 
 from rich.console import Console
 
-from app.cli.common import VERB_HELP, UserError
+from app.cli.common import VERB_HELP, UserError, fit_progress
 from app.cli.frf import add_processing_arguments, load_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
@@ -183,7 +183,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")
         check_mounts(stored.mounts)
         mounts = dataclasses.replace(mounts, table=stored)
-    result = fit(m, options)
+    with fit_progress() as progress:
+        result = fit(m, options, progress=progress)
     _report(args.file, args.out, m.frf, result, mounts)
     return 2 if m.provenance.skipped else 0
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from app.cli.common import VERB_HELP, UserError
+from app.cli.common import VERB_HELP, UserError, fit_progress
 from app.cli.summary import print_result
 from app.io.runfile import read_run
 from app.pipeline import RUN_FILE, load
@@ -37,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
     if len(data.records) == 0:
         raise UserError(f"{args.file}: the run holds no record yet")
     m = load(args.file, fmt=RUN_FILE)
-    frf, result = m.frf, fit(m)
+    with fit_progress() as progress:
+        frf, result = m.frf, fit(m, progress=progress)
     what = "blocks" if data.method == "shaker" else "hits"
     console = Console()
     acc = int(np.count_nonzero(data.records.accepted))

@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from app.cli.common import VERB_HELP, UserError
+from app.cli.common import VERB_HELP, UserError, fit_progress
 
 
 def add_parser(sub: Any) -> None:
@@ -54,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
         show_reports(args, err.reports)
         raise
     show_reports(args, m.provenance.reports)
-    a = analyse(m, IdentifyOptions(physical=args.physical), args.file.name)
+    with fit_progress() as progress:
+        a = analyse(m, IdentifyOptions(physical=args.physical), args.file.name, progress)
     # figures are drawn by Qt off screen: no display needed
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6 import QtWidgets

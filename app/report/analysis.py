@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from processing.bootstrap import Progress
 from processing.coherence import CoherenceGate, coherence_gate
 from processing.data import FRFSet
 from processing.geometry import DEFAULT_MAX_COND_T, GeometryReport, check_geometry
@@ -78,7 +79,7 @@ class Analysis:
 
 
 def analyse(measurement: Measurement, options: IdentifyOptions | None = None,
-            source: str = "") -> Analysis:
+            source: str = "", progress: Progress | None = None) -> Analysis:
     """Identify (:func:`processing.identify.fit`, as every view does) and check
     ``measurement``; never raises for bad data (messages instead).
 
@@ -87,6 +88,7 @@ def analyse(measurement: Measurement, options: IdentifyOptions | None = None,
     measurement : the FRFs and their provenance (:func:`app.pipeline.load`)
     options : identification options (bands, method, physical constraint)
     source : label shown in views and reports
+    progress : ``progress(done, total)`` of the bootstrap's resamples (:func:`fit`)
 
     Examples
     --------
@@ -109,7 +111,7 @@ def analyse(measurement: Measurement, options: IdentifyOptions | None = None,
     error: str | None = geo_error
     if geometry is not None:
         try:
-            result = fit(measurement, opt)
+            result = fit(measurement, opt, progress=progress)
         except (ValueError, ArithmeticError) as err:  # InputError, GeometryError, LinAlgError
             error = message_of(err)
     rigidity: RigidityCheck | None = None

@@ -17,7 +17,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from bootstrap import QUANTITIES, calibrate, hammer_frfs, scenario
+from bootstrap import QUANTITIES, calibrate, hammer_frfs, reference_resample, scenario
 
 from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
 from processing import bootstrap as bsm
@@ -213,7 +213,7 @@ def test_resampled_frfs_follow_the_estimator(estimator: str) -> None:
     col = UnitSpectra(np.arange(n_f, dtype=float), np.abs(F) ** 2, np.conj(F)[:, None] * X,
                       np.abs(X) ** 2, np.ones(n_u))
     units = TimeUnits("hit", (col,), np.array([1]), np.array([[0.0, 0.0, 1.0]]), estimator)
-    H, G = bsm._resampled_frfs(units, col.freq[2:], [np.ones((2, n_u))])
+    H, G = bsm.resampled_frfs(units, col.freq[2:], [np.ones((2, n_u))])
     want, coh = frf(col.mean(), estimator)
     assert_allclose(np.moveaxis(H[0, ..., 0], 0, 1), want[:, 0, 2:], rtol=1e-10)
     assert_allclose(np.moveaxis(G[0, ..., 1], 0, 1), coh[:, 0, 2:], rtol=1e-10)
@@ -240,3 +240,38 @@ def test_resamples_in_chunks_are_the_same(monkeypatch: pytest.MonkeyPatch) -> No
     assert isinstance(whole, bsm.Bootstrap) and isinstance(parts, bsm.Bootstrap)
     assert_allclose(parts.theta, whole.theta, rtol=1e-12, atol=1e-12 * np.abs(whole.theta).max())
     assert_allclose(parts.K, whole.K, rtol=1e-12, atol=1e-12 * np.abs(whole.K).max())
+
+
+def test_resamples_with_leakage_shapes_are_the_per_resample_iteration() -> None:
+    """The resamples of a fit with leakage shapes (here the upper residual), solved together,
+    are each the fit's own iteration run on that resample alone (the loop of
+    benchmarks/bootstrap.py: StiffnessStep, MassLineProblem and iterate)."""
+    sc = build_scenario(ScenarioSpec(seed=3, n_forces=6, n_sensors=3, elastic_ratio=6.0,
+                                     damping="viscous"))
+    m = hammer_frfs(sc, 0, hits=3)
+    st = idm.stages(m)
+    assert st.fitted.mass_line is not None and st.fitted.mass_line.shapes is not None
+    _, boot = idm.bootstrap_identify(m, IdentifyOptions(), 12, seed=2)
+    assert isinstance(boot, bsm.Bootstrap) and m.time_units is not None
+    theta, K, C = reference_resample(st, m.time_units, boot)
+    assert np.ptp(theta[:, 0]) > 1e-4 * abs(theta[0, 0])  # the resamples differ
+    for got, want in ((boot.theta, theta), (boot.K, K), (boot.C, C)):
+        assert_allclose(got, want, rtol=0, atol=1e-11 * np.abs(want).max())
+
+
+def test_progress_follows_the_resamples() -> None:
+    """``progress(done, total)``: from 0 to all, in at least PROGRESS_STEPS steps, through
+    ``fit`` too; the resamples do not depend on it."""
+    m = hammer_frfs(scenario(), seed=1, hits=3)
+    seen: list[tuple[int, int]] = []
+    _, quiet = idm.bootstrap_identify(m, IdentifyOptions(), 40, seed=3)
+    _, shown = idm.bootstrap_identify(m, IdentifyOptions(), 40, seed=3,
+                                      progress=lambda d, t: seen.append((d, t)))
+    assert isinstance(quiet, bsm.Bootstrap) and isinstance(shown, bsm.Bootstrap)
+    assert_array_equal(shown.theta, quiet.theta)
+    done = [d for d, _ in seen]
+    assert seen[0] == (0, 40) and seen[-1] == (40, 40) and {t for _, t in seen} == {40}
+    assert done == sorted(done) and len(set(done)) >= bsm.PROGRESS_STEPS + 1
+    seen.clear()
+    idm.fit(m, IdentifyOptions(bootstrap=20), progress=lambda d, t: seen.append((d, t)))
+    assert seen[0] == (0, 20) and seen[-1] == (20, 20)
