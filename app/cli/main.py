@@ -22,11 +22,6 @@ from app.cli.common import VERB_HELP, UserError, in_flags
 #: terminal width (characters) assumed when the output is a file or a pipe
 PIPE_COLUMNS = 200
 
-# One OpenBLAS thread unless the user says otherwise (set before a verb imports numpy): the
-# identification's matrices are small, and on busy cores a second BLAS thread made it many
-# times slower (benchmarks/results/bootstrap-speed.md)
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
 #: the verbs (modules under app.cli), in the order ``insitu --help`` lists them
 VERBS = tuple(VERB_HELP)
 
