@@ -121,9 +121,12 @@ def settings_from(args: argparse.Namespace, **kwargs: Any) -> Settings:
 def load_and_show(path: Path, args: argparse.Namespace, settings: Settings,
                   fmt: str | None = None) -> Measurement:
     """``path``'s measurement through the pipeline (:func:`app.pipeline.load`), its reports
-    printed (a run left out: one stderr line)."""
-    try:
-        m = load(path, settings, fmt=fmt)
+    printed (a run left out: one stderr line); a spinner on a terminal while it reads."""
+    from rich.console import Console
+
+    try:  # a spinner on a terminal's stderr while the file is read (a time UFF takes seconds)
+        with Console(stderr=True).status(f"reading {path.name}"):
+            m = load(path, settings, fmt=fmt)
     except OpenError as err:
         show_reports(args, err.reports)
         raise
