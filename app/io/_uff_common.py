@@ -1,7 +1,8 @@
 """Shared pieces of the UFF readers: loading a file through pyuff, units, DOF codes.
 
-Everything here works on the list of dictionaries that ``pyuff.UFF(path).read_sets()``
-returns. Unit factors follow dataset 164: a file value divided by the factor of its
+A file is indexed once by pyuff (:func:`open_uff`) and its datasets parsed one at a time
+(:func:`read_set`) or all together (:func:`load_sets`); the rest works on the dictionaries
+pyuff returns. Unit factors follow dataset 164: a file value divided by the factor of its
 dimension gives the SI value (a file in mm has length factor 1000).
 """
 

@@ -7,6 +7,9 @@ DOF; the other records are accelerations (ordinate type 12) at their node/direct
 The sample rate comes from the abscissa increment, units from dataset 164 and the
 records' unit exponents.
 
+A file is read one run at a time (:func:`read_time_file`, :meth:`TimeFile.read_run`): memory
+holds the records of one run, never the file's samples.
+
 The E13.5 abscissa increment holds 6 significant digits, so 1/2048 s reads back as
 4.88281e-4 s; a rate is snapped to the integer whose period prints to the same six
 digits (2048 Hz here). Non-integer rates keep that 6-digit precision in ASCII files;
