@@ -18,15 +18,12 @@ simulation's): ``fit(Measurement(frf), options)``.
 from __future__ import annotations
 
 import dataclasses
-import functools
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import ParamSpec, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
-from threadpoolctl import threadpool_limits
 
+from processing.blas import one_blas_thread
 from processing.bootstrap import DEFAULT_RESAMPLES, Bootstrap, Progress, resample
 from processing.data import FRFSet, InputError
 from processing.geometry import excitation_matrix
@@ -72,7 +69,6 @@ from processing.uncertainty import (
 from processing.units import MIN_UNITS, TimeUnits
 
 __all__ = [
-    "BLAS_THREADS",
     "Bands",
     "Checks",
     "Fit",
@@ -95,26 +91,6 @@ __all__ = [
     "upper_residual",
     "weigh_lines",
 ]
-
-
-#: BLAS threads during a fit. Its matrices are small (6 x 6 to 10 x 10, stacked over lines):
-#: a second BLAS thread gains nothing, and beside another busy process its spinning made a
-#: hammer run's fit 30 times slower (155 s against 4.8 s, measured); one thread, always.
-BLAS_THREADS = 1
-
-_P = ParamSpec("_P")
-_R = TypeVar("_R")
-
-
-def one_blas_thread(fn: Callable[_P, _R]) -> Callable[_P, _R]:
-    """``fn`` run with :data:`BLAS_THREADS` BLAS threads (the caller's count restored)."""
-
-    @functools.wraps(fn)
-    def limited(*args: _P.args, **kwargs: _P.kwargs) -> _R:
-        with threadpool_limits(BLAS_THREADS, user_api="blas"):
-            return fn(*args, **kwargs)
-
-    return limited
 
 
 # --- what the fit reads from a measurement ---------------------------------------------------

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from app.acquire.blocks import BlockAnalysis, RecordLoader, shaker_measurement
 from app.acquire.plan import RecordSettings, TestPlan
 from app.io.runfile import RunData
+from processing.blas import one_blas_thread
 from processing.data import Geometry, InputError
 from processing.impact import (
     ImpactResult,
@@ -50,6 +51,7 @@ def impact_settings(record: RecordSettings) -> ImpactSettings:
                           pretrigger=record.n_pretrigger, exp_tau=record.exp_tau)
 
 
+@one_blas_thread
 def hit_result(data: NDArray[np.float64], record: RecordSettings, names: Sequence[str],
                ranges: NDArray[np.float64] | None, override: str = "") -> ImpactResult:
     """Verdict, windows and spectra of one stored hit record (force row 0, N; responses m/s^2).
@@ -337,6 +339,7 @@ def check_identifiable(run: RunData) -> None:
         raise InputError(f"{run.path}: not identified: {host_timed(dev, ref)}")
 
 
+@one_blas_thread
 def analysis_measurement(ana: RecordAnalysis, geometry: Geometry,
                          resp_nodes: NDArray[np.int64], resp_dirs: NDArray[np.float64],
                          source: str, points: Sequence[int] | None = None,
@@ -367,6 +370,7 @@ def analysis_measurement(ana: RecordAnalysis, geometry: Geometry,
     return dataclasses.replace(m, source=source)
 
 
+@one_blas_thread
 def run_measurement(run: RunData, max_averages: int | None = None,
                     loader: RecordLoader | None = None,
                     ) -> tuple[Measurement, RecordAnalysis]:

@@ -14,6 +14,7 @@ from app.io.frf_h5 import h5_format, read_frf_measurement
 from app.io.uff import read_frf_measurement_uff
 from app.io.uff_time import uff_holds_time_data
 from app.pipeline.settings import Settings
+from processing.blas import one_blas_thread
 from processing.measurement import Measurement
 
 __all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "H5_SUFFIXES", "READERS", "RUN_FILE", "SUFFIXES",
@@ -77,6 +78,7 @@ READERS: dict[str, Reader] = {
 }
 
 
+@one_blas_thread
 def load(path: str | Path, settings: Settings | None = None, *,
          fmt: str | None = None) -> Measurement:
     """The measurement of a file of any format: every view's one way in.
