@@ -47,10 +47,10 @@ def in_flags(err: BaseException) -> str:
 
 
 @contextlib.contextmanager
-def fit_progress() -> Iterator[Callable[[int, int], None]]:
+def fit_progress() -> Iterator[Callable[[int, int], None] | None]:
     """A ``progress`` for :func:`processing.identify.fit`: while the bootstrap's resamples
-    are solved, a rich progress bar on stderr, gone when the block ends (nothing is drawn
-    when stderr is not a terminal)."""
+    are solved, a rich progress bar on stderr, gone when the block ends (None when stderr
+    is not a terminal: a pipe or a log gets no line of it)."""
     from rich.console import Console
     from rich.progress import (
         BarColumn,
@@ -61,8 +61,12 @@ def fit_progress() -> Iterator[Callable[[int, int], None]]:
         TimeElapsedColumn,
     )
 
+    err = Console(stderr=True)
+    if not err.is_terminal:
+        yield None
+        return
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=Console(stderr=True), transient=True) as bars:
+                  TimeElapsedColumn(), console=err, transient=True) as bars:
         task: list[TaskID] = []
 
         def update(done: int, total: int) -> None:

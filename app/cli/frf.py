@@ -122,10 +122,15 @@ def load_and_show(path: Path, args: argparse.Namespace, settings: Settings,
                   fmt: str | None = None) -> Measurement:
     """``path``'s measurement through the pipeline (:func:`app.pipeline.load`), its reports
     printed (a run left out: one stderr line); a spinner on a terminal while it reads."""
+    import contextlib
+
     from rich.console import Console
 
-    try:  # a spinner on a terminal's stderr while the file is read (a time UFF takes seconds)
-        with Console(stderr=True).status(f"reading {path.name}"):
+    err = Console(stderr=True)
+    # a spinner on a terminal's stderr while the file is read (a time UFF takes seconds)
+    spinner = err.status(f"reading {path.name}") if err.is_terminal else contextlib.nullcontext()
+    try:
+        with spinner:
             m = load(path, settings, fmt=fmt)
     except OpenError as err:
         show_reports(args, err.reports)
