@@ -208,6 +208,9 @@ class SerialHammer(StreamingFrontEnd):
             time.sleep(0.05)
             self._link.reset_input()
             ident = self.query("ID?")
+            if ident == "OK":  # the STOP's answer, come after the input was dropped (a host
+                # that gave this thread no CPU for 50 ms): the identity is the next line
+                ident = self._link.readline(self.reply_timeout).decode("ascii", "replace").strip()
             if not ident.startswith(IDENTITY_PREFIX):
                 raise DeviceInitializationError(
                     f"{self.name}: not an HD-1 hammer digitiser (identity {ident!r})", self.name)

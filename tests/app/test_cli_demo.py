@@ -13,6 +13,7 @@ import app.cli.demo as demo
 import app.mockbench.bench as mockbench
 from app.cli.main import main
 from app.io.runfile import read_run
+from hardware_mocks.physics import STALL_TIMEOUT
 
 #: the demo's plan cut to six forces spanning the rigid-body motions (the least that
 #: identifies; 18 records of real-time data would take the whole plan's time)
@@ -56,7 +57,7 @@ def _silent_bench(monkeypatch: pytest.MonkeyPatch, heal_after: float | None) -> 
 def test_demo_resumes_a_paused_simulated_bench(monkeypatch: pytest.MonkeyPatch,
                                                tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
-    _silent_bench(monkeypatch, heal_after=1.0)
+    _silent_bench(monkeypatch, heal_after=STALL_TIMEOUT + 1.0)  # silent past the stall
     six_point_plans(monkeypatch)
     out = tmp_path / "demo.h5"
     assert main(["demo", "--bench", "engine-rigid", "--length", "0.5", "--out", str(out)]) == 0
