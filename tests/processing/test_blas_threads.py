@@ -35,24 +35,3 @@ def test_the_fit_uses_one_blas_thread_and_restores_the_callers(
     assert seen and all(set(s) == {1} for s in seen), seen
     assert after == before
     assert abs(result.properties.mass - get_bench("engine-rigid").model.mass) < 1.0
-
-
-def test_a_limited_call_inside_another_keeps_the_limit_until_the_outer_ends() -> None:
-    from processing.blas import one_blas_thread
-
-    seen: list[list[int]] = []
-
-    @one_blas_thread
-    def inner() -> None:
-        seen.append(_blas_threads())
-
-    @one_blas_thread
-    def outer() -> None:
-        inner()
-        seen.append(_blas_threads())  # the inner call's end left the limit in place
-
-    with threadpool_limits(2, user_api="blas"):
-        outer()
-        after = _blas_threads()
-    assert [set(s) for s in seen] == [{1}, {1}]
-    assert set(after) == {2}
