@@ -184,12 +184,12 @@ class HammerDevice(SerialMockDevice):
             self._reply("OK")
         elif self.streaming:
             self._reply("ERR 3 busy")
-        elif word == "START":
-            self._reply("OK")
+        elif word == "START":  # the clock started, then OK: the host's OK means it runs
             self._clock = DeviceClock(self.rate, self.ppm, self.offset)
             self._clock.start(self._now())
             self._seq = self._produced = self._frame_no = 0
             self.streaming = True
+            self._reply("OK")
         elif word in ("RATE", "RANGE", "FMT", "IEPE"):
             self._setting(word, arg)
         elif word == "RATE?":
