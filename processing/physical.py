@@ -10,7 +10,6 @@ these ten numbers (Rucker & Wensing, 2022).
 from __future__ import annotations
 
 import numpy as np
-import scipy.optimize
 from numpy.typing import NDArray
 
 from processing.inertia import from_pseudo_inertia, pseudo_inertia
@@ -58,6 +57,8 @@ def constrain_physical(
     """
     if is_physical(theta_ls):
         return np.asarray(theta_ls, dtype=float)
+    import scipy.optimize  # 0.1 s to import; a physical estimate never needs it
+
     Nsym = 0.5 * (normal + normal.T)
     w, V = np.linalg.eigh(Nsym)
     Lt = (V * np.sqrt(np.clip(w, 1e-300, None))).T  # Lt^T Lt = N

@@ -15,12 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.ndimage
-import scipy.optimize
-import scipy.signal
 from numpy.typing import NDArray
 
 from processing._kernels import real_times_complex, sumsq_columns
+from processing.peaks import find_prominent, running_median
 from processing.stiffness import line_operators
 
 __all__ = [
@@ -105,6 +103,8 @@ def _fit_peak(freq: NDArray[np.float64], R: NDArray[np.complex128], f0: float) -
         coef, *_ = np.linalg.lstsq(Ar, Yr, rcond=None)
         return np.asarray((Yr - Ar @ coef).ravel())
 
+    import scipy.optimize  # 0.1 s to import: loaded when a residual peak is fitted
+
     best = None
     for z0 in (0.005, 0.02, 0.06):
         sol = scipy.optimize.least_squares(
@@ -153,10 +153,9 @@ def elastic_peaks(
     R = (P @ H.reshape(n_r, -1)).reshape(n_r * n_e, n_f)
     power = np.sum(np.abs(R) ** 2, axis=0)
     prominence = np.log10(3.0)
-    by_rel, _ = scipy.signal.find_peaks(np.log10(np.maximum(rel, 1e-12)), prominence=prominence)
-    by_abs, _ = scipy.signal.find_peaks(np.log10(np.maximum(power, 1e-300)),
-                                        prominence=2 * prominence)  # power: |.|^2
-    floor = float(np.min(scipy.ndimage.median_filter(rel, size=9, mode="nearest")))
+    by_rel = find_prominent(np.log10(np.maximum(rel, 1e-12)), prominence)
+    by_abs = find_prominent(np.log10(np.maximum(power, 1e-300)), 2 * prominence)  # |.|^2
+    floor = float(np.min(running_median(rel, 9)))
     idx = np.union1d(by_rel[rel[by_rel] > max(min_rel, 3.0 * floor)],
                      by_abs[rel[by_abs] > max(min_rel, 10.0 * floor)])
     if line_snr is not None:

@@ -52,3 +52,6 @@ def test_identify_of_frfs_loads_no_spectra(tmp_path: Path) -> None:
     loaded = set(out.stdout.split())
     assert "processing.identify" in loaded  # it did identify
     assert not {"numba", "processing.spectral", "app.acquire"} & loaded, loaded
+    # scipy.signal and scipy.stats take 0.3 s to import; scipy.optimize 0.1 s, needed only
+    # for a residual peak's fit or a non-physical estimate (neither on this rigid bench)
+    assert not {"scipy.signal", "scipy.stats", "scipy.optimize"} & loaded, loaded
