@@ -21,7 +21,11 @@ Measured in one run, each pair taking turns (medians over ``--repeat`` runs):
    (first order and stated), bootstrap, report (the HTML report's figures and tables);
    each stage's own time (a stage called inside another counts for itself, except inside
    the bootstrap, which counts whole);
-4. the engine-size core: the article's per-line loop against the vectorised mass-line solve.
+4. the engine-size core: the article's per-line loop against the vectorised mass-line solve;
+5. the live result: a hammer run of 18 points x 3 hits on the in-process mock bench (the
+   engine, as ``insitu acquire --mock --hits 3``), the seconds from the last hit's
+   ``on_hit`` to the first result a view shows (``on_result``, before the bootstrap over
+   hits) and to the final (stored) one; ``--live-runs`` runs (two minutes each).
 
     .venv/bin/python benchmarks/identify.py [--repeat 5] [--work DIR] [--write-docs]
 
@@ -349,6 +353,42 @@ def core_table(repeat: int) -> Section:
     return title, ("implementation", "ms (median)", "speed-up (median of pairs)"), rows
 
 
+def live_table(runs: int, work: Path) -> Section:
+    """Last hit -> first and final result of a live run (``runs`` runs on the mock bench)."""
+    from app.acquire import HammerProcedure
+    from app.acquire.events import RunState
+    from app.mockbench.bench import InProcessBench, plan_for_bench
+
+    class Clock:
+        def __init__(self) -> None:
+            self.hit = self.first = self.final = 0.0
+
+        def on_hit(self, hit: object) -> None:
+            self.hit = time.monotonic()
+
+        def on_result(self, result: object, final: bool) -> None:
+            if final:
+                self.final = time.monotonic()
+            elif not self.first:
+                self.first = time.monotonic()
+
+    rows = []
+    for i in range(runs):
+        clock = Clock()
+        path = work / f"live-{i}.h5"
+        path.unlink(missing_ok=True)
+        with InProcessBench("engine") as bench:
+            proc = HammerProcedure(plan_for_bench("engine", hits=3), bench.station, path,
+                                   listeners=[bench.operator, clock])
+            proc.start()
+            if proc.wait(900) is not RunState.FINISHED:
+                raise RuntimeError(f"live run {i + 1}: {proc.message}")
+        rows.append([str(i + 1), f"{len(proc.hits)}", f"{clock.first - clock.hit:.2f}",
+                     f"{clock.final - clock.hit:.2f}"])
+    return ("Live result, mock bench (engine), 18 points x 3 hits",
+            ("run", "hits", "s to the first result", "s to the final result"), rows)
+
+
 # --- output ----------------------------------------------------------------------------------
 
 
@@ -373,13 +413,15 @@ def main() -> int:
     p.add_argument("--repeat", type=int, default=5, help="runs of each (taking turns)")
     p.add_argument("--work", type=Path, help="keep the generated inputs here and reuse them")
     p.add_argument("--write-docs", action="store_true", help="write its docs/benchmarks.md part")
+    p.add_argument("--live-runs", type=int, default=2, help="live runs on the mock bench")
     args = p.parse_args()
     console = Console(width=200)
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         cases = make_inputs(work, console)
         tables = [start_table(args.repeat), end_to_end(cases, args.repeat, work),
-                  stage_table(cases, args.repeat), core_table(args.repeat)]
+                  stage_table(cases, args.repeat), core_table(args.repeat),
+                  live_table(args.live_runs, work)]
     for t in tables:
         console.print(rich_table(t))
     if args.write_docs:

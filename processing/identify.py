@@ -18,6 +18,7 @@ simulation's): ``fit(Measurement(frf), options)``.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -196,11 +197,18 @@ def _bootstrap(st: Stages, units: TimeUnits, progress: Progress | None = None,
         return None
     least = min(c.n_units for c in units.columns)
     if n is None:
-        if least < MIN_UNITS:
+        if not _bootstrap_runs(st.problem.options, units):
             return (f"no bootstrap over {units.kind}s: a point has {least} (at least "
                     f"{MIN_UNITS} for the default; --bootstrap N runs it with 2)")
         n = DEFAULT_RESAMPLES
     return resample(st.problem, st.bands, st.weights, st.fitted, units, n, progress=progress)
+
+
+def _bootstrap_runs(options: IdentifyOptions, units: TimeUnits | None) -> bool:
+    """Whether :func:`_bootstrap` resamples these units with these options."""
+    if units is None or options.bootstrap == 0 or not options.uncertainty:
+        return False
+    return options.bootstrap is not None or min(c.n_units for c in units.columns) >= MIN_UNITS
 
 
 def uncertainty(st: Stages,
@@ -251,19 +259,28 @@ def uncertainty(st: Stages,
 # --- the fit ---------------------------------------------------------------------------------
 
 
+#: called with the result before the bootstrap runs (see :func:`fit`)
+Preliminary = Callable[[IdentificationResult], None]
+
+
 def _fit_once(d: _Data, options: IdentifyOptions, solver: SolverSettings,
-              progress: Progress | None = None) -> IdentificationResult:
+              progress: Progress | None = None,
+              preliminary: Preliminary | None = None) -> IdentificationResult:
     st = _stages(d, options, solver)
     frf = d.frf
-    unc = (uncertainty(st, (frf.resp_nodes, frf.exc_nodes), d.units, progress)
-           if options.uncertainty else None)
+    nodes = (frf.resp_nodes, frf.exc_nodes)
+    if preliminary is not None and _bootstrap_runs(options, d.units):
+        preliminary(assemble(st.problem, st.bands, st.weights, st.fitted, st.checks,
+                             uncertainty(st, nodes)))
+    unc = uncertainty(st, nodes, d.units, progress) if options.uncertainty else None
     return assemble(st.problem, st.bands, st.weights, st.fitted, st.checks, unc)
 
 
 @one_blas_thread
 def fit(measurement: Measurement, options: IdentifyOptions | None = None,
         solver: SolverSettings | None = None, *,
-        progress: Progress | None = None) -> IdentificationResult:
+        progress: Progress | None = None,
+        preliminary: Preliminary | None = None) -> IdentificationResult:
     """Identify the ten inertia parameters and K, C at O from a measurement.
 
     Uses what the measurement carries besides H: its coherence (each FRF value weighed by
@@ -280,6 +297,9 @@ def fit(measurement: Measurement, options: IdentifyOptions | None = None,
     solver : how the solver works (default :class:`SolverSettings`)
     progress : ``progress(done, total)``, called as the bootstrap's resamples are solved
         (for a view's progress bar; the result does not depend on it)
+    preliminary : when the bootstrap runs, called first with the result without it (the
+        same estimates, the fit covariance's spreads): a live view shows that at once,
+        the bootstrap taking a second or more
 
     Raises
     ------
@@ -294,11 +314,15 @@ def fit(measurement: Measurement, options: IdentifyOptions | None = None,
     """
     opt, sol = options or IdentifyOptions(), solver or SolverSettings()
     d = _data(measurement, opt, sol)
-    result = (_refined(d, opt, sol) if opt.refine_points > 0
-              else _fit_once(d, opt, sol, progress))
-    if d.notes:
-        result = dataclasses.replace(result, warnings=(*result.warnings, *d.notes))
-    return result
+
+    def noted(result: IdentificationResult) -> IdentificationResult:
+        if d.notes:
+            return dataclasses.replace(result, warnings=(*result.warnings, *d.notes))
+        return result
+
+    early = None if preliminary is None else lambda r: preliminary(noted(r))
+    return noted(_refined(d, opt, sol) if opt.refine_points > 0
+                 else _fit_once(d, opt, sol, progress, early))
 
 
 def identify(frf: FRFSet, options: IdentifyOptions | None = None,

@@ -135,8 +135,10 @@ class RecordingProcedure(Procedure):
         message, result_json = "", None
         if self.do_identify and self.geometry_report.ok:
             try:
-                self.result = fit(anti_aliased(measurement))
+                self.result = fit(anti_aliased(measurement),
+                                  preliminary=lambda r: self.emit("on_result", r, False))
                 result_json = self.result.to_json()
+                self.emit("on_result", self.result, True)
             except (InputError, GeometryError) as err:
                 message = f"identification failed: {err}"
                 self.emit("on_error", message)

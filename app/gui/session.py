@@ -21,7 +21,7 @@ from app.pipeline.formats import H5_SUFFIXES
 from app.report.analysis import Analysis, analyse
 from app.report.sources import open_source
 from processing.data import FRFSet
-from processing.identify import IdentifyOptions
+from processing.identify import IdentificationResult, IdentifyOptions
 from processing.measurement import Measurement
 
 __all__ = ["Session"]
@@ -78,17 +78,32 @@ class Session(QtCore.QObject):
             run_mounts(p) if p.suffix.lower() in H5_SUFFIXES else None)))
 
     def set_measurement(self, measurement: Measurement, source: str, path: Path | None = None,
-                        fmt: str | None = None) -> None:
+                        fmt: str | None = None, result: IdentificationResult | None = None,
+                        ) -> None:
         """Make ``measurement`` the current data and analyse it with automatic bands.
 
-        ``fmt`` is the format of the file at ``path`` (:data:`app.pipeline.FORMATS`)."""
+        ``fmt`` is the format of the file at ``path`` (:data:`app.pipeline.FORMATS`).
+        ``result`` is ``fit(measurement)`` with the default options when already made (a live
+        run's): taken when the session's options are the defaults, else it fits again."""
         self.measurement = measurement
         self.source, self.path, self.format = source, path, fmt
         self._generation += 1
         self.analysis = None
         self.options = replace(self.options, mass_band=None, stiffness_band=None)
         self.data_changed.emit(measurement.frf)
-        self.reanalyse()
+        if result is None or not self.set_result(result):
+            self.reanalyse()
+
+    def set_result(self, result: IdentificationResult) -> bool:
+        """Show ``result``, ``fit`` of the current measurement with the default options (a
+        live run's final result after its preliminary one); False, and nothing done, when the
+        session's options are not the defaults (the operator changed them)."""
+        m, opt, src, gen = self.measurement, self.options, self.source, self._generation
+        if m is None or opt != IdentifyOptions():
+            return False
+        self.runner.submit("session.analysis",
+                           lambda: (gen, analyse(m, opt, src, result=result)))
+        return True
 
     def set_mounts(self, mounts: MountsFile | None) -> None:
         """The mounts the results view analyses (rates, torque roll axis); None clears."""

@@ -79,7 +79,8 @@ class Analysis:
 
 
 def analyse(measurement: Measurement, options: IdentifyOptions | None = None,
-            source: str = "", progress: Progress | None = None) -> Analysis:
+            source: str = "", progress: Progress | None = None,
+            result: IdentificationResult | None = None) -> Analysis:
     """Identify (:func:`processing.identify.fit`, as every view does) and check
     ``measurement``; never raises for bad data (messages instead).
 
@@ -89,6 +90,8 @@ def analyse(measurement: Measurement, options: IdentifyOptions | None = None,
     options : identification options (bands, method, physical constraint)
     source : label shown in views and reports
     progress : ``progress(done, total)`` of the bootstrap's resamples (:func:`fit`)
+    result : ``fit(measurement, options)`` when already made (a live run's, as it stores it):
+        taken instead of fitting again
 
     Examples
     --------
@@ -107,9 +110,8 @@ def analyse(measurement: Measurement, options: IdentifyOptions | None = None,
         geo_error: str | None = message_of(err)
     else:
         geo_error = None
-    result: IdentificationResult | None = None
     error: str | None = geo_error
-    if geometry is not None:
+    if geometry is not None and result is None:
         try:
             result = fit(measurement, opt, progress=progress)
         except (ValueError, ArithmeticError) as err:  # InputError, GeometryError, LinAlgError

@@ -36,6 +36,9 @@ class Recorder(Listener):
     def on_frf(self, frf: object) -> None:
         self.events.append(("frf", frf))
 
+    def on_result(self, result: object, final: bool) -> None:
+        self.events.append(("result", (result, final)))
+
     def on_finished(self, state: RunState) -> None:
         self.events.append(("finished", state))
 
@@ -51,6 +54,9 @@ def test_engine_identified_within_tolerance_and_replay_is_identical(tmp_path: Pa
         assert proc.wait(300) is RunState.FINISHED, proc.message
         model = bench.bench.model
     assert rec.events[-1] == ("finished", RunState.FINISHED)
+    # one hit a point: no bootstrap, so no preliminary result; the final before the end
+    assert [e for e in rec.events if e[0] == "result"] == [("result", (proc.result, True))]
+    assert rec.events[-2] == ("result", (proc.result, True))
     assert [e[1].index for e in rec.events if e[0] == "point"] == list(range(len(POINTS)))
     assert proc.result is not None and proc.frf is not None
     truth = inertia_properties(model.theta)

@@ -275,3 +275,27 @@ def test_progress_follows_the_resamples() -> None:
     seen.clear()
     idm.fit(m, IdentifyOptions(bootstrap=20), progress=lambda d, t: seen.append((d, t)))
     assert seen[0] == (0, 20) and seen[-1] == (20, 20)
+
+
+def test_preliminary_result_comes_before_the_bootstrap() -> None:
+    """``preliminary``: called once, before the first resample, with the final result's
+    estimates and the fit covariance's spreads; not called when no bootstrap runs."""
+    m = hammer_frfs(scenario(), seed=2, hits=3)
+    events: list[object] = []
+    r = idm.fit(m, IdentifyOptions(bootstrap=20), progress=lambda d, t: events.append(d),
+                preliminary=events.append)
+    first = events[0]
+    assert isinstance(first, idm.IdentificationResult)
+    assert [e for e in events if isinstance(e, idm.IdentificationResult)] == [first]
+    assert events[1:] and all(isinstance(e, int) for e in events[1:])  # then the resamples
+    assert_array_equal(first.theta, r.theta)
+    assert_array_equal(first.K, r.K)
+    assert first.warnings == r.warnings
+    u0, u = first.uncertainty, r.uncertainty
+    assert u0 is not None and u is not None and u.ci95 and not u0.ci95
+    assert not any("bootstrap" in s for s in u0.sources)
+    assert u0.std["mass"] == idm.fit(m, IdentifyOptions(bootstrap=0)).uncertainty.std["mass"]
+    seen: list[object] = []
+    idm.fit(m, IdentifyOptions(bootstrap=0), preliminary=seen.append)
+    idm.fit(hammer_frfs(scenario(), seed=2, hits=2), preliminary=seen.append)  # too few hits
+    assert seen == []

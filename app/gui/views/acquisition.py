@@ -34,6 +34,8 @@ from app.gui.widgets import verdict_color
 from app.io.runfile import RunFileError, write_mounts
 from app.pipeline import RUN_FILE
 from app.report.analysis import message_of
+from processing.identify import IdentificationResult
+from processing.measurement import Measurement
 
 __all__ = ["AcquisitionView"]
 
@@ -61,6 +63,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.procedure: HammerProcedure | ShakerProcedure | None = None
         self.word = "hit"  # "block" in a shaker run
         self.hits: list[HitRecord] = []
+        self._shown: Measurement | None = None  # the run's measurement, once shown
         self.state: RunState = RunState.IDLE
         self._pause_asked = False
         top = self._run_controls()
@@ -163,6 +166,7 @@ class AcquisitionView(QtWidgets.QWidget):
         self.bridge.paused.connect(self._paused)
         self.bridge.resumed.connect(lambda: self._set_state(RunState.RUNNING))
         self.bridge.error.connect(lambda m: self.message.emit("error", f"acquisition: {m}"))
+        self.bridge.result.connect(self._result)
         self.bridge.finished.connect(self._finished)
 
     # --- controls --------------------------------------------------------------------------------
@@ -227,6 +231,7 @@ class AcquisitionView(QtWidgets.QWidget):
             self.message.emit("error", f"cannot start: {message_of(err)}")
             return False
         self.word = "block" if shaker else "hit"
+        self._shown = None
         self.run_path.setText(str(path))
         self.hits = []
         self.hits_table.setRowCount(0)
@@ -372,6 +377,26 @@ class AcquisitionView(QtWidgets.QWidget):
         else:  # a device failed: the shaker output is off already
             self.message.emit("error", f"acquisition paused, device problem: {reason}")
 
+    @QtCore.Slot(object, bool)
+    def _result(self, result: IdentificationResult, final: bool) -> None:
+        """The run's identification: shown as soon as the points are done (the bootstrap
+        over hits then runs in the worker), then its final (stored) form, without fitting
+        again: the same numbers as the run file's."""
+        proc = self.procedure
+        if proc is None or proc.measurement is None:
+            return
+        if self._shown is None:
+            path = proc.path
+            # the run's own measurement, cut as the pipeline opens the run file: the same
+            # numbers as the stored result and every view of the file
+            self._shown = anti_aliased(proc.measurement)
+            self.session.set_measurement(self._shown, path.name, path, RUN_FILE, result=result)
+            if not final:
+                self.message.emit("info", f"result of the {len(self.hits)} {self.word}s; "
+                                  "their bootstrap is running")
+        elif self.session.measurement is self._shown:
+            self.session.set_result(result)
+
     @QtCore.Slot(object)
     def _finished(self, state: RunState) -> None:
         self.plots.stop()
@@ -391,10 +416,10 @@ class AcquisitionView(QtWidgets.QWidget):
                     write_mounts(path, self.session.mounts)
                 except RunFileError as err:
                     self.message.emit("error", f"the mounts table was not saved: {err}")
-            # the run's own measurement, cut as the pipeline opens the run file: the same
-            # numbers as the stored result and every view of the file
-            self.session.set_measurement(anti_aliased(proc.measurement),
-                                         path.name if path else "acquisition", path, RUN_FILE)
+            if self._shown is None:  # no identification (a partial plan, a failed fit)
+                self.session.set_measurement(anti_aliased(proc.measurement),
+                                             path.name if path else "acquisition", path,
+                                             RUN_FILE)
         else:
             why = proc.message if proc is not None and proc.message else state.value
             self.next_label.setText(f"Ended ({state.value}): {why}")
