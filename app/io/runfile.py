@@ -548,9 +548,11 @@ def repair(path: str | Path) -> bool:
     "open for writing" mark only if it struck during that write. Such a file is copied
     object by object into a fresh one that then replaces it (the original stays in place
     until the copy is complete); every record whose columns were all written reads back.
+    The reserve file a killed writer left beside it (:func:`reserve_path`) is deleted.
     """
     p = Path(path)
     with _open(p) as f:
+        _drop_reserve(p)
         if f.mode == "r" and not f.swmr_mode:
             return False
     tmp = p.with_name(p.name + ".repair-tmp")

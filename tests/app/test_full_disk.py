@@ -24,6 +24,8 @@ from app.cli.main import main
 from app.io import runfile
 from app.io.runfile import read_run, reserve_path
 from app.pipeline import RUN_FILE, load
+from drivers.base import ChannelConfig
+from processing.data import Geometry
 
 #: six well-conditioned points of the rigid bench, short records: a run of a few seconds (too
 #: short for the mass line: the FRFs are checked as replay does, not the identification)
@@ -161,3 +163,22 @@ def test_a_disk_full_while_storing_the_frfs_fails_the_run_keeping_every_record(
     lines = np.isin(live["freq"], replayed.freq)  # replay's lines: 0 Hz and the top left out
     assert np.count_nonzero(lines) == replayed.freq.size
     assert np.array_equal(live["H"][:, :, lines], replayed.H)
+
+
+def test_the_writer_holds_a_reserve_that_repair_deletes_after_a_crash(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run.h5"
+    chans = [ChannelConfig("F", 0, "force", 2.25), ChannelConfig("a1", 1, "acceleration", 10.0,
+                                                                  node=1, direction=(1, 0, 0))]
+    w = runfile.RunWriter.create(out, plan_data={}, station_data={}, channels=chans,
+                                 devices=["fe"] * 2, geometry=Geometry(np.array([1]),
+                                                                       np.zeros((1, 3))),
+                                 fs=1024.0, n_samples=64, method="hammer")
+    w.add_record(0, np.ones((2, 64)), time=0.0, peak_force=1.0, auto_accepted=True, reason="")
+    assert reserve_path(out).stat().st_size == runfile.RESERVE_BYTES  # the room to close on
+    # the writer's process dies here (never closed): the reserve stays beside the file
+    assert main(["repair", str(out)]) == 0
+    assert not reserve_path(out).exists()
+    assert "1 records (interrupted)" in capsys.readouterr().out
+    w.finish("stopped")
+    assert not reserve_path(out).exists() and read_run(out).state == "stopped"
