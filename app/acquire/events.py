@@ -180,11 +180,12 @@ class Listener:
     def on_resumed(self) -> None:
         """The run continues after a pause."""
 
-    def on_result(self, result: Any, final: bool) -> None:
-        """The run's identification (an :class:`~processing.identify.IdentificationResult`)
-        once every point is done: first (``final`` False, when the bootstrap over hits or
-        blocks runs) at once, with the fit covariance's spreads, then (``final`` True) the
-        result stored in the run file, ``on_finished`` following."""
+    def on_result(self, measurement: Any, result: Any, final: bool) -> None:
+        """The run's identification (an :class:`~processing.identify.IdentificationResult`
+        of ``measurement``, the run's FRFs cut as every view reads the run file) once every
+        point is done: first (``final`` False, when the bootstrap over hits or blocks runs)
+        at once, with the fit covariance's spreads, then (``final`` True) the result stored
+        in the run file, ``on_finished`` following."""
 
     def on_error(self, message: str) -> None:
         """A failure the run cannot continue from (one line); ``on_finished`` follows."""

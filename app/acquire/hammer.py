@@ -303,6 +303,20 @@ class HammerProcedure(RecordingProcedure):
     def _records_needed(self) -> int:
         return self.plan.hits
 
+    def record_values(self) -> int:
+        rec = self.plan.record
+        n_store = rec.n_samples + 2 * margin_samples(rec.fs)
+        n = len(self.rows) * n_store
+        if self.sync_channel is not None:  # the common channel's record and its offset
+            n += n_store + 1
+        if self.force_name != self.ref_name:  # the hammer digitiser's own samples (at most)
+            fs_raw = self.station.devices[self.force_name].fs or rec.fs
+            n += int(np.ceil(n_store * fs_raw / rec.fs)) + 256
+        return n
+
+    def frf_lines(self) -> int:
+        return self.plan.record.n_samples // 2 + 1
+
     def _bad_frames(self) -> int:
         return self._streams.bad_frames if self._streams is not None else 0
 

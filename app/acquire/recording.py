@@ -5,13 +5,16 @@ one run file (:class:`app.io.runfile.RunWriter`). Subclasses open their devices 
 :meth:`_open_devices` and the file in :meth:`_open_file`, close their devices in
 :meth:`_close_devices`, say how many records a point needs and how many frames went bad,
 report each record with :meth:`_report`, and call :meth:`_finish_run` with the run's FRFs
-when every point is done.
+when every point is done. They also say what one record holds (:meth:`record_values`) and
+how many lines their FRFs have (:meth:`frf_lines`): the run's start refuses a run whose file
+cannot fit on its disk (:func:`app.acquire.space.check_disk_space`).
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -19,7 +22,9 @@ from app.acquire.analysis import RecordAnalysis, anti_aliased
 from app.acquire.events import HitRecord, PointFRF, Progress
 from app.acquire.plan import PlanError, TestPlan
 from app.acquire.procedure import Procedure
+from app.acquire.space import check_disk_space
 from app.io.runfile import RunWriter
+from drivers.base import ChannelConfig
 from drivers.station import StationConfig
 from processing.data import FRFSet, InputError
 from processing.geometry import GeometryError, GeometryReport
@@ -39,6 +44,9 @@ class RecordingProcedure(Procedure):
 
     plan: TestPlan
     station: StationConfig
+    path: Path  # the run file
+    resume_file: bool  # continue the run in it
+    rows: tuple[ChannelConfig, ...]  # the rows of every record: force(s) first
     analysis: RecordAnalysis  # RunAnalysis (hammer) or BlockAnalysis (shaker)
     ref_name: str  # the front end of the responses
     hits: list[HitRecord]
@@ -73,7 +81,21 @@ class RecordingProcedure(Procedure):
         """Corrupted frames seen so far."""
         raise NotImplementedError
 
+    def record_values(self) -> int:
+        """Values (float64) stored for one record: every row's samples, and the hammer's own
+        force or the common channel when the run keeps them."""
+        raise NotImplementedError
+
+    def frf_lines(self) -> int:
+        """Frequency lines of the FRFs stored when the run finishes."""
+        raise NotImplementedError
+
+    def records_needed(self) -> int:
+        """Accepted records each point (or drive) needs."""
+        return self._records_needed()
+
     def startup(self) -> None:
+        check_disk_space(self)  # before any device opens or the file is created
         self._open_devices()
         self._open_file()
         self._t0 = time.monotonic()
@@ -131,16 +153,19 @@ class RecordingProcedure(Procedure):
         makes of the run file: :func:`processing.identify.fit` of its lines up to fs / 2.56);
         the run is done."""
         assert self.writer is not None
-        self.measurement, self.frf = measurement, measurement.frf
-        message, result_json = "", None
+        message, result_json, result = "", None, None
         if self.do_identify and self.geometry_report.ok:
             try:
-                self.result = fit(anti_aliased(measurement),
-                                  preliminary=lambda r: self.emit("on_result", r, False))
-                result_json = self.result.to_json()
-                self.emit("on_result", self.result, True)
+                cut = anti_aliased(measurement)
+                result = fit(cut, preliminary=lambda r: self.emit("on_result", cut, r, False))
+                result_json = result.to_json()
             except (InputError, GeometryError) as err:
                 message = f"identification failed: {err}"
                 self.emit("on_error", message)
+        # a run is done once its FRFs are on the disk (a full disk fails it: shutdown then
+        # finds no FRFs and the writer says why)
         self.writer.finish("finished", message, measurement, result_json)
+        self.measurement, self.frf, self.result = measurement, measurement.frf, result
         self.writer = None
+        if result is not None:
+            self.emit("on_result", cut, result, True)

@@ -335,6 +335,12 @@ class ShakerProcedure(RecordingProcedure):
     def _records_needed(self) -> int:
         return self.plan.shaker.averages
 
+    def record_values(self) -> int:
+        return len(self.rows) * self.plan.shaker.nperseg
+
+    def frf_lines(self) -> int:
+        return self.plan.shaker.nperseg // 2 + 1
+
     def _bad_frames(self) -> int:
         return self.frontend.health.bad_frames if self.frontend is not None else 0
 

@@ -41,6 +41,7 @@ from app.acquire.overrides import override_run, parse_override
 from app.acquire.plan import TestPlan, parse_plan
 from app.acquire.recording import RecordingProcedure
 from app.acquire.shaker import ShakerProcedure
+from app.acquire.space import check_disk_space
 from app.cli.common import VERB_HELP, UserError
 from app.io.runfile import read_run
 from drivers.station import StationConfig, load_station
@@ -233,8 +234,8 @@ def _kept(path: Path) -> str:
     """What an ended run left, as it is on the disk: never a file that does not exist."""
     try:
         n = len(read_run(path, with_data=False).records) if path.is_file() else 0
-    except ValueError:
-        n = 0
+    except ValueError as err:  # never "no record" for a file that may hold some
+        return f"{err} (insitu repair {path} recovers the records written)"
     if n:
         return f"its {n} records are in {path} (continue with --resume {path})"
     if path.is_file():
@@ -312,6 +313,7 @@ def run(args: argparse.Namespace) -> int:
             _check_bench_shakers(plan if plan is not None else parse_plan(
                 read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan"), station)
         proc = _procedure(plan, station, args, bench)
+        check_disk_space(proc)  # before any device opens or the file is created
         operator = None
         if args.mock_operator:
             _check_rate(proc, proc.plan, station)

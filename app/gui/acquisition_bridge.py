@@ -29,7 +29,7 @@ class AcquisitionBridge(QtCore.QObject):
     paused = QtCore.Signal(str)
     resumed = QtCore.Signal()
     error = QtCore.Signal(str)
-    result = QtCore.Signal(object, bool)  # IdentificationResult, final
+    result = QtCore.Signal(object, object, bool)  # Measurement, IdentificationResult, final
     finished = QtCore.Signal(object)  # RunState
 
     def __init__(self, parent: QtCore.QObject | None = None) -> None:
@@ -57,8 +57,8 @@ class AcquisitionBridge(QtCore.QObject):
     def on_resumed(self) -> None:
         self.resumed.emit()
 
-    def on_result(self, result: Any, final: bool) -> None:
-        self.result.emit(result, final)
+    def on_result(self, measurement: Any, result: Any, final: bool) -> None:
+        self.result.emit(measurement, result, final)
 
     def on_error(self, message: str) -> None:
         self.error.emit(message)

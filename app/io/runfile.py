@@ -6,7 +6,10 @@ datasets; the writer opens the file only for each change and closes it after
 an ``fsync``, so a power cut or ``kill -9`` leaves a file that any HDF5 tool
 reads, with every record written so far (:func:`repair` mends the rare file
 killed in the middle of a write). :meth:`RunWriter.finish` writes the state,
-FRFs and identification result.
+FRFs and identification result. While it writes, the writer holds a reserve file
+beside the run file (:data:`RESERVE_BYTES`): when the disk fills, it deletes the
+reserve and uses that room to close the file cleanly, without the record that did
+not fit, in state ``failed`` (:class:`DiskFullError`).
 
 Example
 -------
@@ -19,12 +22,15 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import errno
 import json
+import logging
 import os
+import shutil
 import threading
 import time
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,14 +44,20 @@ from drivers.base import ChannelConfig
 from processing.data import FRFSet, Geometry
 from processing.measurement import Measurement, Provenance
 
-__all__ = ["SCHEMA_VERSION", "ChannelInfo", "RecordTable", "RunData", "RunFileError",
-           "RunWriter", "iter_record_data", "read_run", "repair", "run_mounts", "write_mounts"]
+__all__ = ["RESERVE_BYTES", "SCHEMA_VERSION", "ChannelInfo", "DiskFullError", "RecordTable",
+           "RunData", "RunFileError", "RunWriter", "iter_record_data", "read_run", "repair",
+           "reserve_path", "run_mounts", "write_mounts"]
+
+logger = logging.getLogger(__name__)
 
 SCHEMA_VERSION = 1
 FORMAT = "insitu-run"
 TEXT = 256  # bytes of a reason / note in the fixed-width string columns
 OVERRIDES = {"": 0, "accept": 1, "reject": -1}
 _OVERRIDE_NAMES = {v: k for k, v in OVERRIDES.items()}
+#: bytes the writer keeps in reserve beside the run file while it writes: the room to close
+#: the file cleanly when the disk fills (HDF5's structures and the state need a few kB)
+RESERVE_BYTES = 1 << 20
 
 #: per-record columns: name -> (dtype, unit)
 _COLUMNS: dict[str, tuple[str, str]] = {
@@ -57,6 +69,31 @@ _COLUMNS: dict[str, tuple[str, str]] = {
 
 class RunFileError(ValueError):
     """The run file is missing, foreign, of another schema version or damaged (one line)."""
+
+
+class DiskFullError(RunFileError):
+    """The disk of the run file is full: the change was not written, the file was closed
+    cleanly with every record before it and state ``failed`` (one line)."""
+
+
+def reserve_path(path: str | Path) -> Path:
+    """The reserve file a writer holds beside the run file ``path`` (``RUN.h5.reserve``)."""
+    p = Path(path)
+    return p.with_name(p.name + ".reserve")
+
+
+def _disk_full(err: OSError) -> bool:
+    """True when ``err`` (an OSError, or h5py's wrapping of one) says the disk is full."""
+    text = str(err)
+    return err.errno in (errno.ENOSPC, errno.EDQUOT) or "No space left" in text or \
+        f"errno = {errno.ENOSPC}," in text or "Disk quota exceeded" in text
+
+
+def _free_mb(p: Path) -> float:
+    try:
+        return shutil.disk_usage(p.parent).free / 1e6
+    except OSError:
+        return float("nan")
 
 
 @dataclass(frozen=True)
@@ -154,7 +191,10 @@ class RunWriter:
     """Appends records to a run file; use :meth:`create` or :meth:`resume`, then
     :meth:`add_record` per hit, :meth:`finish` at the end.
 
-    Not thread-safe: one thread (the procedure's worker) writes.
+    Not thread-safe: one thread (the procedure's worker) writes. A change that fails
+    (the disk full, :class:`DiskFullError`; any other write error, :class:`RunFileError`)
+    is undone and ends the writer: the file is closed in state ``failed`` with every
+    record before it, and :meth:`finish` does nothing more.
     """
 
     def __init__(self, path: Path, n_records: int) -> None:
@@ -162,24 +202,90 @@ class RunWriter:
         self._n = n_records
         self._lock = threading.Lock()
         self._closed = False
+        #: why a write failed (the writer is closed then), or ""
+        self.failure = ""
 
     @contextlib.contextmanager
-    def _session(self) -> Iterator[h5py.File]:
-        """The file, open for one change, then flushed to disk (fsync) and closed."""
+    def _session(self, what: str, undo: Callable[[h5py.File], None]
+                 ) -> Iterator[h5py.File]:
+        """The file, open for one change, then flushed to disk (fsync) and closed.
+
+        ``what`` names the change in messages; ``undo`` takes it back out of the open file
+        when a write fails (the disk full): see :meth:`_fail`.
+        """
         with self._lock:
             if self._closed:
                 raise RunFileError(f"{self.path}: the run file is closed")
             try:
                 f = _append(self.path)
             except OSError as err:
-                raise RunFileError(f"{self.path}: cannot open the run file to append: "
-                                   f"{str(err).splitlines()[0]}") from err
+                self._closed = True
+                raise self._failed(err, self._message(what, err), saved=True) from err
             try:
                 yield f
                 f.flush()
                 _fsync(f)
+            except OSError as err:  # h5py's errors wrap the OS's (ENOSPC, EIO)
+                message = self._message(what, err)
+                raise self._failed(err, message, self._fail(f, undo, message)) from err
             finally:
-                f.close()
+                _close(f)
+
+    def _message(self, what: str, err: OSError) -> str:
+        first = str(err).splitlines()[0] if str(err) else type(err).__name__
+        if _disk_full(err):
+            return f"disk full ({_free_mb(self.path):.1f} MB free) writing {what} to {self.path}"
+        return f"cannot write {what} to {self.path}: {first}"
+
+    def _failed(self, err: OSError, message: str, saved: bool) -> RunFileError:
+        """The one-line error of a failed change; ``saved``: the file was closed cleanly
+        (else it needs ``insitu repair``)."""
+        then = "resume the run" if saved else f"run insitu repair {self.path}"
+        if _disk_full(err):
+            return DiskFullError(f"{message}: free space on that disk, then {then}")
+        return RunFileError(f"{message}: {then}" if not saved else message)
+
+    def _fail(self, f: h5py.File, undo: Callable[[h5py.File], None], message: str) -> bool:
+        """A write failed in ``f``: free the reserve, take the change back out, store state
+        ``failed`` and ``message``, flush; the writer is closed. True when that worked (the
+        file is whole, with every record before the change), False when it needs repair."""
+        self._closed = True
+        self.failure = message
+        _drop_reserve(self.path)  # the room to finish this session (the disk is full)
+        try:
+            undo(f)
+            f.attrs["state"] = "failed"
+            f.attrs["message"] = message
+            f.flush()
+            _fsync(f)
+        except (OSError, RuntimeError, KeyError) as err:
+            logger.error("%s: could not close the run file cleanly after a failed write: %s",
+                         self.path, err)
+            return False
+        return True
+
+    def _hold_reserve(self) -> None:
+        """Create the reserve file beside the run file (:data:`RESERVE_BYTES`)."""
+        r = reserve_path(self.path)
+        try:
+            fd = os.open(r, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            try:
+                try:
+                    os.posix_fallocate(fd, 0, RESERVE_BYTES)
+                except OSError as err:  # a file system without fallocate: write the bytes
+                    if err.errno not in (errno.EOPNOTSUPP, errno.EINVAL):
+                        raise
+                    os.write(fd, bytes(RESERVE_BYTES))
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        except OSError as err:
+            r.unlink(missing_ok=True)
+            first = str(err).splitlines()[0]
+            if _disk_full(err):
+                raise DiskFullError(f"{self.path}: disk full ({_free_mb(self.path):.1f} MB "
+                                    "free): free space on that disk") from err
+            raise RunFileError(f"{r}: cannot write the run's reserve file: {first}") from err
 
     # -- opening --------------------------------------------------------------------------------
     @classmethod
@@ -197,55 +303,37 @@ class RunWriter:
         (default: ``same-device``, or ``host-timed`` with ``n_raw``) says how the force row
         was put on the front end's clock; a ``sync_channel`` (common channel) adds its
         record and the correction it gave per record. ``attrs`` are extra ``/records``
-        attributes (the shaker's window, for instance).
+        attributes (the shaker's window, for instance). The reserve file is made first; a
+        disk too full for the file's structures raises :class:`DiskFullError` and leaves
+        neither file.
         """
         p = Path(path)
+        writer = cls(p, 0)
+        writer._hold_reserve()
         try:
-            f = h5py.File(p, "w", libver="latest")
+            f = h5py.File(h5py.h5f.create(os.fsencode(p), h5py.h5f.ACC_TRUNC,
+                                          fapl=_write_access()))
         except OSError as err:
+            _drop_reserve(p)
             raise RunFileError(f"{p}: cannot create the run file: {err}") from err
-        f.attrs.update({"format": FORMAT, "schema_version": SCHEMA_VERSION, "state": "running",
-                        "message": "", "method": method,
-                        "created": datetime.datetime.now().astimezone().isoformat(
-                            timespec="seconds")})
-        _text(f, "plan", dict(plan_data))
-        _text(f, "station", dict(station_data))
-        ch = f.create_group("channels")
-        _array(ch, "name", np.array([c.name for c in channels], dtype="S64"), "n/a")
-        _array(ch, "device", np.array(list(devices), dtype="S64"), "n/a")
-        _array(ch, "quantity", np.array([c.quantity for c in channels], dtype="S16"), "n/a")
-        _array(ch, "unit", np.array([c.unit for c in channels], dtype="S16"), "n/a")
-        _array(ch, "sensitivity", [c.sensitivity for c in channels], "mV/unit")
-        _array(ch, "range", [c.range_v for c in channels], "V")
-        _array(ch, "iepe", np.array([c.iepe for c in channels], dtype="u1"), "1")
-        _array(ch, "node", [-1 if c.node is None else c.node for c in channels], "1")
-        _array(ch, "direction", [c.direction or (0.0, 0.0, 0.0) for c in channels], "1")
-        g = f.create_group("geometry")
-        _array(g, "node_ids", geometry.node_ids, "1")
-        _array(g, "xyz", geometry.xyz, "m")
-        rec = f.create_group("records")
-        rec.attrs["fs"] = float(fs)
-        rec.attrs["fs_raw"] = float(fs_raw)
-        rec.attrs["force_alignment"] = force_alignment or (
-            "host-timed" if n_raw else "same-device")
-        rec.attrs["sync_channel"] = sync_channel
-        rec.attrs.update(dict(attrs or {}))
-        _column(rec, "data", "f8", "see /channels/unit", (len(channels), int(n_samples)))
-        rec["data"].attrs["units"] = np.array([c.unit for c in channels], dtype="S16")
-        if n_raw:
-            _column(rec, "force_raw", "f8", "N", (int(n_raw),))
-        if sync_channel:
-            _column(rec, "sync", "f8", "N", (int(n_samples),))
-            _column(rec, "sync_offset", "f8", "s")
-        for name, (dtype, unit) in _COLUMNS.items():
-            _column(rec, name, dtype, unit)
-        notes = f.create_group("notes")
-        _column(notes, "time", "f8", "s")
-        _column(notes, "text", f"S{TEXT * 2}", "n/a")
-        f.flush()
-        _fsync(f)
-        f.close()
-        return cls(p, 0)
+        try:
+            _layout(f, plan_data=plan_data, station_data=station_data, channels=channels,
+                    devices=devices, geometry=geometry, fs=fs, n_samples=n_samples,
+                    method=method, fs_raw=fs_raw, n_raw=n_raw,
+                    force_alignment=force_alignment, sync_channel=sync_channel, attrs=attrs)
+            f.flush()
+            _fsync(f)
+        except OSError as err:  # nothing acquired yet: no half-made file is left behind
+            _close(f)
+            p.unlink(missing_ok=True)
+            _drop_reserve(p)
+            if _disk_full(err):
+                raise DiskFullError(f"{p}: disk full ({_free_mb(p):.1f} MB free) while "
+                                    "creating the run file: free space on that disk") from err
+            raise RunFileError(f"{p}: cannot create the run file: "
+                               f"{str(err).splitlines()[0]}") from err
+        _close(f)
+        return writer
 
     @classmethod
     def resume(cls, path: str | Path) -> RunWriter:
@@ -253,22 +341,24 @@ class RunWriter:
 
         A file whose writer was killed carries HDF5's "open for writing" mark; it is
         copied object by object into a fresh file that then replaces it (the original
-        stays in place until the copy is complete).
+        stays in place until the copy is complete). A record left incomplete (some of
+        its columns unwritten) is dropped, so the next one takes its place.
         """
         p = Path(path)
         read_run(p, with_data=False)  # one-line error if foreign or damaged
         repair(p)
-        with _append(p) as f:
+        writer = cls(p, 0)
+        writer._hold_reserve()
+        with writer._session("the run's state", lambda f: None) as f:
             f.attrs["state"] = "running"
             f.attrs["message"] = ""
             for key in ("frf", "result"):
                 if key in f:
                     del f[key]
-            n = int(f["records/point"].shape[0])
-            f.flush()
-            _fsync(f)
-        return cls(p, n)
-
+            rec = f["records"]
+            writer._n = min([rec[c].shape[0] for c in _COLUMNS] + [rec["data"].shape[0]])
+            _truncate(rec, writer._n)
+        return writer
     # -- appending ------------------------------------------------------------------------------
     @property
     def n_records(self) -> int:
@@ -289,7 +379,7 @@ class RunWriter:
                   "auto_accepted": bool(auto_accepted),
                   "reason": reason.encode("utf-8")[:TEXT], "override": 0,
                   "bad_frames": bad_frames, "missing": missing}
-        with self._session() as f:
+        with self._session(f"record {i + 1}", lambda f: _truncate(f["records"], i)) as f:
             rec = f["records"]
             rec["data"].resize(i + 1, axis=0)
             rec["data"][i] = data
@@ -318,14 +408,17 @@ class RunWriter:
             raise ValueError(f"override must be one of accept, reject or '', got {override!r}")
         if not 0 <= index < self.n_records:
             raise ValueError(f"no record {index}: the run has {self.n_records}")
-        with self._session() as f:
+        with self._session(f"the override of record {index + 1}", lambda f: None) as f:
             f["records/override"][index] = OVERRIDES[override]
 
     def add_note(self, text: str, time: float) -> None:
         """Append an operator note (``time`` s since the run started)."""
-        with self._session() as f:
+        count: list[int] = []
+        with self._session("a note", lambda f: _truncate(f["notes"], count[0]) if count
+                           else None) as f:
             notes = f["notes"]
             i = notes["time"].shape[0]
+            count.append(i)
             for name, v in (("time", time), ("text", text.encode("utf-8")[: 2 * TEXT])):
                 notes[name].resize(i + 1, axis=0)
                 notes[name][i] = v
@@ -333,13 +426,21 @@ class RunWriter:
     # -- ending ---------------------------------------------------------------------------------
     def finish(self, state: str, message: str = "", measurement: Measurement | None = None,
                result: Mapping[str, Any] | None = None) -> None:
-        """Record the final state, FRFs and result; the writer is closed after it."""
-        with self._session() as f:
-            f.attrs["state"] = state
-            f.attrs["message"] = message
+        """Record the final state, FRFs and result; the writer is closed after it.
+
+        Does nothing after a failed write (the file already says ``failed`` and why).
+        """
+        if self.failure:
+            return
+
+        def undo(f: h5py.File) -> None:
             for key in ("frf", "result"):
                 if key in f:
                     del f[key]
+
+        with self._session("the FRFs" if measurement is not None else "the run's state",
+                           undo) as f:
+            undo(f)
             if measurement is not None:
                 frf = measurement.frf
                 g = f.create_group("frf")
@@ -357,12 +458,82 @@ class RunWriter:
                 _array(g, "n_averages", np.asarray(measurement.provenance.n_averages, int), "1")
             if result is not None:
                 _text(f, "result", dict(result), "SI, see docs/conventions.md")
+            f.attrs["state"] = state  # last: a run is finished once its FRFs are in
+            f.attrs["message"] = message
         self.close()
 
     def close(self) -> None:
-        """Refuse further changes (idempotent); every record added is already on disk."""
+        """Refuse further changes and delete the reserve file (idempotent); every record
+        added is already on disk."""
         with self._lock:
             self._closed = True
+            _drop_reserve(self.path)
+
+
+def _layout(f: h5py.File, *, plan_data: Mapping[str, Any], station_data: Mapping[str, Any],
+            channels: Sequence[ChannelConfig], devices: Sequence[str], geometry: Geometry,
+            fs: float, n_samples: int, method: str, fs_raw: float, n_raw: int,
+            force_alignment: str, sync_channel: str, attrs: Mapping[str, Any] | None) -> None:
+    """Every object of a new run file (:meth:`RunWriter.create`), no record yet."""
+    f.attrs.update({"format": FORMAT, "schema_version": SCHEMA_VERSION, "state": "running",
+                    "message": "", "method": method,
+                    "created": datetime.datetime.now().astimezone().isoformat(
+                        timespec="seconds")})
+    _text(f, "plan", dict(plan_data))
+    _text(f, "station", dict(station_data))
+    ch = f.create_group("channels")
+    _array(ch, "name", np.array([c.name for c in channels], dtype="S64"), "n/a")
+    _array(ch, "device", np.array(list(devices), dtype="S64"), "n/a")
+    _array(ch, "quantity", np.array([c.quantity for c in channels], dtype="S16"), "n/a")
+    _array(ch, "unit", np.array([c.unit for c in channels], dtype="S16"), "n/a")
+    _array(ch, "sensitivity", [c.sensitivity for c in channels], "mV/unit")
+    _array(ch, "range", [c.range_v for c in channels], "V")
+    _array(ch, "iepe", np.array([c.iepe for c in channels], dtype="u1"), "1")
+    _array(ch, "node", [-1 if c.node is None else c.node for c in channels], "1")
+    _array(ch, "direction", [c.direction or (0.0, 0.0, 0.0) for c in channels], "1")
+    g = f.create_group("geometry")
+    _array(g, "node_ids", geometry.node_ids, "1")
+    _array(g, "xyz", geometry.xyz, "m")
+    rec = f.create_group("records")
+    rec.attrs["fs"] = float(fs)
+    rec.attrs["fs_raw"] = float(fs_raw)
+    rec.attrs["force_alignment"] = force_alignment or (
+        "host-timed" if n_raw else "same-device")
+    rec.attrs["sync_channel"] = sync_channel
+    rec.attrs.update(dict(attrs or {}))
+    _column(rec, "data", "f8", "see /channels/unit", (len(channels), int(n_samples)))
+    rec["data"].attrs["units"] = np.array([c.unit for c in channels], dtype="S16")
+    if n_raw:
+        _column(rec, "force_raw", "f8", "N", (int(n_raw),))
+    if sync_channel:
+        _column(rec, "sync", "f8", "N", (int(n_samples),))
+        _column(rec, "sync_offset", "f8", "s")
+    for name, (dtype, unit) in _COLUMNS.items():
+        _column(rec, name, dtype, unit)
+    notes = f.create_group("notes")
+    _column(notes, "time", "f8", "s")
+    _column(notes, "text", f"S{TEXT * 2}", "n/a")
+
+
+def _truncate(group: h5py.Group, n: int) -> None:
+    """Cut every per-record dataset of ``group`` (``/records``) to ``n`` rows."""
+    for name in group:
+        ds = group[name]
+        if ds.shape and ds.shape[0] > n:
+            ds.resize(n, axis=0)
+
+
+def _close(f: h5py.File) -> None:
+    """Close ``f``; after a failed write HDF5 may refuse (logged: the file was handled)."""
+    try:
+        f.close()
+    except (OSError, RuntimeError) as err:
+        logger.warning("closing %s after a failed write: %s", f.filename, err)
+
+
+def _drop_reserve(p: Path) -> None:
+    with contextlib.suppress(OSError):
+        reserve_path(p).unlink(missing_ok=True)
 
 
 def _fsync(f: h5py.File) -> None:
@@ -377,9 +548,11 @@ def repair(path: str | Path) -> bool:
     "open for writing" mark only if it struck during that write. Such a file is copied
     object by object into a fresh one that then replaces it (the original stays in place
     until the copy is complete); every record whose columns were all written reads back.
+    The reserve file a killed writer left beside it (:func:`reserve_path`) is deleted.
     """
     p = Path(path)
     with _open(p) as f:
+        _drop_reserve(p)
         if f.mode == "r" and not f.swmr_mode:
             return False
     tmp = p.with_name(p.name + ".repair-tmp")
@@ -394,9 +567,28 @@ def repair(path: str | Path) -> bool:
 
 
 # -- reading ------------------------------------------------------------------------------------
+def _write_access() -> h5py.h5p.PropFAID:
+    """How the writer opens a run file: latest format, no lock, and no raw-data buffers.
+
+    Without the chunk cache and the sieve buffer every write reaches the file within the
+    call, so a full disk raises there. (Buffered, the data were written when h5py released
+    the dataset, where an error is only printed: the record was silently lost, and the
+    file's close then crashed the process, exit 139, on the half-closed dataset.)
+    """
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_libver_bounds(h5py.h5f.LIBVER_LATEST, h5py.h5f.LIBVER_LATEST)
+    mdc, slots, _, w0 = fapl.get_cache()
+    fapl.set_cache(mdc, slots, 0, w0)
+    fapl.set_sieve_buf_size(0)
+    fapl.set_file_locking(False, ignore_when_disabled=False)
+    fapl.set_fclose_degree(h5py.h5f.CLOSE_STRONG)
+    return fapl
+
+
 def _append(p: Path) -> h5py.File:
-    """The file opened to append, whoever reads it: a reader's lock never stops a record."""
-    return h5py.File(p, "a", libver="latest", locking=False)
+    """The file opened to append, whoever reads it: a reader's lock never stops a record
+    (and unbuffered: :func:`_write_access`)."""
+    return h5py.File(h5py.h5f.open(os.fsencode(p), h5py.h5f.ACC_RDWR, fapl=_write_access()))
 
 
 def _open(p: Path, patience: float = 2.0) -> h5py.File:

@@ -36,7 +36,7 @@ class Recorder(Listener):
     def on_frf(self, frf: object) -> None:
         self.events.append(("frf", frf))
 
-    def on_result(self, result: object, final: bool) -> None:
+    def on_result(self, measurement: object, result: object, final: bool) -> None:
         self.events.append(("result", (result, final)))
 
     def on_finished(self, state: RunState) -> None:

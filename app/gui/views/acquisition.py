@@ -377,24 +377,25 @@ class AcquisitionView(QtWidgets.QWidget):
         else:  # a device failed: the shaker output is off already
             self.message.emit("error", f"acquisition paused, device problem: {reason}")
 
-    @QtCore.Slot(object, bool)
-    def _result(self, result: IdentificationResult, final: bool) -> None:
+    @QtCore.Slot(object, object, bool)
+    def _result(self, measurement: Measurement, result: IdentificationResult,
+                final: bool) -> None:
         """The run's identification: shown as soon as the points are done (the bootstrap
         over hits then runs in the worker), then its final (stored) form, without fitting
         again: the same numbers as the run file's."""
         proc = self.procedure
-        if proc is None or proc.measurement is None:
+        if proc is None:
             return
-        if self._shown is None:
-            path = proc.path
+        if self._shown is not measurement:
             # the run's own measurement, cut as the pipeline opens the run file: the same
             # numbers as the stored result and every view of the file
-            self._shown = anti_aliased(proc.measurement)
-            self.session.set_measurement(self._shown, path.name, path, RUN_FILE, result=result)
+            self._shown = measurement
+            self.session.set_measurement(measurement, proc.path.name, proc.path, RUN_FILE,
+                                         result=result)
             if not final:
                 self.message.emit("info", f"result of the {len(self.hits)} {self.word}s; "
                                   "their bootstrap is running")
-        elif self.session.measurement is self._shown:
+        elif self.session.measurement is measurement:
             self.session.set_result(result)
 
     @QtCore.Slot(object)
