@@ -227,7 +227,10 @@ def uncertainty(st: Stages,
         force_noise=0.0 if coh is None else force_noise_ratio(coh[..., msel], weights.mass),
         stiff_weight=regressor_weights(problem.X[..., weights.stiffness_lines],
                                        weights.stiffness, problem.row_scale),
-        elastic_hz=tuple(p.frequency for p in problem.peaks))
+        elastic_hz=tuple(p.frequency for p in problem.peaks),
+        # K and C come out symmetric but for the plain method's line average
+        symmetric=problem.solver.symmetric and (problem.improved
+                                                or bool(problem.window_decay)))
     stated = problem.options.stated
     sources: tuple[str, ...] = (_COV_SOURCE,)
     extra = extra_cov = None
