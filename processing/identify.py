@@ -82,6 +82,7 @@ __all__ = [
     "bootstrap_identify",
     "check",
     "choose_bands",
+    "coherence_unchecked",
     "fit",
     "identify",
     "settle_mass_band",
@@ -301,7 +302,32 @@ def fit(measurement: Measurement, options: IdentifyOptions | None = None,
               else _fit_once(d, opt, sol, progress))
     if d.notes:
         result = dataclasses.replace(result, warnings=(*result.warnings, *d.notes))
+    unchecked = coherence_unchecked(measurement)
+    if unchecked:
+        result = dataclasses.replace(result, coherence_checked=False,
+                                     coherence_unchecked=unchecked)
     return result
+
+
+def coherence_unchecked(measurement: Measurement) -> str:
+    """Why the coherence of ``measurement`` cannot show noise, or "" when it can.
+
+    Without coherence there is nothing to check; with at most as many records (hits,
+    blocks) a point as forces driven at once (one hit, one block; two blocks of two
+    shakers) the H1 coherence is 1 by definition, whatever the noise: a check on it cannot
+    fail."""
+    prov = measurement.provenance
+    if measurement.frf.coherence is None:
+        return "no coherence in the input"
+    if not prov.n_averages or max(prov.n_averages) > prov.references:
+        return ""
+    kind = prov.excitation
+    word = "hit" if kind in ("impact", "hammer") else "block" if kind else "record"
+    n = max(prov.n_averages)
+    if prov.references > 1:
+        return (f"{n} {word}{'s' if n > 1 else ''} a point for {prov.references} forces: "
+                "the multiple coherence is 1 by definition")
+    return f"one {word} a point: the coherence is 1 by definition"
 
 
 def identify(frf: FRFSet, options: IdentifyOptions | None = None,
