@@ -391,8 +391,7 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
         :func:`flexibility_bias` (whose result is a part of its own)
     elastic_hz : the elastic modes seen in the data (Hz), if any: the part
         :func:`series_softening` of K and C
-    symmetric : K and C were fitted symmetric: every part is that of the symmetric
-        estimates (:func:`symmetrised`), so ``K[i, j]`` and ``K[j, i]`` share one variance
+    symmetric : K and C were fitted symmetric: each part is then :func:`symmetrised`
     """
     cov_t = theta_covariance(ml, theta, B, n_blocks)
     if half_thetas is not None:
