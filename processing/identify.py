@@ -83,6 +83,7 @@ __all__ = [
     "bootstrap_identify",
     "check",
     "choose_bands",
+    "coherence_unchecked",
     "fit",
     "identify",
     "settle_mass_band",
@@ -235,7 +236,10 @@ def uncertainty(st: Stages,
         force_noise=0.0 if coh is None else force_noise_ratio(coh[..., msel], weights.mass),
         stiff_weight=regressor_weights(problem.X[..., weights.stiffness_lines],
                                        weights.stiffness, problem.row_scale),
-        elastic_hz=tuple(p.frequency for p in problem.peaks))
+        elastic_hz=tuple(p.frequency for p in problem.peaks),
+        # K and C come out symmetric but for the plain method's line average
+        symmetric=problem.solver.symmetric and (problem.improved
+                                                or bool(problem.window_decay)))
     stated = problem.options.stated
     sources: tuple[str, ...] = (_COV_SOURCE,)
     extra = extra_cov = None
@@ -314,15 +318,40 @@ def fit(measurement: Measurement, options: IdentifyOptions | None = None,
     """
     opt, sol = options or IdentifyOptions(), solver or SolverSettings()
     d = _data(measurement, opt, sol)
+    unchecked = coherence_unchecked(measurement)
 
     def noted(result: IdentificationResult) -> IdentificationResult:
         if d.notes:
-            return dataclasses.replace(result, warnings=(*result.warnings, *d.notes))
+            result = dataclasses.replace(result, warnings=(*result.warnings, *d.notes))
+        if unchecked:
+            result = dataclasses.replace(result, coherence_checked=False,
+                                         coherence_unchecked=unchecked)
         return result
 
     early = None if preliminary is None else lambda r: preliminary(noted(r))
     return noted(_refined(d, opt, sol) if opt.refine_points > 0
                  else _fit_once(d, opt, sol, progress, early))
+
+
+def coherence_unchecked(measurement: Measurement) -> str:
+    """Why the coherence of ``measurement`` cannot show noise, or "" when it can.
+
+    Without coherence there is nothing to check; with at most as many records (hits,
+    blocks) a point as forces driven at once (one hit, one block; two blocks of two
+    shakers) the H1 coherence is 1 by definition, whatever the noise: a check on it cannot
+    fail."""
+    prov = measurement.provenance
+    if measurement.frf.coherence is None:
+        return "no coherence in the input"
+    if not prov.n_averages or max(prov.n_averages) > prov.references:
+        return ""
+    kind = prov.excitation
+    word = "hit" if kind in ("impact", "hammer") else "block" if kind else "record"
+    n = max(prov.n_averages)
+    if prov.references > 1:
+        return (f"{n} {word}{'s' if n > 1 else ''} a point for {prov.references} forces: "
+                "the multiple coherence is 1 by definition")
+    return f"one {word} a point: the coherence is 1 by definition"
 
 
 def identify(frf: FRFSet, options: IdentifyOptions | None = None,

@@ -122,6 +122,8 @@ class IdentificationResult:
     #: FRF values of the bands' lines under ``coherence_threshold`` (weighted down), of
     #: ``coherence_values``
     coherence_low: int
+    #: whether the coherence check could fail: coherence measured over more records a
+    #: point than forces driven at once (``coherence_unchecked`` says why not, else "")
     coherence_checked: bool
     coherence_min: float
     physical_enforced: bool
@@ -147,6 +149,9 @@ class IdentificationResult:
     damping_model: str = "viscous"
     #: how the damping model was chosen, in words
     damping_note: str = ""
+    #: why the coherence check is not made ("no coherence in the input", "one hit a
+    #: point": a coherence of 1 by definition), or "" when it is
+    coherence_unchecked: str = ""
 
     @property
     def coherence_low_fraction(self) -> float:
@@ -154,7 +159,9 @@ class IdentificationResult:
         return self.coherence_low / self.coherence_values if self.coherence_values else 0.0
 
     def checks(self) -> dict[str, dict[str, Any]]:
-        """Named pass/fail checks with their figures (result JSON ``checks``)."""
+        """Named pass/fail checks with their figures (result JSON ``checks``); a check that
+        could not fail has ``pass`` None and says why in ``not_checked`` (the coherence of
+        one record a point is 1 by definition)."""
         p = self.properties
         rel = self.reconstruction_error
         return {
@@ -166,8 +173,12 @@ class IdentificationResult:
                 "cond_T": self.geometry.cond_T,
             },
             "coherence": {
-                "pass": self.coherence_low_fraction <= COHERENCE_LOW_PASS,
+                # None (JSON null): not checked, the check could not fail
+                "pass": (self.coherence_low_fraction <= COHERENCE_LOW_PASS
+                         if self.coherence_checked else None),
                 "checked": self.coherence_checked,
+                **({} if self.coherence_checked else {
+                    "not_checked": self.coherence_unchecked or "no coherence in the input"}),
                 "threshold": self.coherence_threshold,
                 "min_in_mass_band": self.coherence_min,
                 "low_values": self.coherence_low,

@@ -149,12 +149,6 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None,
     leak = (problem.improved and problem.solver.leakage == "auto" and len(peaks) > 0
             and noise <= problem.solver.leakage_max_noise)
     warnings: list[str] = []
-    if problem.improved and peaks and not leak:
-        warnings.append(
-            f"elastic leakage not modelled (FRF noise {noise * 100:.2f} % > "
-            f"{problem.solver.leakage_max_noise * 100:g} %): mass line kept to half the "
-            "elastic mode"
-        )
     choice: BandChoice | None = None
     if opt.mass_band is None or opt.stiffness_band is None:
         clean = problem.clean_lines
@@ -179,6 +173,8 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None,
     stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
     reason = "bands given" if choice is None else (
         choice.reason if opt.mass_band is None else "mass line given; stiffness band chosen")
+    if problem.improved and peaks and not leak and choice is not None and opt.mass_band is None:
+        reason += f"; {_unmodelled_leakage(problem)}: mass line kept under half the elastic mode"
     if choice is not None and choice.relaxed and opt.mass_band is None:
         warnings.append(choice.reason)
     return Bands(
@@ -188,6 +184,70 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None,
         in_stiffness=_band_mask(problem.freq, stiff_band, "stiffness"),
         leakage=leak, choice=choice, warnings=tuple(warnings), reason=reason,
     )
+
+
+def _unmodelled_leakage(problem: Problem) -> str:
+    """Why the elastic modes' leakage into the mass line is not modelled, in words."""
+    if problem.solver.leakage == "off":
+        return "elastic leakage not modelled (turned off)"
+    return (f"elastic leakage not modelled (FRF noise {problem.noise * 100:.2f} % > "
+            f"{problem.solver.leakage_max_noise * 100:g} %)")
+
+
+def _leakage_unmodelled(problem: Problem, bands: Bands) -> bool:
+    """True when elastic modes are seen but their leakage into the mass line is not modelled
+    (improved method)."""
+    return problem.improved and bool(problem.peaks) and not bands.leakage
+
+
+#: the half-band drift of an estimate (its two halves' difference over that difference's
+#: standard deviation) above which the unmodelled elastic leakage is warned about: the
+#: largest of ten near-normal numbers exceeds it by chance about once in 40 fits (3 > the
+#: 2.8 of a 5 % Bonferroni bound over the ten parameters)
+LEAKAGE_DRIFT_Z = 3.0
+
+_THETA_NAMES = ("mass", "m x_c", "m y_c", "m z_c", "J_xx", "J_yy", "J_zz", "J_xy", "J_xz",
+                "J_yz")
+
+
+def leakage_drift(fitted: Fit) -> tuple[float, int] | None:
+    """How far the estimates of the lower and upper halves of the mass line disagree, in
+    standard deviations of their difference (twice the fit's own, drift-free standard
+    deviation, :func:`processing.uncertainty.theta_covariance`), and the parameter where
+    most: (z, index into theta); None without the halves or the mass-line state.
+
+    Elastic modes above the band add a residual growing like ``w^2`` to the mass line's
+    accelerances: where it matters, the estimate drifts with the band beyond its noise."""
+    if fitted.half_thetas is None or fitted.mass_line is None or fitted.mass_rhs is None:
+        return None
+    from processing.uncertainty import theta_covariance
+
+    d = np.asarray(fitted.half_thetas[1]) - np.asarray(fitted.half_thetas[0])
+    sd = np.sqrt(np.clip(np.diag(theta_covariance(fitted.mass_line, fitted.theta,
+                                                   fitted.mass_rhs)), 0.0, None))
+    z = np.abs(d) / np.maximum(2 * sd, 1e-300)
+    if not np.all(np.isfinite(z)):
+        return None
+    k = int(np.argmax(z))
+    return float(z[k]), k
+
+
+def leakage_warning(problem: Problem, bands: Bands, fitted: Fit) -> str | None:
+    """The warning when unmodelled elastic leakage bends the mass line beyond its noise
+    (:func:`leakage_drift` over :data:`LEAKAGE_DRIFT_Z`), else None."""
+    if not _leakage_unmodelled(problem, bands):
+        return None
+    drift = leakage_drift(fitted)
+    if drift is None or drift[0] <= LEAKAGE_DRIFT_Z:
+        return None
+    z, k = drift
+    lo, hi = bands.mass_band
+    first = min(p.frequency for p in problem.peaks)
+    covered = "; the ± include the drift" if problem.options.uncertainty else ""
+    return (f"{_unmodelled_leakage(problem)}: the estimate drifts across the mass line "
+            f"{lo:.1f}-{hi:.1f} Hz by {z:.1f} standard deviations ({_THETA_NAMES[k]}), more "
+            f"than its noise explains{covered}. A mass line further under the elastic mode "
+            f"at {first:.1f} Hz, or less FRF noise (more averages), reduces it")
 
 
 # --- stage 2: weights ------------------------------------------------------------------------
@@ -624,7 +684,8 @@ def solve(problem: Problem, bands: Bands, weights: LineWeights,
             tried.add(model)
     theta, K, C, D, Xs = best.theta, best.K, best.C, best.D, best.Xs
     halves = None
-    if opt.uncertainty and np.count_nonzero(weights.mass_lines) >= 8:
+    if ((opt.uncertainty or _leakage_unmodelled(problem, bands))
+            and np.count_nonzero(weights.mass_lines) >= 8):
         lo, hi = (_fit_model(problem, w, step, shapes).theta for w in _halves(weights))
         halves = (lo, hi)
     enforced = False
@@ -699,6 +760,9 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
     tau, freq = problem.exponential_tau, problem.freq
     M, K = mass_matrix(fitted.theta), fitted.K
     warnings: list[str] = []
+    leak = leakage_warning(problem, bands, fitted)
+    if leak:
+        warnings.append(leak)
     if tau:
         warnings.append(f"exponential window (tau = {tau:g} s): its damping was removed from C")
     props = inertia_properties(fitted.theta)

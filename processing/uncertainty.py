@@ -58,6 +58,7 @@ __all__ = [
     "propagate",
     "regressor_weights",
     "series_softening",
+    "symmetrised",
     "theta_covariance",
 ]
 
@@ -368,6 +369,7 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
                    force_noise: float = 0.0,
                    stiff_weight: NDArray[np.float64] | None = None,
                    elastic_hz: tuple[float, ...] = (),
+                   symmetric: bool = False,
                    ) -> FitCovariance:
     """Joint covariance of theta, K and C of one fit.
 
@@ -389,6 +391,7 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
         :func:`flexibility_bias` (whose result is a part of its own)
     elastic_hz : the elastic modes seen in the data (Hz), if any: the part
         :func:`series_softening` of K and C
+    symmetric : K and C were fitted symmetric: each part is then :func:`symmetrised`
     """
     cov_t = theta_covariance(ml, theta, B, n_blocks)
     if half_thetas is not None:
@@ -432,7 +435,36 @@ def fit_covariance(ml: MassLineProblem, theta: NDArray[np.float64],
     if force_noise > 0:
         p_all = np.concatenate([theta, np.ravel(K), np.ravel(C)])
         parts["force noise (H1 bias)"] = force_noise**2 * np.outer(p_all, p_all)
+    if symmetric:
+        parts = {name: symmetrised(part) for name, part in parts.items()}
     return FitCovariance(np.sum(list(parts.values()), axis=0), parts)
+
+
+def _symmetriser() -> NDArray[np.float64]:
+    """(82, 82) ``Q`` mapping ``[theta, vec K, vec C]`` to ``[theta, vec sym K, vec sym C]``,
+    ``sym A = (A + A^T) / 2`` (row-major vec)."""
+    swap = np.arange(36).reshape(6, 6).T.ravel()  # vec A -> vec A^T
+    P = 0.5 * (np.eye(36) + np.eye(36)[swap])
+    Q = np.eye(82)
+    Q[10:46, 10:46] = P
+    Q[46:, 46:] = P
+    return Q
+
+
+_SYM = _symmetriser()
+
+
+def symmetrised(cov: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The (82, 82) covariance of ``[theta, vec sym K, vec sym C]`` from that of
+    ``[theta, vec K, vec C]``: ``Q cov Q^T``.
+
+    A symmetric fit's K is the symmetric part of what the per-line scatter describes
+    entry by entry; the variance of its ``[i, j]`` entry is then
+    ``(var K_ij + var K_ji + 2 cov(K_ij, K_ji)) / 4``, the same for ``[j, i]``. Parts that
+    are already symmetric (carried from theta through the symmetric stiffness step) are
+    unchanged.
+    """
+    return np.asarray(_SYM @ cov @ _SYM.T)
 
 
 # --- propagation -----------------------------------------------------------------------------

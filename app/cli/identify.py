@@ -196,10 +196,8 @@ def _report(path: Path, out: Path | None, frf: FRFSet, result: IdentificationRes
                   f"{frf.H.shape[1]} excitations, {frf.freq.size} lines "
                   f"{frf.freq[0]:g}-{frf.freq[-1]:g} Hz")
     print_result(result, console)
-    if result.uncertainty is not None:
-        console.print("uncertainty: " + "; ".join(result.uncertainty.sources))
     ms = mount_system(result, mounts.table, mounts.excitation_hz, mounts.loss_factor_hz)
-    print_mount_system(ms, console)
+    print_mount_system(ms, console, spreads=result.uncertainty is None)
     if out:
         out.write_text(json.dumps({**result.to_json(), **ms.to_json()}, indent=2))
         console.print(f"result written to {out}")

@@ -9,6 +9,7 @@ from rich.table import Table
 
 from app.report.mount_system import MountSystem
 from app.report.tables import (
+    SPREADS,
     contribution_lines,
     half_width,
     modes_text,
@@ -115,6 +116,9 @@ def checks_table(result: IdentificationResult) -> Table:
     t.add_column("verdict")
     t.add_column("figures", overflow="fold")
     for name, c in result.checks().items():
+        if c["pass"] is None:  # a check that could not fail: why, no figures
+            t.add_row(name, "[yellow]not checked[/yellow]", str(c.get("not_checked", "")))
+            continue
         figs = ", ".join(
             f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
             for k, v in c.items() if k not in ("pass", "low_ranges_hz")
@@ -126,7 +130,8 @@ def checks_table(result: IdentificationResult) -> Table:
 def coherence_line(result: IdentificationResult) -> str:
     """How many FRF values of the bands have a low coherence (weighted down), and where."""
     if not result.coherence_checked:
-        return "Coherence: not measured (no coherence in the input), every value weighs the same"
+        why = result.coherence_unchecked or "no coherence in the input"
+        return f"Coherence: not checked, {why}; every value weighs the same"
     if result.coherence_low == 0:
         return f"Coherence >= {result.coherence_threshold:g} on every FRF value of the bands"
     ranges = result.coherence_ranges_hz
@@ -149,6 +154,8 @@ def print_result(
     """Print the ten parameters, K and C, the bands and the checks."""
     con = console or Console()
     u = result.uncertainty
+    if u is not None:
+        con.print(SPREADS, markup=False)
     con.print(inertia_table(result, truth))
     con.print(matrix_table("Stiffness K at O (N/m, N/rad, N m/m, N m/rad)", result.K, K_truth,
                            *_spreads(u, "stiffness")))
@@ -205,9 +212,14 @@ def _rich_table(title: str, head: list[str], rows: list[list[str]], left: int = 
     return t
 
 
-def print_mount_system(ms: MountSystem, console: Console | None = None) -> None:
-    """Print the modes, the energy decoupling, and with mounts the rates and the TRA."""
+def print_mount_system(ms: MountSystem, console: Console | None = None, *,
+                       spreads: bool = False) -> None:
+    """Print the modes, the energy decoupling, and with mounts the rates and the TRA (their
+    spreads as :data:`~app.report.tables.SPREADS` says: printed here when ``spreads``, i.e.
+    when :func:`print_result` did not)."""
     con = console or Console()
+    if spreads and ms.rates is not None:
+        con.print(SPREADS, markup=False)
     con.print(_rich_table("Rigid-body modes of the identified M, K, C (damping: modal "
                           "approximation)", ms.mode_head(), ms.mode_rows()))
     con.print(_rich_table("Kinetic-energy decoupling (% of each mode's energy, at the CoG)",

@@ -19,6 +19,7 @@ from app.report import figures
 from app.report.analysis import Analysis
 from app.report.mount_system import mount_system
 from app.report.tables import (
+    SPREADS,
     check_rows,
     contribution_lines,
     format_matrix,
@@ -138,6 +139,8 @@ def build_report(a: Analysis, title: str = "In situ identification report",
         f"{n_f} lines {a.frf.freq[0]:g}-{a.frf.freq[-1]:g} Hz. Method: {a.options.method}"
         f"{', physically constrained' if a.options.physical else ''}. "
         f"Written {datetime.now().isoformat(timespec='seconds')}.</p>",
+        *([f"<p>{html.escape(SPREADS)}.</p>"] if a.result is not None and (
+            a.result.uncertainty is not None or mounts is not None) else []),
         "<h2>Checks</h2>", _checks(a),
     ]
     r = a.result

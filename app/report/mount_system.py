@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.io.mounts import MountsFile
+from app.report.tables import Z95, half_width
 from processing.identify import IdentificationResult
 from processing.modes import (
     Isolation,
@@ -118,17 +119,22 @@ class MountSystem:
         return [[str(r + 1), *(f"{V[k, r]:+.4f}" for k in range(6))] for r in range(6)]
 
     def mount_rows(self) -> list[list[str]]:
-        """Mount, axis, rate (N/m), std, loss factor, std, determined."""
+        """Mount, axis, rate (N/m), its 95 % spread, loss factor, its 95 % spread, determined.
+
+        The spreads are those of every other table (:func:`app.report.tables.spread`): the
+        rate's 95 % interval (:meth:`processing.mounts.RateFit.ci95`) as ``± h``, or as
+        ``[lo, hi]`` where it is clipped at 0; the loss factor's ``± 1.96 std``."""
         if self.rates is None:
             return []
         k, eta, eta_s = self.rates.stiffness, self.rates.loss_factors, self.rates.loss_factors_std
+        ci = k.ci95()
         rows = []
         for i, name in enumerate(k.names):
             for a, axis in enumerate("uvw"):
                 ok = bool(k.identifiable[i, a])
                 rows.append([name if a == 0 else "", axis, f"{k.rates[i, a]:.4g}",
-                             _num(k.std[i, a], ".2g"), _num(eta[i, a], ".3f"),
-                             _num(eta_s[i, a], ".2g"), "yes" if ok else "NO"])
+                             _rate_spread(k.rates[i, a], ci[i, a]), _num(eta[i, a], ".3f"),
+                             _half(Z95 * eta_s[i, a]), "yes" if ok else "NO"])
         return rows
 
     def mount_head(self) -> list[str]:
@@ -138,7 +144,7 @@ class MountSystem:
         f = r.loss_factor_hz if r is not None else 0.0
         eta = ("loss factor d/k" if r is not None and r.damping is None
                and r.structural is not None else f"loss factor at {f:.3g} Hz")
-        return ["mount", "axis", "rate (N/m)", "std (N/m)", eta, "std", "determined"]
+        return ["mount", "axis", "rate (N/m)", "95 % (N/m)", eta, "95 %", "determined"]
 
     def mount_notes(self) -> list[str]:
         """Rank and condition of the fit and one line per undetermined combination."""
@@ -147,8 +153,9 @@ class MountSystem:
         k = self.rates.stiffness
         cond = f"{k.cond:.3g}" if np.isfinite(k.cond) else "inf"
         notes = [f"design 21 x {k.rates.size}: rank {k.rank}, condition {cond}; relative "
-                 f"residual {k.residual:.2%} ({k.dof} residual degrees of freedom); std from "
-                 "the fit's residual"]
+                 f"residual {k.residual:.2%} ({k.dof} residual degrees of freedom); 95 % "
+                 + ("intervals from the identified K's uncertainty" if k.known_variance else
+                    "intervals from the fit's residual (Student's t)")]
         return notes + k.undetermined()
 
     def tra_rows(self) -> list[list[str]]:
@@ -174,6 +181,20 @@ class MountSystem:
 
 def _num(v: float, fmt: str) -> str:
     return format(float(v), fmt) if np.isfinite(v) else "—"
+
+
+def _half(h: float) -> str:
+    return "± " + half_width(float(h)) if np.isfinite(h) else "—"
+
+
+def _rate_spread(rate: float, interval: NDArray[np.float64]) -> str:
+    """A rate's 95 % interval as ``± h``, or ``[lo, hi]`` where it was clipped at 0."""
+    lo, hi = (float(v) for v in interval)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return "—"
+    if lo > 0:
+        return _half(hi - float(rate))
+    return f"[{lo:.4g}, {hi:.4g}]"
 
 
 def _vec(v: np.ndarray, fmt: str = "+.4f") -> str:

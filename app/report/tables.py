@@ -13,15 +13,21 @@ from numpy.typing import NDArray
 
 from app.report.analysis import Analysis
 from processing.geometry import DEFAULT_MAX_COND_T
+from processing.identify import coherence_unchecked
 from processing.inertia import InertiaProperties
 from processing.results import Uncertainty
 
-__all__ = ["CheckRow", "check_rows", "contribution_lines", "format_matrix", "half_width",
+__all__ = ["SPREADS", "CheckRow", "check_rows", "contribution_lines", "format_matrix", "half_width",
            "inertia_rows", "modes_text", "principal_rows", "quantity_label", "sources_line",
            "spread"]
 
 #: half-width of a 95 % interval in standard deviations (normal distribution)
 Z95 = 1.96
+
+#: the one convention of every spread every view shows, stated once in its header
+SPREADS = ("Spreads are 95 %: ± 1.96 standard deviations, or the [lo, hi] interval where "
+           "it is not symmetric (the result JSON's std are standard deviations, its ci95 "
+           "the intervals)")
 
 
 def spread(u: Uncertainty | None, key: str, index: tuple[int, ...] = (), *,
@@ -99,7 +105,7 @@ def sources_line(u: Uncertainty | None) -> str:
     if u is None:
         return ""
     what = "; ".join(u.sources) if u.sources else "sources not stated"
-    return (f"Uncertainty (± 1.96 standard deviations, or [95 % interval]): {what}")
+    return f"Uncertainty: {what}"
 
 
 def inertia_rows(p: InertiaProperties, u: Uncertainty | None = None
@@ -156,7 +162,7 @@ class CheckRow:
 
     @property
     def verdict(self) -> str:
-        return {True: "PASS", False: "FAIL", None: "n/a"}[self.passed]
+        return {True: "PASS", False: "FAIL", None: "not checked"}[self.passed]
 
 
 def check_rows(a: Analysis) -> list[CheckRow]:
@@ -174,15 +180,12 @@ def check_rows(a: Analysis) -> list[CheckRow]:
         rows.append(CheckRow("geometry (rank, cond of E and T)", ok, detail))
     gate = a.gate
     thr = a.options.coherence_threshold
-    if gate is None:
-        rows.append(CheckRow(f"coherence ≥ {thr:g}", None, "no coherence in the data"))
+    unchecked = coherence_unchecked(a.measurement)
+    if gate is None or unchecked:
+        rows.append(CheckRow(f"coherence ≥ {thr:g}", None, unchecked + (
+            "; it needs several hits or blocks a point" if gate is not None else "")))
     else:
-        detail = gate.summary()
-        n_avg = a.measurement.provenance.n_averages
-        if n_avg and max(n_avg) <= 1:
-            detail += ("; one average per point: coherence is 1 by definition, this check "
-                       "needs several hits or blocks per point")
-        rows.append(CheckRow(f"coherence ≥ {thr:g}", gate.n_dropped == 0, detail))
+        rows.append(CheckRow(f"coherence ≥ {thr:g}", gate.n_dropped == 0, gate.summary()))
     rig = a.rigidity
     if rig is None:
         rows.append(CheckRow("rigidity (sensors predict each other)", None,

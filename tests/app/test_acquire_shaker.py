@@ -208,7 +208,7 @@ def test_burst_random_plan_acquired_and_identified_from_the_command_line(
     plan_file = ROOT / "docs" / "shaker_burst_plan.toml"
     plan = load_plan(plan_file)
     s = plan.shaker
-    assert s.waveform == "burst-random" and s.averages == 2
+    assert s.waveform == "burst-random" and s.averages == 3
     path, out = tmp_path / "burst.h5", tmp_path / "burst.json"
     assert main(["acquire", "--mock", "--bench", "engine-rigid", "--plan", str(plan_file),
                  "--out", str(path)]) == 0
@@ -220,9 +220,9 @@ def test_burst_random_plan_acquired_and_identified_from_the_command_line(
     with h5py.File(path, "r") as f:
         assert f["records"].attrs["waveform"] == "burst-random"
         assert f["records"].attrs["window"] == "boxcar"
-    assert run.records.data.shape == (2 * n_pts, 13, s.nperseg)
+    assert run.records.data.shape == (3 * n_pts, 13, s.nperseg)
     assert run.records.accepted.all()
-    assert run.records.point.tolist() == [j for j in range(n_pts) for _ in range(2)]
+    assert run.records.point.tolist() == [j for j in range(n_pts) for _ in range(3)]
     force = run.records.data[:, 0]
     # every block starts at its burst (BURST_PRE samples before it) and ends in silence
     burst = round(s.duty * s.nperseg)
@@ -232,9 +232,9 @@ def test_burst_random_plan_acquired_and_identified_from_the_command_line(
     assert not on[:, BURST_PRE + burst + 3:].any()
     assert run.measurement is not None
     stored = run.measurement.frf
-    assert run.measurement.provenance.n_averages == (2,) * n_pts
+    assert run.measurement.provenance.n_averages == (3,) * n_pts
     band = (stored.freq >= 5.0) & (stored.freq <= 150.0)
-    # two bursts of a random multisine per point: coherence 1 but for leakage (none seen)
+    # three bursts of a random multisine per point: coherence 1 but for leakage (none seen)
     assert stored.coherence is not None
     assert np.median(stored.coherence[..., band]) > 0.999
 

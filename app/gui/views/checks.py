@@ -57,8 +57,12 @@ class ChecksView(QtWidgets.QWidget):
         self.table.resizeColumnToContents(0)
         self.table.resizeRowsToContents()
         failed = [c.name for c in self.rows if c.passed is False]
+        unchecked = [c.name for c in self.rows if c.passed is None]
         if failed:
             set_verdict(self.overall, False, "FAIL: " + ", ".join(failed))
+        elif unchecked:
+            set_verdict(self.overall, None, "No check fails; not checked: "
+                        + ", ".join(unchecked))
         else:
             set_verdict(self.overall, True, "All checks pass")
         figures.draw_coherence_bars(self.coherence_bars.getPlotItem(), a)

@@ -17,6 +17,7 @@ from app.report import figures
 from app.report.analysis import Analysis, message_of
 from app.report.mount_system import MountSystem, mount_system
 from app.report.tables import (
+    SPREADS,
     contribution_lines,
     format_matrix,
     inertia_rows,
@@ -319,7 +320,8 @@ class ResultsView(QtWidgets.QWidget):
         self.summary.setText(text)
         top = contribution_lines(u)
         self.uncertainty.setText("\n".join(
-            [sources_line(u), *(["Largest contributions to the variance:", *top] if top else [])]))
+            [SPREADS, sources_line(u),
+             *(["Largest contributions to the variance:", *top] if top else [])]))
         self.uncertainty.setVisible(u is not None)
         fill_table(self.inertia, ("parameter", "unit", "about CoG", "about origin O"),
                    inertia_rows(p, u))

@@ -14,6 +14,7 @@ from app.gui.main_window import MainWindow
 from app.io.uff import write_frf_uff
 from app.report.analysis import Analysis
 from app.report.html import build_report
+from app.report.tables import SPREADS
 from hardware_mocks.benches import get_bench
 from tests.app.test_cli_uncertainty import with_uncertainty
 
@@ -68,7 +69,8 @@ def test_results_view_and_report_show_uncertainty(qtbot, make_window, choose_fil
     f, sf = r.rigid_modes_hz, u.std["rigid_modes_hz"]
     assert f"{f[0]:.2f} ± {1.96 * sf[0]:.2g}" in res.summary.text()
     assert res.uncertainty.isVisibleTo(res)
-    assert res.uncertainty.text().splitlines()[1:] == [
+    assert res.uncertainty.text().splitlines()[0] == SPREADS  # the convention, once
+    assert res.uncertainty.text().splitlines()[2:] == [
         "Largest contributions to the variance:", "CoG z: 70 % from point 3 location",
         "J_xy about the CoG: 55 % from fit (noise)", "mass: 40 % from gain of channel 4"]
     window.tabs.setCurrentWidget(res)
