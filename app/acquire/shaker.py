@@ -120,6 +120,7 @@ class ShakerProcedure(RecordingProcedure):
         self.heartbeat = heartbeat
         self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
         self._resolve(force_channel, shaker)
+        self._check_limits()
         self.analysis = BlockAnalysis(plan, [c.name for c in self.rows], np.array(
             [c.full_scale for c in self.rows]),
             loader=lambda ids: iter_record_data(self.path, ids))
@@ -172,6 +173,36 @@ class ShakerProcedure(RecordingProcedure):
         self.rows: tuple[ChannelConfig, ...] = (*forces[:n], *resp)
         self.shaker_names = shakers[:n]
         self.shaker_name = shakers[0]
+
+    def _check_limits(self) -> None:
+        """Refuse (PlanError, one line) a ``[shaker]`` setting its shakers do not accept,
+        before any device is opened and any run file created."""
+        s, fs = self.plan.shaker, self.plan.record.fs
+        # device setting -> the plan's key, its value in the device's unit, the unit
+        values = {"level": ("shaker.level", s.level, "V"),
+                  "f_start": ("shaker.f_start", s.f_start, "Hz"),
+                  "f_stop": ("shaker.f_stop", s.f_stop, "Hz"),
+                  "ramp": ("shaker.ramp", s.ramp, "s")}
+        if s.waveform != "random":  # a chirp's and a burst's period is one block
+            values["period"] = ("shaker.nperseg", s.nperseg / fs, "s")
+        for name in self.shaker_names:
+            cfg = self.station.devices[name]
+            backend = get_backend(cfg.backend)
+            limits = backend.setting_limits(cfg) if issubclass(backend, ExcitationDevice) \
+                else {}
+            for setting, (low, high) in limits.items():
+                if setting not in values or low <= values[setting][1] <= high:
+                    continue
+                key, value, unit = values[setting]
+                over = value > high
+                what = (f"{key} = {s.nperseg} at record.fs = {fs:g} Hz is a {value:g} s period"
+                        if setting == "period" else f"{key} {value:g} {unit} is")
+                todo = ("the stored plan cannot run: start a new run" if self.resume_file
+                        else f"{'lower' if over else 'raise'} {key}")
+                raise PlanError(f"{self.plan.source}: {what} "
+                                f"{'above' if over else 'below'} the "
+                                f"{high if over else low:g} {unit} that {self.station.source} "
+                                f"allows for shaker {name!r}: {todo}")
 
     def _open_devices(self) -> None:
         fe = create_device(self.station.devices[self.ref_name],
