@@ -459,6 +459,14 @@ class ExcitationDevice(Device):
         self.waveform: Waveform | None = None
         self.level: float = 0.0
 
+    @classmethod
+    def setting_limits(cls, config: DeviceConfig) -> dict[str, tuple[float, float]]:
+        """The range each setting may take on the device ``config`` describes, without
+        opening it: ``{"level": (0.0, 2.0), ...}`` (V, Hz and s, by the names of
+        :meth:`set_waveform`, ``level`` and ``ramp``); a setting not listed has no known
+        limit. A run checks its plan against them before it starts."""
+        return {}
+
     def set_waveform(self, waveform: Waveform | str, **params: float) -> None:
         """Choose the drive signal; ``params`` are waveform settings (``frequency``,
         ``f_start``, ``f_stop``, ``duration``, ``burst``), in Hz, s and fraction."""

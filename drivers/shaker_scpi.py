@@ -37,6 +37,11 @@ __all__ = ["ScpiShaker", "ShakerError"]
 logger = logging.getLogger(__name__)
 
 IDENTITY_PREFIX = "INSITU,SG-1,"
+#: the highest level a station allows by default, V (option ``max_level``)
+MAX_LEVEL = 2.0
+#: what the SG-1 accepts: frequencies (Hz), the chirp and burst period and the ramp (s)
+SG1_LIMITS = {"f_start": (0.0, 20000.0), "f_stop": (0.1, 20000.0), "period": (0.01, 100.0),
+              "ramp": (0.0, 60.0)}
 FUNCTION_CODES = {
     Waveform.RANDOM: "RAND",
     Waveform.BURST_RANDOM: "BRAN",
@@ -77,7 +82,8 @@ class ScpiShaker(ExcitationDevice):
     max_error_reads: ClassVar[int] = 12
 
     def __init__(self, name: str, url: str, *, baudrate: int = 115200, heartbeat: float = 0.5,
-                 ramp: float = 1.0, max_level: float = 2.0, reply_timeout: float = 0.5) -> None:
+                 ramp: float = 1.0, max_level: float = MAX_LEVEL,
+                 reply_timeout: float = 0.5) -> None:
         super().__init__(name)
         if heartbeat < 0 or ramp < 0 or max_level <= 0:
             raise ValueError(f"{name}: heartbeat and ramp must be >= 0 s, max_level > 0 V")
@@ -98,6 +104,12 @@ class ScpiShaker(ExcitationDevice):
         opts: dict[str, Any] = {"baudrate": config.transport.baudrate, **config.options,
                                 **overrides}
         return cls(config.name, config.transport.url, **opts)
+
+    @classmethod
+    def setting_limits(cls, config: DeviceConfig) -> dict[str, tuple[float, float]]:
+        """The SG-1's ranges, and the level up to the station's ``max_level`` option."""
+        level = config.options.get("max_level", MAX_LEVEL)
+        return {**SG1_LIMITS, "level": (0.0, float(level))}
 
     # -- SCPI -------------------------------------------------------------------------------------
     def write(self, command: str) -> None:

@@ -107,7 +107,12 @@ class PointFRF:
 
 @dataclass(frozen=True)
 class Progress:
-    """Where the run is: current point, hits, frames lost, elapsed time (s)."""
+    """Where the run is: current point, hits, frames lost, elapsed time (s).
+
+    ``hits``, ``accepted`` and ``points_done`` count the whole run file: with a resumed
+    run, the records and points done before it too. ``points_done`` counts the points
+    (or drives) that have every record they need, wherever they are in the plan.
+    """
 
     point: int
     n_points: int
@@ -117,10 +122,7 @@ class Progress:
     accepted: int
     bad_frames: int
     elapsed: float
-
-    @property
-    def points_done(self) -> int:
-        return self.point + (1 if self.point_accepted >= self.point_needed else 0)
+    points_done: int
 
 
 @dataclass(frozen=True)

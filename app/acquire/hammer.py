@@ -8,6 +8,7 @@ Example
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -20,9 +21,9 @@ from numpy.typing import NDArray
 
 from app.acquire.analysis import RunAnalysis, analysis_measurement, host_timed, margin_samples
 from app.acquire.events import HitRecord
-from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
+from app.acquire.plan import ExcitationPoint, PlanError, TestPlan
 from app.acquire.procedure import StopRequestedError
-from app.acquire.recording import RecordingProcedure
+from app.acquire.recording import RecordingProcedure, resumed_plan
 from app.acquire.streams import HitStreams, RawHit
 from app.io.runfile import RunWriter, iter_record_data, read_run
 from drivers.base import AcquisitionFrontEnd, ChannelConfig
@@ -40,8 +41,9 @@ logger = logging.getLogger(__name__)
 
 
 def station_summary(station: StationConfig) -> dict[str, Any]:
-    """The station as JSON-able data for the run file."""
-    out: dict[str, Any] = {"name": station.name, "source": station.source, "devices": {}}
+    """The station as JSON-able data for the run file (its ``[extra]`` table too)."""
+    out: dict[str, Any] = {"name": station.name, "source": station.source, "devices": {},
+                           "extra": json.loads(json.dumps(station.extra, default=str))}
     for name, dev in station.devices.items():
         out["devices"][name] = {
             "backend": dev.backend, "fs": dev.fs, "transport": asdict(dev.transport),
@@ -97,11 +99,11 @@ class HammerProcedure(RecordingProcedure):
         super().__init__(listeners)
         self.path = Path(path)
         self.resume_file = resume
-        if plan is None:
-            if not resume:
-                raise PlanError("give a test plan (or resume a run file)")
-            run = read_run(self.path, with_data=False)
-            plan = parse_plan(run.plan_data, f"{self.path}:/plan")
+        stored = read_run(self.path, with_data=False) if resume else None
+        if stored is not None:
+            plan = resumed_plan(stored, plan)
+        elif plan is None:
+            raise PlanError("give a test plan (or resume a run file)")
         if plan.method != "hammer":
             raise PlanError(f"{plan.source}: plan.method is {plan.method!r}; "
                             "this is the hammer procedure")
@@ -113,6 +115,8 @@ class HammerProcedure(RecordingProcedure):
         self._sync_choice = sync_channel
         self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
         self._resolve_channels()
+        if stored is not None:
+            self._check_stored_channels(stored)
         if self.force_alignment == "host-timed" and identify and self.geometry_report.ok:
             raise PlanError(f"{station.source}: {host_timed(self.force_name, self.ref_name)}")
         self.devices: dict[str, AcquisitionFrontEnd] = {}
@@ -190,12 +194,10 @@ class HammerProcedure(RecordingProcedure):
         n_store = rec.n_samples + 2 * margin
         if self.resume_file:
             run = read_run(self.path, with_data=False)
-            stored = tuple(c.name for c in run.channels)
-            if stored != tuple(c.name for c in self.rows):
-                raise PlanError(f"{self.path}: recorded channels {', '.join(stored)} differ from "
-                                "the station's; resume with the same station")
+            self._check_stored_channels(run)
             self.writer = RunWriter.resume(self.path)
             recs = run.records
+            self._keep_stored(recs)
             # the points' averages rebuilt from the stored records, read one at a time
             for i, data in iter_record_data(self.path, range(len(recs))):
                 if self.stop_asked:  # a long run takes a while to read back: stop now

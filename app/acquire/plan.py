@@ -18,7 +18,7 @@ A plan is a TOML file::
     waveform = "random"          # random, burst-random, chirp
     level = 0.5                  # V RMS (random) or V peak
     f_start = 2.0                # Hz
-    f_stop = 200.0               # Hz
+    f_stop = 200.0               # Hz, at most record.fs / 2 (Nyquist)
     averages = 20
     nperseg = 2048               # samples per block (line spacing fs/nperseg; chirp period)
     ramp = 1.0                   # s, output ramp up and down
@@ -86,6 +86,7 @@ __all__ = [
     "TestPlan",
     "load_plan",
     "parse_plan",
+    "plan_differences",
 ]
 
 Method = Literal["hammer", "shaker"]
@@ -394,6 +395,10 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
     excs = _excitations(c, data)
     resps = _responses(c, data)
     _check_shakers(c, method, shaker, excs)
+    if method == "shaker" and shaker.f_stop > record.fs / 2:
+        raise c.fail("shaker.f_stop", f"{shaker.f_stop:g} Hz is above the Nyquist frequency "
+                     f"of record.fs = {record.fs:g} Hz ({record.fs / 2:g} Hz): lower "
+                     "shaker.f_stop or raise record.fs")
     plan = TestPlan(name, method, hits, record, tuple(excs), tuple(resps), shaker, source)
     plan.geometry()  # nodes with two coordinates
     return plan
@@ -524,6 +529,69 @@ def _check_shakers(c: _Ctx, method: Method, shaker: ShakerSettings,
             if len(dofs) < k:
                 raise c.fail(f"excitation[{i}]", f"the {k} excitations driven together "
                              f"(excitation[{i}] to [{i + k - 1}]) must differ")
+
+
+#: the unit of each plan key in messages
+_UNITS = {"record.fs": "Hz", "record.length": "s", "record.pretrigger": "s",
+          "record.trigger_level": "N", "record.exp_tau": "s", "shaker.level": "V",
+          "shaker.f_start": "Hz", "shaker.f_stop": "Hz", "shaker.ramp": "s",
+          "shaker.settle": "s", "xyz": "m"}
+#: keys a method does not use (a hammer plan's [shaker] table, a shaker plan's trigger)
+_UNUSED = {"hammer": ("shaker.",),
+           "shaker": ("plan.hits", "record.pretrigger", "record.trigger_level",
+                      "record.exp_tau")}
+
+
+def _flat(data: Mapping[str, Any]) -> dict[str, Any]:
+    """``to_dict()`` data as ``{"record.length": 1.5, "excitation[0].xyz": [...], ...}``."""
+    out: dict[str, Any] = {}
+    for table, t in data.items():
+        if isinstance(t, list):
+            for i, item in enumerate(t):
+                out.update({f"{table}[{i}].{k}": v for k, v in item.items()})
+        else:
+            out.update({f"{table}.{k}": v for k, v in t.items()})
+    return out
+
+
+def _worded(key: str, value: Any) -> str:
+    unit = _UNITS.get(key, _UNITS.get(key.rsplit(".", 1)[-1], ""))
+    if isinstance(value, list):
+        text = f"[{', '.join(f'{x:g}' if isinstance(x, float) else str(x) for x in value)}]"
+    elif isinstance(value, float):
+        text = f"{value:g}"
+    else:
+        text = str(value)
+    return f"{text} {unit}" if unit else text
+
+
+def plan_differences(old: TestPlan, new: TestPlan, old_name: str, new_name: str,
+                     most: int = 3) -> list[str]:
+    """What differs between two plans, in the plan file's words, as
+    ``"record.length 1.5 s in run.h5, 2 s in plan.toml"``; empty when they acquire alike.
+
+    The plan's name is not compared, nor the keys its method does not use (a hammer
+    plan's ``[shaker]`` table, a shaker plan's hits and trigger settings). Points are
+    compared in order; a different number of them is one difference. At most ``most``
+    differences are listed, then how many more there are.
+    """
+    a, b = _flat(old.to_dict()), _flat(new.to_dict())
+    unused = _UNUSED[old.method] if old.method == new.method else ()
+    counts = {"excitation": (len(old.excitations), len(new.excitations)),
+              "response": (len(old.responses), len(new.responses))}
+    found: list[str] = []
+    for key, value in a.items():
+        table = key.split("[")[0]
+        if (key == "plan.name" or key.startswith(unused) or value == b.get(key)
+                or (table in counts and counts[table][0] != counts[table][1])):
+            continue
+        found.append(f"{key} {_worded(key, value)} in {old_name}, "
+                     f"{_worded(key, b.get(key))} in {new_name}")
+    found += [f"{table} {n_old} points in {old_name}, {n_new} in {new_name}"
+              for table, (n_old, n_new) in counts.items() if n_old != n_new]
+    if len(found) > most:
+        found = [*found[:most], f"{len(found) - most} more"]
+    return found
 
 
 def load_plan(path: str | Path) -> TestPlan:

@@ -47,6 +47,7 @@ class Procedure:
         self._thread: threading.Thread | None = None
         self._done = threading.Event()
         self._stop_asked = threading.Event()
+        self._stop_reason = "stopped by the operator"
 
     # -- public API (any thread) ----------------------------------------------------------------
     def add_listener(self, listener: Any) -> None:
@@ -69,8 +70,11 @@ class Procedure:
         """Continue a paused run (devices restart; the current point is announced again)."""
         self._cmds.put(("resume", None))
 
-    def stop(self) -> None:
-        """End the run early; everything acquired stays in the file (state ``stopped``)."""
+    def stop(self, reason: str = "stopped by the operator") -> None:
+        """End the run early; everything acquired stays in the file (state ``stopped``,
+        message ``reason``; the first stop's reason is kept)."""
+        if not self._stop_asked.is_set():
+            self._stop_reason = reason
         self._stop_asked.set()  # seen at once by long steps (a shaker's ramp) that poll it
         self._cmds.put(("stop", None))
 
@@ -168,8 +172,10 @@ class Procedure:
             try:
                 self.on_pause()
             except DeviceError as err:
-                logger.warning("stopping devices while pausing: %s", err)
-            logger.warning("run paused: %s", reason)
+                # the device that made the run pause often fails to stop too: the
+                # log file keeps it, the listeners say the one thing that matters
+                logger.info("stopping devices while pausing: %s", err)
+            logger.info("run paused: %s", reason)
             self.emit("on_paused", reason)
             while not self._handle(*self._cmds.get()):
                 pass
@@ -191,7 +197,7 @@ class Procedure:
                 self.state = RunState.FINISHED
             except StopRequestedError:
                 self.state = RunState.STOPPED
-                self.message = "stopped by the operator"
+                self.message = self._stop_reason
             except Exception as err:  # surfaced to the listeners, never lost
                 logger.exception("procedure failed")
                 self.state = RunState.FAILED

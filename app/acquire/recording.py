@@ -20,10 +20,10 @@ import numpy as np
 
 from app.acquire.analysis import RecordAnalysis, anti_aliased
 from app.acquire.events import HitRecord, PointFRF, Progress
-from app.acquire.plan import PlanError, TestPlan
+from app.acquire.plan import PlanError, TestPlan, parse_plan, plan_differences
 from app.acquire.procedure import Procedure
 from app.acquire.space import check_disk_space
-from app.io.runfile import RunWriter
+from app.io.runfile import RecordTable, RunData, RunWriter
 from drivers.base import ChannelConfig
 from drivers.station import StationConfig
 from processing.data import FRFSet, InputError
@@ -31,9 +31,23 @@ from processing.geometry import GeometryError, GeometryReport
 from processing.identify import IdentificationResult, fit
 from processing.measurement import Measurement
 
-__all__ = ["RecordingProcedure"]
+__all__ = ["RecordingProcedure", "resumed_plan"]
 
 logger = logging.getLogger(__name__)
+
+
+def resumed_plan(run: RunData, plan: TestPlan | None, name: str | None = None) -> TestPlan:
+    """The plan stored in ``run`` (a run file to resume); ``plan``, when given, must not
+    differ from it (:func:`~app.acquire.plan.plan_differences`), or :class:`PlanError`
+    says where, in one line. ``name`` is the run file's name in it (default its path)."""
+    path = Path(run.path)
+    stored = parse_plan(run.plan_data, f"{path}:/plan")
+    if plan is None:
+        return stored
+    diff = plan_differences(stored, plan, name or str(path), Path(plan.source).name)
+    if diff:
+        raise PlanError(f"{'; '.join(diff)}: resume with the stored plan or start a new run")
+    return stored
 
 
 class RecordingProcedure(Procedure):
@@ -46,9 +60,9 @@ class RecordingProcedure(Procedure):
     station: StationConfig
     path: Path  # the run file
     resume_file: bool  # continue the run in it
-    rows: tuple[ChannelConfig, ...]  # the rows of every record: force(s) first
     analysis: RecordAnalysis  # RunAnalysis (hammer) or BlockAnalysis (shaker)
     ref_name: str  # the front end of the responses
+    rows: tuple[ChannelConfig, ...]  # the channels of every record: forces, then responses
     hits: list[HitRecord]
     point_index: int
     writer: RunWriter | None
@@ -99,6 +113,31 @@ class RecordingProcedure(Procedure):
         self._open_devices()
         self._open_file()
         self._t0 = time.monotonic()
+        # the counters as the run starts (a resumed run's points done before it included)
+        need = self._records_needed()
+        self.point_index = next((d for d in range(len(self.plan.drives))
+                                 if self.analysis.n_used(d) < need), self.point_index)
+        self._emit_progress()
+
+    def _check_stored_channels(self, run: RunData) -> None:
+        """A run resumes on the channels its records hold (PlanError before any device
+        opens, naming the station the run was acquired with)."""
+        stored = tuple(c.name for c in run.channels)
+        rows = tuple(c.name for c in self.rows)
+        if stored != rows:
+            where = run.station_data.get("source") or run.station_data.get("name") or "?"
+            raise PlanError(f"{run.path}: recorded channels {', '.join(stored)} differ from "
+                            f"the station's {', '.join(rows)}: resume on the station the run "
+                            f"was acquired with ({where})")
+
+    def _keep_stored(self, records: RecordTable) -> None:
+        """The hits (blocks) of a resumed run's file, without samples, as :attr:`hits`."""
+        need, fs = self._records_needed(), self.plan.record.fs
+        self.hits = [HitRecord(i, int(records.point[i]), float(records.time[i]),
+                               float(records.peak_force[i]), bool(records.auto_accepted[i]),
+                               records.reason[i], records.override[i],
+                               int(records.bad_frames[i]), int(records.missing[i]),
+                               point_needed=need, fs=fs) for i in range(len(records))]
 
     def _response_frontend(self) -> str:
         """Name of the one device that records every response of the plan."""
@@ -130,10 +169,16 @@ class RecordingProcedure(Procedure):
             None if res is None or res.H is None else res.H[:, 0, :],
             None if res is None or res.coherence is None else res.coherence[:, 0, :],
             0 if res is None else res.n_accepted))
+        self._emit_progress()
+
+    def _emit_progress(self) -> None:
+        """``on_progress`` with the counters of the whole run file."""
+        need = self._records_needed()
+        done = sum(self.analysis.n_used(d) >= need for d in range(len(self.plan.drives)))
         self.emit("on_progress", Progress(
             self.point_index, len(self.plan.drives), self.analysis.n_used(self.point_index),
-            self._records_needed(), len(self.hits), sum(h.accepted for h in self.hits),
-            self._bad_frames(), time.monotonic() - self._t0))
+            need, len(self.hits), sum(h.accepted for h in self.hits), self._bad_frames(),
+            time.monotonic() - self._t0, done))
 
     def shutdown(self) -> None:
         """Devices off, then the file closed with the run's state unless it is complete."""

@@ -42,9 +42,9 @@ from app.acquire.analysis import analysis_measurement
 from app.acquire.blocks import WINDOWS, BlockAnalysis, block_verdict
 from app.acquire.events import HitRecord
 from app.acquire.hammer import station_summary
-from app.acquire.plan import ExcitationPoint, PlanError, TestPlan, parse_plan
+from app.acquire.plan import ExcitationPoint, PlanError, TestPlan
 from app.acquire.procedure import StopRequestedError
-from app.acquire.recording import RecordingProcedure
+from app.acquire.recording import RecordingProcedure, resumed_plan
 from app.acquire.shaker_io import BlockStream, ShakerDrive, ShakerDrives
 from app.io.runfile import RunWriter, iter_record_data, read_run
 from drivers.base import AcquisitionFrontEnd, ChannelConfig, ExcitationDevice
@@ -105,11 +105,11 @@ class ShakerProcedure(RecordingProcedure):
         super().__init__(listeners)
         self.path = Path(path)
         self.resume_file = resume
-        if plan is None:
-            if not resume:
-                raise PlanError("give a test plan (or resume a run file)")
-            plan = parse_plan(read_run(self.path, with_data=False).plan_data,
-                              f"{self.path}:/plan")
+        stored = read_run(self.path, with_data=False) if resume else None
+        if stored is not None:
+            plan = resumed_plan(stored, plan)
+        elif plan is None:
+            raise PlanError("give a test plan (or resume a run file)")
         if plan.method != "shaker":
             raise PlanError(f"{plan.source}: plan.method is {plan.method!r}; "
                             "this is the shaker procedure")
@@ -120,6 +120,9 @@ class ShakerProcedure(RecordingProcedure):
         self.heartbeat = heartbeat
         self.geometry_report: GeometryReport = plan.check(station, strict=not partial)
         self._resolve(force_channel, shaker)
+        if stored is not None:
+            self._check_stored_channels(stored)
+        self._check_limits()
         self.analysis = BlockAnalysis(plan, [c.name for c in self.rows], np.array(
             [c.full_scale for c in self.rows]),
             loader=lambda ids: iter_record_data(self.path, ids))
@@ -173,6 +176,36 @@ class ShakerProcedure(RecordingProcedure):
         self.shaker_names = shakers[:n]
         self.shaker_name = shakers[0]
 
+    def _check_limits(self) -> None:
+        """Refuse (PlanError, one line) a ``[shaker]`` setting its shakers do not accept,
+        before any device is opened and any run file created."""
+        s, fs = self.plan.shaker, self.plan.record.fs
+        # device setting -> the plan's key, its value in the device's unit, the unit
+        values = {"level": ("shaker.level", s.level, "V"),
+                  "f_start": ("shaker.f_start", s.f_start, "Hz"),
+                  "f_stop": ("shaker.f_stop", s.f_stop, "Hz"),
+                  "ramp": ("shaker.ramp", s.ramp, "s")}
+        if s.waveform != "random":  # a chirp's and a burst's period is one block
+            values["period"] = ("shaker.nperseg", s.nperseg / fs, "s")
+        for name in self.shaker_names:
+            cfg = self.station.devices[name]
+            backend = get_backend(cfg.backend)
+            limits = backend.setting_limits(cfg) if issubclass(backend, ExcitationDevice) \
+                else {}
+            for setting, (low, high) in limits.items():
+                if setting not in values or low <= values[setting][1] <= high:
+                    continue
+                key, value, unit = values[setting]
+                over = value > high
+                what = (f"{key} = {s.nperseg} at record.fs = {fs:g} Hz is a {value:g} s period"
+                        if setting == "period" else f"{key} {value:g} {unit} is")
+                todo = ("the stored plan cannot run: start a new run" if self.resume_file
+                        else f"{'lower' if over else 'raise'} {key}")
+                raise PlanError(f"{self.plan.source}: {what} "
+                                f"{'above' if over else 'below'} the "
+                                f"{high if over else low:g} {unit} that {self.station.source} "
+                                f"allows for shaker {name!r}: {todo}")
+
     def _open_devices(self) -> None:
         fe = create_device(self.station.devices[self.ref_name],
                            **self.device_options.get(self.ref_name, {}))
@@ -208,11 +241,10 @@ class ShakerProcedure(RecordingProcedure):
         s = self.plan.shaker
         if self.resume_file:
             run = read_run(self.path, with_data=False)
-            if tuple(c.name for c in run.channels) != tuple(c.name for c in self.rows):
-                raise PlanError(f"{self.path}: recorded channels differ from the station's; "
-                                "resume with the same station")
+            self._check_stored_channels(run)
             self.writer = RunWriter.resume(self.path)
             rec = run.records
+            self._keep_stored(rec)
             for i, data in iter_record_data(self.path, range(len(rec))):
                 if self.stop_asked:  # a long run takes a while to read back: stop now
                     raise StopRequestedError

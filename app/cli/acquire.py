@@ -4,7 +4,11 @@ The plan's ``method`` picks the procedure: hammer (triggered hits) or shaker (a
 level ramp, then blocks averaged per point). ``--mock`` (or no ``--station``)
 acquires on the built-in in-process mock bench with a simulated operator (who
 hits, or moves the shaker). ``--resume`` continues an interrupted run from its
-file. ``--resume --override HIT=accept|reject|clear`` (repeatable; HIT the record
+file, with the plan stored there (a ``--plan`` that differs is refused, naming the keys)
+on the station the run was acquired with (the built-in mock bench it used, or the
+``--station`` it needs, said in one line before any device opens). Ctrl-C, SIGTERM and
+SIGHUP stop the run, its records kept, and the last line gives the command that
+continues it. ``--resume --override HIT=accept|reject|clear`` (repeatable; HIT the record
 number printed by the run, from 1) changes the operator's verdict of stored hits
 or blocks: the FRFs and the identification are recomputed from the raw records
 and stored when every point is complete (no device is opened then), otherwise
@@ -27,7 +31,9 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-from collections.abc import Mapping
+import signal
+import threading
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -38,7 +44,7 @@ from app.acquire import HammerProcedure, Listener, load_plan
 from app.acquire.events import HitRecord, RunState
 from app.acquire.events import Progress as RunProgress
 from app.acquire.overrides import override_run, parse_override
-from app.acquire.plan import TestPlan, parse_plan
+from app.acquire.plan import PlanError, TestPlan, parse_plan, plan_differences
 from app.acquire.recording import RecordingProcedure
 from app.acquire.shaker import ShakerProcedure
 from app.acquire.space import check_disk_space
@@ -58,9 +64,13 @@ STOP_WAIT = 15.0
 class ProgressBars(Listener):
     """Rich progress bars of a run: points (or stops) done, records of the current one."""
 
-    def __init__(self, progress: Progress, plan: TestPlan, console: Console) -> None:
+    def __init__(self, progress: Progress, plan: TestPlan, console: Console,
+                 quiet_pause: bool = False) -> None:
         self.progress = progress
         self.console = console
+        #: a pause the command answers itself (a mock bench stops there): its one line
+        #: is the command's last
+        self.quiet_pause = quiet_pause
         # a stop of the run: a point, or the points two shakers drive together
         self.points = progress.add_task(f"{plan.stop_word}s",
                                         total=len(plan.drives))
@@ -85,7 +95,7 @@ class ProgressBars(Listener):
 
     def on_paused(self, reason: str) -> None:
         self.paused = reason
-        if not reason.startswith(ATTACH):
+        if not reason.startswith(ATTACH) and not self.quiet_pause:
             self.console.print(f"[yellow]paused: {reason}[/yellow]")
 
 
@@ -104,7 +114,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--mock-operator", action="store_true",
                    help="with --station of a running insitu mock-bench: a simulated operator "
                         "hits (or moves the shaker) through its control channel")
-    p.add_argument("--bench", default="engine", help="mock bench (default engine)")
+    p.add_argument("--bench", help="mock bench (default engine; with --resume, the run's)")
     p.add_argument("--method", choices=("hammer", "shaker"), default="hammer",
                    help="mock plan: hammer or shaker (chirp, one block per --hits)")
     p.add_argument("--hits", type=int, default=1,
@@ -119,12 +129,13 @@ def _mock_plan(args: argparse.Namespace) -> TestPlan:
     from app.mockbench.bench import plan_for_bench
 
     pts = [int(x) for x in args.points.split(",")] if args.points else None
+    bench = args.bench or "engine"
     if args.method == "shaker":
         fs = 1024.0
-        return plan_for_bench(args.bench, points=pts, fs=fs, method="shaker", shaker={
+        return plan_for_bench(bench, points=pts, fs=fs, method="shaker", shaker={
             "waveform": "chirp", "nperseg": round(args.length * fs), "averages": args.hits,
             "f_start": 2.0, "f_stop": fs / 2.56, "ramp": 0.2, "settle": 1.5})
-    return plan_for_bench(args.bench, points=pts, hits=args.hits, length=args.length)
+    return plan_for_bench(bench, points=pts, hits=args.hits, length=args.length)
 
 
 def _in_process_bench(name: str, fs: float, shakers: int = 1) -> InProcessBench:
@@ -139,10 +150,9 @@ def _in_process_bench(name: str, fs: float, shakers: int = 1) -> InProcessBench:
     return InProcessBench(name, fs_frontend=fs, shakers=shakers)
 
 
-def _procedure(plan: TestPlan | None, station: StationConfig, args: argparse.Namespace,
+def _procedure(plan: TestPlan, station: StationConfig, args: argparse.Namespace,
                bench: InProcessBench | None) -> RecordingProcedure:
-    method = plan.method if plan is not None else read_run(args.out, with_data=False).method
-    if method == "shaker":
+    if plan.method == "shaker":
         return ShakerProcedure(plan, station, args.out, resume=args.resume,
                                listeners=[bench.shaker_operator] if bench else [],
                                confirm_attach=bench is None and not args.mock_operator)
@@ -230,18 +240,102 @@ def _apply_overrides(args: argparse.Namespace, console: Console) -> bool:
     return True
 
 
-def _kept(path: Path) -> str:
-    """What an ended run left, as it is on the disk: never a file that does not exist."""
+def _again(args: argparse.Namespace) -> str:
+    """The options that continue this run: ``--resume RUN.h5`` and the station's."""
+    station = f" --station {args.station}" if args.station is not None and not args.mock else ""
+    return f"--resume {args.out}{station}{' --mock-operator' if args.mock_operator else ''}"
+
+
+def _kept(path: Path, again: str) -> str:
+    """What an ended run left, as it is on the disk: never a file that does not exist;
+    ``again`` the options that continue it."""
     try:
         n = len(read_run(path, with_data=False).records) if path.is_file() else 0
     except ValueError as err:  # never "no record" for a file that may hold some
         return f"{err} (insitu repair {path} recovers the records written)"
     if n:
-        return f"its {n} records are in {path} (continue with --resume {path})"
+        return f"its {n} records are in {path} (continue with {again})"
     if path.is_file():
         return f"no record was acquired ({path} holds the run's settings; continue with " \
-               f"--resume {path})"
+               f"{again})"
     return "no record was acquired and no run file was written"
+
+
+def _stored_bench(station: Mapping[str, Any]) -> str | None:
+    """The built-in mock bench a run file's stored station is (None: a station file)."""
+    extra = station.get("extra")
+    if isinstance(extra, Mapping) and isinstance(extra.get("in_process_bench"), str):
+        return str(extra["in_process_bench"])
+    # run files written before the station's [extra] was stored: the in-process bench's name
+    if station.get("source") == "in-process mock station":
+        name = str(station.get("name", ""))
+        if name.startswith("in-process mock bench (") and name.endswith(")"):
+            return name[len("in-process mock bench ("):-1]
+    return None
+
+
+def _resume_checks(args: argparse.Namespace, plan: TestPlan | None) -> TestPlan:
+    """The plan a resumed run goes on with, its own; refusals before any device opens: a
+    ``--plan`` that differs from it, a station or bench other than the run's."""
+    run = read_run(args.out, with_data=False)
+    try:
+        stored = parse_plan(run.plan_data, f"{args.out}:/plan")
+    except PlanError as err:
+        raise UserError(f"{args.out} cannot be resumed (start a new run): its stored plan is "
+                        f"refused: {err}") from err
+    if plan is not None:
+        diff = plan_differences(stored, plan, args.out.name, args.plan.name)
+        if diff:
+            raise UserError(f"{'; '.join(diff)}: resume with the stored plan (omit --plan) "
+                            "or start a new run")
+    bench = _stored_bench(run.station_data)
+    source = run.station_data.get("source")
+    if bench is not None:
+        if args.station is not None and not args.mock:
+            raise UserError(f"{args.out} was acquired on the built-in mock bench {bench}: "
+                            "resume it without --station")
+        if args.bench not in (None, bench):
+            raise UserError(f"{args.out} was acquired on mock bench {bench}, not "
+                            f"{args.bench}: resume it without --bench")
+        args.bench = bench
+    elif isinstance(source, str) and source and (args.mock or args.station is None):
+        extra = run.station_data.get("extra")
+        mock = isinstance(extra, Mapping) and "mock_bench" in extra
+        raise UserError(f"{args.out} was acquired on station {source}: resume it with "
+                        f"--station {source}" + (" (and --mock-operator for the simulated "
+                                                 "operator)" if mock else ""))
+    return stored
+
+
+class _Signalled(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised in the main thread as Ctrl-C raises KeyboardInterrupt."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.name = name
+
+
+@contextlib.contextmanager
+def _stop_signals() -> Iterator[None]:
+    """SIGTERM and SIGHUP (a service manager, a closed terminal) stop the run as Ctrl-C
+    does; one is enough: more while the run stops are ignored (its stop is bounded by
+    :data:`STOP_WAIT`). Handlers can only be set in the main thread: elsewhere nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    seen: list[int] = []
+
+    def handler(signum: int, frame: Any) -> None:
+        if not seen:
+            seen.append(signum)
+            raise _Signalled(signal.Signals(signum).name)
+
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, previous in old.items():
+            signal.signal(sig, previous)
 
 
 def _check_paths(args: argparse.Namespace) -> None:
@@ -277,13 +371,13 @@ def _check_paths(args: argparse.Namespace) -> None:
                         "path")
 
 
-def _stop(proc: RecordingProcedure, path: Path) -> None:
+def _stop(proc: RecordingProcedure, path: Path, again: str, reason: str) -> None:
     """Stop the run and wait for it to end, :data:`STOP_WAIT` s at most (a UserError then:
     every record written so far is on the disk, the file is left as interrupted)."""
-    proc.stop()
+    proc.stop(reason)
     proc.wait(STOP_WAIT)
     if proc.running:
-        raise UserError(f"the run did not stop within {STOP_WAIT:g} s: {_kept(path)}")
+        raise UserError(f"the run did not stop within {STOP_WAIT:g} s: {_kept(path, again)}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -295,23 +389,23 @@ def run(args: argparse.Namespace) -> int:
     if args.override and _apply_overrides(args, console):
         return 0
     plan = load_plan(args.plan) if args.plan else None
-    with contextlib.ExitStack() as stack:
+    if args.resume:
+        plan = _resume_checks(args, plan)
+    again = _again(args)
+    with _stop_signals(), contextlib.ExitStack() as stack:
         bench = None
         if args.mock or args.station is None:
-            known = plan if plan is not None or not args.resume else parse_plan(
-                read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan")
-            fs = known.record.fs if known is not None else 1024.0
-            shakers = known.n_references if known is not None else 1
-            bench = stack.enter_context(_in_process_bench(args.bench, fs, shakers))
+            fs = plan.record.fs if plan is not None else 1024.0
+            shakers = plan.n_references if plan is not None else 1
+            bench = stack.enter_context(_in_process_bench(args.bench or "engine", fs, shakers))
             station = bench.station
-            if plan is None and not args.resume:
+            if plan is None:
                 plan = _mock_plan(args)
         else:
             station = load_station(args.station)
-            if plan is None and not args.resume:
+            if plan is None:
                 raise UserError("give --plan FILE (or --mock for the built-in bench's plan)")
-            _check_bench_shakers(plan if plan is not None else parse_plan(
-                read_run(args.out, with_data=False).plan_data, f"{args.out}:/plan"), station)
+            _check_bench_shakers(plan, station)
         proc = _procedure(plan, station, args, bench)
         check_disk_space(proc)  # before any device opens or the file is created
         operator = None
@@ -322,7 +416,8 @@ def run(args: argparse.Namespace) -> int:
         gave_up = ""
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
-            bars = ProgressBars(progress, proc.plan, console)
+            bars = ProgressBars(progress, proc.plan, console,
+                                quiet_pause=operator is not None or bench is not None)
             proc.add_listener(bars)
             proc.start()
             try:
@@ -334,19 +429,19 @@ def run(args: argparse.Namespace) -> int:
                         # records are kept
                         gave_up = (operator.error if operator is not None else "") or \
                             f"run paused: {proc.message}"
-                        _stop(proc, args.out)
+                        _stop(proc, args.out, again, "stopped at a pause")
                     elif proc.state is RunState.PAUSED and bars.paused.startswith(ATTACH):
                         bars.paused = ""
                         console.input(f"{proc.message}: press Enter ")
                         proc.resume()
-            except KeyboardInterrupt:
-                _stop(proc, args.out)
+            except KeyboardInterrupt as err:
+                _stop(proc, args.out, again, f"stopped by {err.name}"
+                      if isinstance(err, _Signalled) else "stopped by the operator")
     if gave_up:
-        raise UserError(f"{gave_up}; the run stopped, {_kept(args.out)}")
-    hits: list[HitRecord] = proc.hits
+        raise UserError(f"{gave_up}; the run stopped, {_kept(args.out, again)}")
     if proc.state is not RunState.FINISHED:
-        raise UserError(f"run {proc.state.value}: {proc.message}; {_kept(args.out)}")
-    console.print(f"{len(hits)} records, run written to {args.out}")
+        raise UserError(f"run {proc.state.value}: {proc.message}; {_kept(args.out, again)}")
+    console.print(f"{len(proc.hits)} records, run written to {args.out}")
     result = proc.result
     if result is not None:
         from app.cli.summary import print_result

@@ -94,7 +94,8 @@ def _acquire(args: argparse.Namespace, console: Console) -> int:
         proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
-            proc.add_listener(ProgressBars(progress, plan, console))
+            # the resumer's line is the pause's one line
+            proc.add_listener(ProgressBars(progress, plan, console, quiet_pause=True))
             resumer = _Resumer(proc, console)
             proc.add_listener(resumer)
             proc.start()

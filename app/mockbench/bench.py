@@ -155,7 +155,9 @@ class InProcessBench:
                            "channels": [{"name": "F", "input": 0, "quantity": "force",
                                          "sensitivity": 2.25, "range": 5.0}]},
                 **shaker_devices,
-            }}, "in-process mock station")
+            },
+            # a run file keeps it: --resume finds the bench its records came from
+            "extra": {"in_process_bench": name}}, "in-process mock station")
         self.operator = MockOperator(self.hammer, **(operator or {}))
         self.shaker_operator = MockShakerOperator(*self.shakers)
 
