@@ -98,7 +98,7 @@ def test_kill_9_on_a_station_then_the_command_the_refusal_gives(
     in one line, before any device opens, what it needs; that command completes the run."""
     plan = tmp_path / "plan.toml"
     plan.write_text((ROOT / "docs" / "mock_bench_plan.toml").read_text()
-                    .replace("length = 1.5", "length = 0.5"))
+                    .replace("length = 1.5", "length = 0.5").replace("hits = 3", "hits = 1"))
     with contextlib.contextmanager(running_bench)(tmp_path, "--bench", "engine-rigid") as (
             _, station):
         out = tmp_path / "run.h5"

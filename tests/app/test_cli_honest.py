@@ -68,6 +68,7 @@ def test_one_hit_a_point_is_not_a_coherence_check_in_any_view(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
         capsys: pytest.CaptureFixture[str]) -> None:
     six_point_plans(monkeypatch)  # the demo's plan (one hit a point) on six points
+    monkeypatch.setenv("COLUMNS", "200")  # the tables' rows unwrapped, whatever the host
     run, out, html = tmp_path / "run.h5", tmp_path / "r.json", tmp_path / "r.html"
     assert main(["demo", "--bench", "engine-rigid", "--length", "0.5", "--out",
                  str(run)]) == 0
