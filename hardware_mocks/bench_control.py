@@ -4,7 +4,7 @@
 127.0.0.1 for one JSON object per line and answers each with one line::
 
     -> {"cmd": "hit", "exc": 3, "peak": 250.0}
-    <- {"ok": true, "hits": [{"t0": 5123.4567, "exc": 3, "peak": 250.0, "duration": 0.001}]}
+    <- {"ok": true, "hits": [{"t0": 5123.4567, "exc": 3, "peak": 250.0, "duration": 0.0025}]}
     -> {"cmd": "attach-shaker", "exc": 5}          <- {"ok": true, "shaker": 1, "exc": 5}
     -> {"cmd": "attach-shaker", "exc": 7, "shaker": 2}   (a bench with two shakers)
     -> {"cmd": "fault", "device": "hammer", "name": "drop_every", "value": 7}

@@ -9,7 +9,7 @@ accelerations the model predicts for it, each on its own sample grid.
 A hit is a half-sine force pulse ``peak * sin(pi (t - t0) / duration)`` for
 ``t0 <= t <= t0 + duration``. Devices sample it as its mean over each sample
 interval (an ideal anti-alias box filter), which is exact to integrate. The built-in
-benches are hit with a steel tip (:data:`TIP_DURATION`, :data:`TIP_PEAK`): its force
+benches are hit with a hard tip (:data:`TIP_DURATION`, :data:`TIP_PEAK`): its force
 stays within 20 dB of its peak up to 1.30 / duration (:func:`pulse_band`).
 
 Continuous excitation (a shaker) is a :class:`ForceSource` added with
@@ -63,16 +63,20 @@ class ForceSource(Protocol):
         ...
 
 
-#: s, the built-in benches' hammer pulse (a steel tip on a cast engine or block: 0.5 to 1 ms).
-#: Its force is 20 dB under its peak at 1300 Hz (:func:`pulse_band`), above the band of every
-#: built-in plan (fs / 2.56 = 400 Hz at their 1024 Hz) and of the block's own 2048 Hz lines
-#: (800 Hz); a 4 ms (rubber-like) pulse was 20 dB down from 325 Hz, and its spectral zero
-#: (1.5 / duration, 375 Hz) lay inside the 400 Hz band.
-TIP_DURATION = 0.001
-#: N, the steel tip's peak: the impulse ``2 peak duration / pi`` (0.51 N s) of the same swing
-#: as the former 200 N, 4 ms pulse (a harder tip shortens the contact and raises the peak,
-#: the momentum given stays), so the force under the rigid-body modes is as before.
-TIP_PEAK = 800.0
+#: s, the built-in benches' hammer pulse: a hard tip whose force is 20 dB under its peak at
+#: 521 Hz (:func:`pulse_band`), above the Nyquist frequency of every built-in plan (their
+#: band is fs / 2.56 = 400 Hz at 1024 Hz; the force is 12 dB down there, sampling included);
+#: a 4 ms (soft) pulse was 20 dB down from 325 Hz and had its spectral zero (1.5 / duration,
+#: 375 Hz) inside that band. Not shorter: the mock devices sample a pulse as its mean over
+#: each sample (no anti-alias filter), so a force channel on another device (the hammer's
+#: 4096 Hz digitiser, resampled) misses what folds into the front end's band from above its
+#: Nyquist frequency; from a 1 ms pulse that was 2.8 % of the force on the mass line (the
+#: mass 0.7 % off), from this one 0.13 % (4 ms: 0.1 %).
+TIP_DURATION = 0.0025
+#: N, the tip's peak: the impulse ``2 peak duration / pi`` (0.51 N s) of the same swing as the
+#: former 200 N, 4 ms pulse (a harder tip shortens the contact and raises the peak, the
+#: momentum given stays), so the force under the rigid-body modes is as before.
+TIP_PEAK = 320.0
 
 
 def pulse_band(duration: float, drop_db: float = 20.0) -> float:
