@@ -4,7 +4,7 @@
 127.0.0.1 for one JSON object per line and answers each with one line::
 
     -> {"cmd": "hit", "exc": 3, "peak": 250.0}
-    <- {"ok": true, "hits": [{"t0": 5123.4567, "exc": 3, "peak": 250.0, "duration": 0.004}]}
+    <- {"ok": true, "hits": [{"t0": 5123.4567, "exc": 3, "peak": 250.0, "duration": 0.0025}]}
     -> {"cmd": "attach-shaker", "exc": 5}          <- {"ok": true, "shaker": 1, "exc": 5}
     -> {"cmd": "attach-shaker", "exc": 7, "shaker": 2}   (a bench with two shakers)
     -> {"cmd": "fault", "device": "hammer", "name": "drop_every", "value": 7}
@@ -145,15 +145,20 @@ class BenchControl:
             raise BenchControlError(f"mock bench: {reply.get('error', 'request refused')}")
         return dict(reply)
 
-    def hit(self, exc: int = 0, peak: float = 200.0, *, duration: float = 0.004,
+    def hit(self, exc: int = 0, peak: float | None = None, *, duration: float | None = None,
             delay: float = 0.05, double: tuple[float, float] | None = None
             ) -> list[dict[str, float]]:
-        """Hit excitation DOF ``exc`` with ``peak`` N for ``duration`` s, ``delay`` s from now.
+        """Hit excitation DOF ``exc`` with ``peak`` N for ``duration`` s, ``delay`` s from now
+        (``peak`` and ``duration`` left out: the bench's own hammer tip,
+        :data:`hardware_mocks.physics.TIP_PEAK` and :data:`~hardware_mocks.physics.TIP_DURATION`).
 
         Returns the pulses made (``t0`` on the host's monotonic clock, s).
         """
-        req: dict[str, Any] = {"cmd": "hit", "exc": exc, "peak": peak, "duration": duration,
-                               "delay": delay}
+        req: dict[str, Any] = {"cmd": "hit", "exc": exc, "delay": delay}
+        if peak is not None:
+            req["peak"] = peak
+        if duration is not None:
+            req["duration"] = duration
         if double is not None:
             req["double"] = list(double)
         return list(self.request(**req)["hits"])

@@ -34,7 +34,14 @@ from typing import Any
 from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.frontend_device import FrontEndDevice, shaker_force_inputs
 from hardware_mocks.hammer_device import HammerDevice
-from hardware_mocks.physics import HEARTBEAT, REPLY_TIMEOUT, STALL_TIMEOUT, BenchPhysics
+from hardware_mocks.physics import (
+    HEARTBEAT,
+    REPLY_TIMEOUT,
+    STALL_TIMEOUT,
+    TIP_DURATION,
+    TIP_PEAK,
+    BenchPhysics,
+)
 from hardware_mocks.shaker_device import ShakerDevice, bench_shakers, shaker_name
 from hardware_mocks.socketcand import SocketcandServer
 
@@ -198,8 +205,8 @@ class MockBench:
             if cmd == "hit":
                 double = request.get("double")
                 hits = self.physics.hit(
-                    int(request.get("exc", 0)), float(request.get("peak", 200.0)),
-                    float(request.get("duration", 0.004)), float(request.get("delay", 0.05)),
+                    int(request.get("exc", 0)), float(request.get("peak", TIP_PEAK)),
+                    float(request.get("duration", TIP_DURATION)), float(request.get("delay", 0.05)),
                     None if double is None else (float(double[0]), float(double[1])))
                 return {"ok": True, "hits": [{"t0": h.t0, "exc": h.exc, "peak": h.peak,
                                               "duration": h.duration} for h in hits]}

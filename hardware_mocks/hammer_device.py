@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hardware_mocks.benches import get_bench
-from hardware_mocks.physics import BenchPhysics, DeviceClock, Hit
+from hardware_mocks.physics import TIP_DURATION, TIP_PEAK, BenchPhysics, DeviceClock, Hit
 from hardware_mocks.pty_port import PtyPort
 from hardware_mocks.serial_device import SerialMockDevice
 
@@ -135,7 +135,7 @@ class HammerDevice(SerialMockDevice):
         with what the host measured."""
         return self._clock
 
-    def hit(self, exc: int = 0, peak: float = 200.0, duration: float = 0.004,
+    def hit(self, exc: int = 0, peak: float = TIP_PEAK, duration: float = TIP_DURATION,
             double: tuple[float, float] | None = None, delay: float = 0.05) -> list[Hit]:
         """Hit the bench at excitation DOF ``exc``; see :meth:`BenchPhysics.hit`."""
         return self.physics.hit(exc, peak, duration, delay, double)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Iterable, Mapping
 from typing import Any, Protocol
 
@@ -34,6 +35,7 @@ import numpy as np
 from hardware_mocks.bench_control import BenchControl, BenchControlError
 from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.hammer_device import HammerDevice
+from hardware_mocks.physics import TIP_DURATION, TIP_PEAK
 from hardware_mocks.shaker_device import ShakerDevice
 
 __all__ = ["MockOperator", "MockShakerOperator", "RemoteOperator", "RemoteShakerOperator",
@@ -49,7 +51,7 @@ SAME_DIRECTION = 0.999
 class Hammer(Protocol):
     """What hits the bench: the in-process :class:`HammerDevice` or a :class:`BenchControl`."""
 
-    def hit(self, exc: int = 0, peak: float = 200.0, *, duration: float = 0.004,
+    def hit(self, exc: int = 0, peak: float = TIP_PEAK, *, duration: float = TIP_DURATION,
             delay: float = 0.05, double: tuple[float, float] | None = None) -> Any: ...
 
 
@@ -93,11 +95,16 @@ class MockOperator:
     bench : Bench, optional
         The bench hit (default: the in-process hammer's).
     peak : float
-        Peak force of a normal hit, N.
+        Peak force of a normal hit, N (default: the bench's steel tip,
+        :data:`~hardware_mocks.physics.TIP_PEAK`).
     duration : float
-        Pulse duration, s.
+        Pulse duration, s (default :data:`~hardware_mocks.physics.TIP_DURATION`).
     pause : float
-        Delay between the procedure's request and the hit, s (lets the last one ring out).
+        Delay between the procedure's request and the hit, s.
+    settle : float
+        Least time between two hits, s: the operator waits for the bench to ring out (the
+        previous hit's response carried into the next record is an error of that record's
+        FRF). 0: hit ``pause`` s after each request.
     faults : mapping of int to str
         By hit number (0-based, over the run): ``"double"`` (a rebound 12 ms later at 40 %),
         or ``"overload"`` (``overload_peak`` N).
@@ -108,9 +115,9 @@ class MockOperator:
     """
 
     def __init__(self, hammer: HammerDevice | Hammer, *, bench: Bench | None = None,
-                 peak: float = 200.0, duration: float = 0.004, pause: float = 0.2,
+                 peak: float = TIP_PEAK, duration: float = TIP_DURATION, pause: float = 0.2,
                  faults: Mapping[int, str] | None = None, overload_peak: float = 3000.0,
-                 patience: float = 8.0) -> None:
+                 patience: float = 8.0, settle: float = 0.0) -> None:
         for k, v in (faults or {}).items():
             if v not in FAULTS:
                 raise ValueError(f"fault {v!r} for hit {k}: choose one of {', '.join(FAULTS)}")
@@ -120,7 +127,8 @@ class MockOperator:
             bench = hammer.physics.bench
         self.hammer = hammer
         self.bench = bench
-        self.peak, self.duration, self.pause = peak, duration, pause
+        self.peak, self.duration, self.pause, self.settle = peak, duration, pause, settle
+        self._last_t0: float | None = None
         self.faults = dict(faults or {})
         self.overload_peak = overload_peak
         self.hits_made = 0
@@ -173,8 +181,13 @@ class MockOperator:
         logger.debug("operator: hit %d at excitation %d%s", n, exc, f" ({fault})" if fault else "")
         peak = self.overload_peak if fault == "overload" else self.peak
         double = (0.012, 0.4) if fault == "double" else None
+        now = time.monotonic()
+        delay = self.pause
+        if self.settle > 0 and self._last_t0 is not None:
+            delay = max(delay, self._last_t0 + self.settle - now)
+        self._last_t0 = now + delay
         self.hammer.hit(exc=exc, peak=peak, duration=self.duration, double=double,
-                        delay=self.pause)
+                        delay=delay)
         self._watch(point)
 
     # -- listener callbacks --------------------------------------------------------------------

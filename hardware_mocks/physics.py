@@ -8,7 +8,9 @@ accelerations the model predicts for it, each on its own sample grid.
 
 A hit is a half-sine force pulse ``peak * sin(pi (t - t0) / duration)`` for
 ``t0 <= t <= t0 + duration``. Devices sample it as its mean over each sample
-interval (an ideal anti-alias box filter), which is exact to integrate.
+interval (an ideal anti-alias box filter), which is exact to integrate. The built-in
+benches are hit with a hard tip (:data:`TIP_DURATION`, :data:`TIP_PEAK`): its force
+stays within 20 dB of its peak up to 1.30 / duration (:func:`pulse_band`).
 
 Continuous excitation (a shaker) is a :class:`ForceSource` added with
 :meth:`BenchPhysics.add_source`: anything with an ``exc`` attribute (the
@@ -31,8 +33,8 @@ from numpy.typing import ArrayLike, NDArray
 from hardware_mocks.benches import Bench
 from hardware_mocks.signals import ImpulseResponse, impulse_response, simulate
 
-__all__ = ["HEARTBEAT", "REPLY_TIMEOUT", "STALL_TIMEOUT", "BenchPhysics", "DeviceClock",
-           "ForceSource", "Hit", "sampled_pulse"]
+__all__ = ["HEARTBEAT", "REPLY_TIMEOUT", "STALL_TIMEOUT", "TIP_DURATION", "TIP_PEAK",
+           "BenchPhysics", "DeviceClock", "ForceSource", "Hit", "pulse_band", "sampled_pulse"]
 
 # The mock devices are threads on the host the acquisition shares with other work: on a
 # loaded machine (load 10 on 2 cores) a mock front end's frames came up to 0.27 s apart
@@ -59,6 +61,47 @@ class ForceSource(Protocol):
     def force(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         """Force (N) at host instants ``t`` (s, ``time.monotonic()``)."""
         ...
+
+
+#: s, the built-in benches' hammer pulse: a hard tip whose force is 20 dB under its peak at
+#: 521 Hz (:func:`pulse_band`), above the Nyquist frequency of every built-in plan (their
+#: band is fs / 2.56 = 400 Hz at 1024 Hz; the force is 12 dB down there, sampling included);
+#: a 4 ms (soft) pulse was 20 dB down from 325 Hz and had its spectral zero (1.5 / duration,
+#: 375 Hz) inside that band. Not shorter: the mock devices sample a pulse as its mean over
+#: each sample (no anti-alias filter), so a force channel on another device (the hammer's
+#: 4096 Hz digitiser, resampled) misses what folds into the front end's band from above its
+#: Nyquist frequency; from a 1 ms pulse that was 2.8 % of the force on the mass line (the
+#: mass 0.7 % off), from this one 0.13 % (4 ms: 0.1 %).
+TIP_DURATION = 0.0025
+#: N, the tip's peak: the impulse ``2 peak duration / pi`` (0.51 N s) of the same swing as the
+#: former 200 N, 4 ms pulse (a harder tip shortens the contact and raises the peak, the
+#: momentum given stays), so the force under the rigid-body modes is as before.
+TIP_PEAK = 320.0
+
+
+def pulse_band(duration: float, drop_db: float = 20.0) -> float:
+    """Hz: the frequency up to which a half-sine pulse of ``duration`` s keeps its force
+    spectrum within ``drop_db`` of its value at 0 Hz.
+
+    The pulse's spectrum relative to 0 Hz is ``cos(pi x) / (1 - 4 x^2)``, ``x = f duration``,
+    falling monotonically to its first zero at ``x = 1.5``; 20 dB (0.1) is reached at
+    ``x = 1.30``. (A device's sampling, the mean over each sample, takes off another
+    ``sinc(f / fs)``: 2.3 dB at 400 Hz of 1024 Hz.)
+
+    >>> round(pulse_band(0.001))
+    1300
+    """
+    if not duration > 0 or not drop_db > 0:
+        raise ValueError(f"duration and drop_db must be positive, got {duration}, {drop_db}")
+    from scipy.optimize import brentq
+
+    level = 10.0 ** (-drop_db / 20.0)
+    if level >= np.pi / 4:  # reached on the flat top, before x = 0.5
+        lo, hi = 1e-9, 0.5 - 1e-9
+    else:
+        lo, hi = 0.5 + 1e-9, 1.5
+    x = brentq(lambda x: np.cos(np.pi * x) / (1.0 - 4.0 * x * x) - level, lo, hi, xtol=1e-12)
+    return float(x) / duration
 
 
 @dataclass(frozen=True)
@@ -143,7 +186,7 @@ class BenchPhysics:
         self._irs: dict[tuple[float, int], ImpulseResponse] = {}
         self._lock = threading.Lock()
 
-    def hit(self, exc: int = 0, peak: float = 200.0, duration: float = 0.004,
+    def hit(self, exc: int = 0, peak: float = TIP_PEAK, duration: float = TIP_DURATION,
             delay: float = 0.05, double: tuple[float, float] | None = None) -> list[Hit]:
         """Hit excitation DOF ``exc`` ``delay`` s from now.
 

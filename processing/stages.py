@@ -405,7 +405,9 @@ class StiffnessStep:
         p, w = self.problem, self.w
         if p.window_decay:
             return "viscous", ("damping viscous (K + jwC): kept with an exponential window "
-                               "(its correction K*(jw + a) holds for damping analytic in s)")
+                               f"(tau = {p.exponential_tau:g} s; the damping it added was "
+                               "removed from C, by K*(jw + a), which holds for damping "
+                               "analytic in s)")
         ch = choose_damping(Xs, p.T, w, M, weights=self.weights, row_scale=p.row_scale,
                             symmetric=p.solver.symmetric, moments=self.moments(Xs))
         return ch.model, ch.reason
@@ -763,8 +765,6 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
     leak = leakage_warning(problem, bands, fitted)
     if leak:
         warnings.append(leak)
-    if tau:
-        warnings.append(f"exponential window (tau = {tau:g} s): its damping was removed from C")
     props = inertia_properties(fitted.theta)
     if not props.physically_consistent:
         warnings.append(

@@ -11,6 +11,7 @@ through UFF, identified with the plain and the improved methods.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -40,8 +41,45 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", type=Path,
                    help="run file to write (default: demo-run.h5 in the current folder, "
                         "numbered if it exists)")
-    p.add_argument("--length", type=float, default=1.5, help="record length per hit, s")
+    p.add_argument("--hits", type=int, default=DEMO_HITS,
+                   help="hits a point (3 or more: the bootstrap over hits runs)")
+    p.add_argument("--length", type=float, default=DEMO_LENGTH, help="record length per hit, s")
+    p.add_argument("--exp-tau", type=float, default=None,
+                   help="exponential window time constant, s (default: the record's "
+                        "length after the pre-trigger / 5; 0: none)")
     p.set_defaults(run=run)
+
+
+#: hits a point. One: the simulated operator lets the bench ring out between hits
+#: (:data:`RING_OUT`), 2.8 s on the engine, so 18 hits take 50 s; three a point (the
+#: bootstrap over hits runs) take 2.5 min
+DEMO_HITS = 1
+#: s, record length per hit (0.5 Hz lines)
+DEMO_LENGTH = 2.0
+#: the exponential window falls to exp(-EXP_FALL) (0.7 %) at the record's end
+EXP_FALL = 5.0
+#: the operator hits again once the previous hit's response has decayed to exp(-RING_OUT)
+#: (0.25 %) of its start: RING_OUT times the bench's slowest decay time constant
+RING_OUT = 6.0
+
+
+def demo_exp_tau(length: float, pretrigger: float) -> float:
+    """The demo's exponential window time constant, s: the engine's rigid-body modes (10
+    to 30 Hz, 3 to 9 % damping, decay time constants up to 0.46 s) still ring at the end of a
+    2 s record, and the rectangular window leaks them into the mass line; the exponential
+    window takes them to exp(-:data:`EXP_FALL`) of their start by its end (the damping it
+    adds is taken off C)."""
+    return (length - pretrigger) / EXP_FALL
+
+
+def ring_out(bench_name: str) -> float:
+    """s between two hits of the demo's operator on built-in bench ``bench_name``:
+    :data:`RING_OUT` times its slowest decay time constant (2.8 s on the engine). A hit
+    sooner finds the previous one still ringing (a 0.2 s pause after each 1.5 s record left
+    2.5 % of it, and the mass came out 1 % high)."""
+    from hardware_mocks.signals import settling_time
+
+    return RING_OUT * settling_time(get_bench(bench_name).model)
 
 
 #: how often the demo resumes its simulated bench after a pause before it stops the run
@@ -83,14 +121,25 @@ def _acquire(args: argparse.Namespace, console: Console) -> int:
     from app.mockbench.bench import InProcessBench, plan_for_bench
 
     name = "engine" if args.bench == "engine" else args.bench
+    if args.hits < 1 or not args.length > 0 or (args.exp_tau is not None and args.exp_tau < 0):
+        raise UserError("--hits must be at least 1, --length positive and --exp-tau not "
+                        "negative")
     if args.out is not None and args.out.exists():
         raise UserError(f"{args.out} exists: choose another --out")
     path = args.out or _free_name()
-    with InProcessBench(name) as bench:
-        plan = plan_for_bench(name, length=args.length)
+    settle = ring_out(name)
+    with InProcessBench(name, operator={"settle": settle}) as bench:
+        plan = plan_for_bench(name, hits=args.hits, length=args.length)
+        rec = plan.record
+        tau = demo_exp_tau(rec.length, rec.pretrigger) if args.exp_tau is None else args.exp_tau
+        plan = dataclasses.replace(plan, record=dataclasses.replace(rec, exp_tau=tau or None))
         console.rule(f"insitu demo: {bench.bench.description}")
-        console.print(f"hammer test of {len(plan.excitations)} points through the drivers "
-                      f"(mock front end on CAN, hammer on {bench.hammer.path}) into {path}")
+        hits = f"{plan.hits} hit{'s' * (plan.hits > 1)} a point"
+        console.print(f"hammer test of {len(plan.excitations)} points, {hits} "
+                      f"({rec.length:g} s records, exponential window "
+                      f"{'none' if plan.record.exp_tau is None else f'{tau:g} s'}; the bench "
+                      f"rings out {settle:.1f} s between hits) through the drivers (mock front "
+                      f"end on CAN, hammer on {bench.hammer.path}) into {path}")
         proc = HammerProcedure(plan, bench.station, path, listeners=[bench.operator])
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:

@@ -113,9 +113,9 @@ def test_acquire_in_another_process_identifies_the_bench(
     result = fit(load(out, fmt=RUN_FILE))  # what every view identifies from the run file
     assert result is not None
     _same(json.loads(json.dumps(result.to_json())), stored)
-    # the stored FRFs keep the hammer's usable band (the 4 ms pulse's force is 20 dB down
-    # from about 320 Hz) in their provenance: with the per-hit spectra (not stored: they
-    # come from the records) they identify as the run did
+    # the stored FRFs keep the hammer's usable band (the 2.5 ms pulse's force is 20 dB down
+    # near Nyquist, above the 400 Hz the run identifies) in their provenance: with the
+    # per-hit spectra (not stored: they come from the records) they identify as the run did
     band_top = stored_m.provenance.force_band_top
     assert band_top is not None
     assert band_top == whole.provenance.force_band_top < stored_m.frf.freq[-1]

@@ -82,3 +82,26 @@ def test_demo_stops_when_the_bench_stays_silent(monkeypatch: pytest.MonkeyPatch,
     assert "frontend" in last and f"1 hits are in {out}" in last
     run = read_run(out)
     assert run.state == "stopped" and len(run.records) == 1
+
+
+@pytest.mark.slow
+def test_demo_is_clean_and_tight(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """``make demo`` as a fresh clone runs it (the whole 18-point plan, in real time, about
+    50 s): no warning, and the mass's 95 % interval under 2 % of the mass and around the
+    model's 110 kg."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo"]) == 0
+    text = capsys.readouterr().out
+    assert "warning" not in text.lower(), text
+    row = next(line for line in text.splitlines() if line.startswith("│ mass "))
+    cells = [c.strip() for c in row.split("│")[1:-1]]  # parameter, unit, value, 95 %, truth
+    mass, spread, truth = float(cells[2]), cells[3], float(cells[4])
+    assert truth == 110.0
+    if spread.startswith("± "):  # value ± 1.96 std
+        lo, hi = mass - float(spread[2:]), mass + float(spread[2:])
+    else:  # [lo, hi]
+        lo, hi = (float(x) for x in spread.strip("[]").split(","))
+    assert (hi - lo) / 2 < 0.02 * truth
+    assert lo <= truth <= hi
+    assert (tmp_path / "demo-run.h5").exists()

@@ -132,7 +132,7 @@ def test_hit_gives_the_models_accelerations(engine_physics_factory, channel_name
 
 def test_double_hit(fd_rig: tuple[FrontEndDevice, CanFrontEnd]) -> None:
     dev, fe = fd_rig
-    dev.physics.hit(exc=0, peak=200.0, double=(0.03, 0.5))
+    dev.physics.hit(exc=0, peak=200.0, duration=0.004, double=(0.03, 0.5))
     force = fe.read_block(512, timeout=2.0).channel("F")
     peaks, _ = find_peaks(force, height=40.0)
     assert len(peaks) == 2 and (peaks[1] - peaks[0]) / 1024 == pytest.approx(0.03, abs=2e-3)
@@ -177,7 +177,7 @@ def test_overload(engine_physics_factory, channel_name: str) -> None:
     physics = engine_physics_factory()
     dev, fe = rig(physics, channel_name, accel_range=1.0, accel_sens=100.0)
     try:
-        physics.hit(exc=0, peak=1000.0)  # ~ 15 m/s^2 at a0: 1.5 V on the 1 V range
+        physics.hit(exc=0, peak=1000.0, duration=0.004)  # ~ 15 m/s^2 at a0: 1.5 V on 1 V
         block = fe.read_block(1024, timeout=2.0)
         assert "a0" in block.overloaded and "F" not in block.overloaded
         assert np.nanmax(np.abs(block.channel("a0"))) == pytest.approx(1000 / 100.0, rel=1e-6)

@@ -44,7 +44,8 @@ def test_hit_is_measured_as_a_half_sine(rig: tuple[HammerDevice, SerialHammer]) 
 
 def test_double_hit_shows_two_pulses(rig: tuple[HammerDevice, SerialHammer]) -> None:
     dev, hammer = rig
-    dev.hit(exc=0, peak=300.0, double=(0.012, 0.4))
+    # a 4 ms pulse spans 16 samples: its sampled peaks are its peaks to 1 %
+    dev.hit(exc=0, peak=300.0, duration=0.004, double=(0.012, 0.4))
     f = hammer.read_block(FS // 2, timeout=2.0).data[0]
     peaks, _ = find_peaks(f, height=50.0)
     assert len(peaks) == 2

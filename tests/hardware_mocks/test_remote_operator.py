@@ -11,6 +11,7 @@ from hardware_mocks.bench_control import BenchControl, BenchControlError, contro
 from hardware_mocks.bench_process import MockBench
 from hardware_mocks.benches import get_bench
 from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator, check_points
+from hardware_mocks.physics import TIP_PEAK
 
 
 def _point(index: int, node: int, direction: tuple[float, float, float]) -> SimpleNamespace:
@@ -33,7 +34,7 @@ def test_remote_operator_hits_where_the_procedure_asks_and_keeps_errors() -> Non
             op.on_hit(_hit(0, False, 0))                        # re-reported: ignored
             op.on_hit(_hit(0, True, 1))                         # complete: no more
             hits = bench.physics.hits()
-            assert [h.exc for h in hits] == [3, 3] and [h.peak for h in hits] == [200.0, 200.0]
+            assert [h.exc for h in hits] == [3, 3] and [h.peak for h in hits] == [TIP_PEAK] * 2
             shaker = RemoteShakerOperator(control)
             shaker.on_next_point(_point(2, 110, (0.0, 1.0, 0.0)))  # excitation 9
             assert bench.shaker.exc == 9 and shaker.points == [2]

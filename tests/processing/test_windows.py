@@ -58,3 +58,28 @@ def test_dynamic_stiffness_correction_recovers_k_and_c():
     assert np.abs(Km - K_true).max() > 0.1 * np.abs(model.K).max()  # the window matters
     Kc = correct_dynamic_stiffness(np.moveaxis(Km, 0, -1), freq, tau)
     assert_allclose(np.moveaxis(Kc, -1, 0), K_true, atol=1e-6 * np.abs(model.K).max())
+
+
+def test_a_windowed_fit_states_its_window_in_the_damping_note_not_as_a_warning():
+    """The window's damping taken off C is what the processing does, not a problem: the
+    damping model's note names the window, no warning; the fit recovers the model's truth
+    from FRFs the window turned into H(jw + 1/tau)."""
+    import dataclasses
+
+    from hardware_mocks.signals import frf_laplace
+    from processing.identify import fit
+    from processing.inertia import inertia_properties
+    from processing.measurement import Measurement, Provenance
+
+    bench, tau = get_bench("engine-rigid"), 0.4
+    g = bench.geometry
+    H = frf_laplace(bench.model, 2j * np.pi * bench.freq + 1 / tau, g.coordinates(bench.resp_nodes),
+                    bench.resp_dirs, g.coordinates(bench.exc_nodes), bench.exc_dirs)
+    r = fit(Measurement(dataclasses.replace(bench.frfset(), H=H),
+                        Provenance(exponential_tau=tau)))
+    assert r.warnings == ()
+    assert "exponential window (tau = 0.4 s; the damping it added was removed from C" in (
+        r.damping_note)
+    assert r.properties.mass == pytest.approx(inertia_properties(bench.model.theta).mass,
+                                              rel=1e-4)
+    assert_allclose(np.diag(r.C), np.diag(bench.model.C), rtol=0.01)
