@@ -172,9 +172,10 @@ def soak(minutes: float, seed: int, folder: Path, console: Console, hits: int = 
     rng = random.Random(seed)
     report = Report(minutes, seed)
     plan = folder / "plan.toml"
-    text = PLAN.read_text().replace("hits = 1", f"hits = {hits}").replace("length = 1.5",
-                                                                           "length = 0.5")
-    plan.write_text(text)
+    text, n = re.subn(r"^hits = \d+$", f"hits = {hits}", PLAN.read_text(), flags=re.M)
+    if n != 1:
+        raise RuntimeError(f"{PLAN}: no single 'hits = N' line to set")
+    plan.write_text(text.replace("length = 1.5", "length = 0.5"))
     out = folder / "soak.h5"
     bench = Bench(folder)
     bench.start()
