@@ -12,6 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pyqtgraph as pg
+from numpy.typing import NDArray
 from PySide6 import QtCore, QtGui
 
 from app.report.analysis import Analysis
@@ -32,6 +33,7 @@ __all__ = [
 COLORS = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000")
 DOF_LABELS = ("x", "y", "z", "rx", "ry", "rz")
 _PASS, _FAIL = "#009E73", "#D55E00"
+_NA = "#888888"  # a check that could not fail
 
 
 def configure() -> None:
@@ -92,7 +94,13 @@ def draw_coherence_bars(plot: pg.PlotItem, a: Analysis) -> None:
     worst = coh.min(axis=-1).ravel()
     x = np.arange(1, worst.size + 1)
     ok = worst >= thr
-    for mask, color, name in ((ok, _PASS, "pass"), (~ok, _FAIL, "below threshold")):
+    kinds: tuple[tuple[NDArray[np.bool_], str, str], ...] = (
+        (ok, _PASS, "pass"), (~ok, _FAIL, "below threshold"))
+    if a.result is not None and not a.result.coherence_checked:  # 1 by definition
+        plot.setTitle(f"Minimum coherence per FRF: not checked ({a.result.coherence_unchecked})",
+                      size="10pt")
+        kinds = ((np.ones_like(ok), _NA, "not checked"),)
+    for mask, color, name in kinds:
         if np.any(mask):
             plot.addItem(pg.BarGraphItem(x=x[mask], height=worst[mask], width=0.8,
                                          brush=color, pen=None))

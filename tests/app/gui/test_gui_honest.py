@@ -46,6 +46,8 @@ def test_checks_view_says_not_checked_for_one_hit_a_point(qtbot, make_window,
         "one hit a point: the coherence is 1 by definition")
     assert "All checks pass" not in view.overall.text()
     assert "not checked: " + coherence in view.overall.text()
+    title = view.coherence_bars.getPlotItem().titleLabel.text
+    assert "not checked (one hit a point" in title  # the bars are no "pass" either
     # the results view: the spreads' convention once, at the head of the uncertainty
     text = window.results_view.uncertainty.text()
     assert text.splitlines()[0] == SPREADS and text.count("95 %") == 1
