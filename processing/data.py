@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ESTIMATORS", "FRFSet", "Geometry", "InputError"]
+__all__ = ["ESTIMATORS", "MAX_UNDEFINED_SHARE", "FRFSet", "Geometry", "InputError", "dof_label",
+           "finite_frfs"]
 
 #: the FRF estimators the spectra compute (:mod:`processing.spectral`)
 ESTIMATORS = ("H1", "H2", "Hv")
@@ -148,3 +149,108 @@ class FRFSet:
     @property
     def exc_xyz(self) -> NDArray[np.float64]:
         return self.geometry.coordinates(self.exc_nodes, "excitation")
+
+
+#: largest share of an FRF set's lines that NaN or infinite FRF values may take out of it
+#: (more: the set is refused, naming the FRFs; a few bad lines are left out with a word)
+MAX_UNDEFINED_SHARE = 0.1
+#: FRFs and line ranges a message names at most (then "and N more")
+_NAMED = 4
+
+
+def dof_label(node: int, direction: NDArray[np.float64]) -> str:
+    """``12+X`` for node 12 along +X (``12(0.71,0.71,0)`` off the global axes)."""
+    d = np.asarray(direction, dtype=float)
+    k = int(np.argmax(np.abs(d)))
+    if np.isclose(abs(d[k]), 1.0, atol=1e-6):
+        return f"{node}{'+' if d[k] > 0 else '-'}{'XYZ'[k]}"
+    return f"{node}({','.join(f'{v:.2g}' for v in d)})"
+
+
+def _named(items: list[str], noun: str) -> str:
+    """``noun a, b, c`` with at most :data:`_NAMED` items, then ``and N more``."""
+    more = len(items) - _NAMED
+    return (f"{noun} " + ", ".join(items[:_NAMED])
+            + (f" and {more} more" if more > 0 else ""))
+
+
+def _frf_names(frf: FRFSet, bad: NDArray[np.bool_]) -> str:
+    """The FRFs (response/excitation DOFs) with a bad value somewhere, compactly."""
+    pairs = [f"{dof_label(frf.resp_nodes[r], frf.resp_dirs[r])}/"
+             f"{dof_label(frf.exc_nodes[e], frf.exc_dirs[e])}" for r, e in np.argwhere(bad)]
+    return _named(pairs, "FRF" if len(pairs) == 1 else "FRFs") + " (response/excitation)"
+
+
+def _line_ranges(freq: NDArray[np.float64], lines: NDArray[np.bool_]) -> str:
+    """``12.5-13, 40 Hz``: the runs of consecutive lines, compactly."""
+    idx = np.flatnonzero(lines)
+    starts = np.r_[0, np.flatnonzero(np.diff(idx) > 1) + 1]
+    ends = np.r_[starts[1:] - 1, idx.size - 1]
+    runs = [f"{freq[idx[a]]:g}" if a == b else f"{freq[idx[a]]:g}-{freq[idx[b]]:g}"
+            for a, b in zip(starts, ends, strict=True)]
+    more = len(runs) - _NAMED
+    return ", ".join(runs[:_NAMED]) + (f" and {more} more ranges" if more > 0 else "") + " Hz"
+
+
+def _lines(n: int) -> str:
+    return f"{n} line{'s' if n != 1 else ''}"
+
+
+def finite_frfs(frf: FRFSet, name: str = "the FRFs") -> tuple[FRFSet, tuple[str, ...]]:
+    """The set without its NaN or infinite values, and one line naming each kind found.
+
+    A line where any FRF value is NaN or infinite is left out of every FRF (the rigid-body
+    fits solve all FRFs of a line together); a NaN or infinite coherence value counts as
+    coherence 0 (that FRF value is weighed as noise: next to no weight in the fit). Each
+    line names the FRFs by response/excitation DOF (``12+X/3-Z``) and the frequencies.
+
+    Parameters
+    ----------
+    frf : the FRF set as read
+    name : what the messages call it (a file's name)
+
+    Returns
+    -------
+    (FRFSet, tuple of str)
+        ``frf`` itself and no line when every value is finite.
+
+    Raises
+    ------
+    InputError
+        Every FRF value undefined, or more than :data:`MAX_UNDEFINED_SHARE` of the lines
+        (or all but one) hold an undefined FRF value: one line naming the FRFs and lines.
+    """
+    H, coh = frf.H, frf.coherence
+    bad_h = ~np.isfinite(H)
+    bad_c = None if coh is None else ~np.isfinite(coh)
+    if not bad_h.any() and (bad_c is None or not bad_c.any()):
+        return frf, ()
+    n_f = frf.freq.size
+    if bad_h.all():
+        raise InputError(f"{name}: every FRF value is NaN or infinite: re-export the FRFs")
+    said: list[str] = []
+    keep = ~np.any(bad_h, axis=(0, 1))
+    n_out = n_f - int(np.count_nonzero(keep))
+    if n_out:
+        frfs = _frf_names(frf, np.any(bad_h, axis=2))
+        ranges = _line_ranges(frf.freq, ~keep)
+        if n_out > MAX_UNDEFINED_SHARE * n_f or n_f - n_out < 2:
+            raise InputError(f"{name}: NaN or infinite values in {frfs} on {n_out} of {n_f} "
+                             f"lines ({ranges}): more than {MAX_UNDEFINED_SHARE:.0%} of the "
+                             "lines; re-measure or re-export those FRFs, or leave their DOFs "
+                             "out of the file")
+        said.append(f"{name}: NaN or infinite values in {frfs} on {_lines(n_out)} ({ranges}): "
+                    "those lines are left out of every FRF")
+    if bad_c is not None:
+        bad_c = bad_c & keep
+        if bad_c.any():
+            assert coh is not None
+            on = np.any(bad_c, axis=(0, 1))
+            said.append(f"{name}: NaN or infinite coherence in "
+                        f"{_frf_names(frf, np.any(bad_c, axis=2))} on "
+                        f"{_lines(int(np.count_nonzero(on)))} ({_line_ranges(frf.freq, on)}): "
+                        "those values count as coherence 0 (next to no weight in the fit)")
+            coh = np.where(bad_c, 0.0, coh)
+    out = FRFSet(frf.freq[keep], H[..., keep], frf.resp_nodes, frf.resp_dirs, frf.exc_nodes,
+                 frf.exc_dirs, frf.geometry, None if coh is None else coh[..., keep])
+    return out, tuple(said)

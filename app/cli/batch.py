@@ -22,10 +22,10 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from app.batch.campaign import Row, run_campaign, write_tables
+from app.batch.campaign import TABLE_NAME, Row, run_campaign, write_tables
 from app.batch.cluster import open_client, total_threads
 from app.cli import identify as identify_verb
-from app.cli.common import VERB_HELP, UserError
+from app.cli.common import VERB_HELP, UserError, check_folder, check_output, check_range, reason
 from app.cli.frf import add_processing_arguments, settings_from
 
 #: the ``insitu identify`` options a campaign takes, with identify's own definitions and
@@ -34,6 +34,10 @@ from app.cli.frf import add_processing_arguments, settings_from
 _IDENTIFY = {"mass_band", "stiffness_band", "physical", "method", "refine_points",
              "no_uncertainty", "location_uncertainty", "angle_uncertainty", "gain_uncertainty",
              "draws", "bootstrap"}
+
+
+#: the tables a campaign writes in ``--out``
+TABLES = tuple(f"{TABLE_NAME}.{ext}" for ext in ("csv", "parquet", "html"))
 
 
 class _Capture:
@@ -72,18 +76,38 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
+#: most local worker processes (one thread each): beyond any machine's cores
+MAX_WORKERS = 256
+
+
+def check_out_folder(out: Path) -> None:
+    """``--out DIR`` checked before any work: a folder (or one to create in an existing,
+    writable folder) whose tables can be written."""
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {out} is a file, not a folder: give a folder for the tables")
+    if out.is_dir():
+        check_folder(out, "--out", f"--out {out}")
+        for name in TABLES:
+            check_output(out / name, "--out")
+        return
+    parent = out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    check_folder(parent, "--out", f"--out {out}")  # the folders are created there
+
+
 def run(args: argparse.Namespace) -> int:
-    if args.refine_points < 0:
-        raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
+    check_range("--workers", args.workers, 1, MAX_WORKERS, "worker processes")
     if args.workers is not None and args.scheduler is not None:
         raise UserError("--workers sizes the local cluster: leave it out with --scheduler "
                         "(the running cluster has its own workers)")
+    settings = settings_from(args)  # every option checked before any work is sent
+    options = identify_verb.options_from(args, identify_verb.stated_from(args))
+    check_out_folder(args.out)
     missing = [str(f) for f in args.files if not f.is_file()]
     if missing:
         raise UserError(f"no such file: {', '.join(missing[:5])}"
                         + (f" and {len(missing) - 5} more" if len(missing) > 5 else ""))
-    settings = settings_from(args)  # every option checked before any work is sent
-    options = identify_verb.options_from(args, identify_verb.stated_from(args))
     console = Console()
     t0 = time.perf_counter()
     with open_client(args.scheduler, args.workers) as client:
@@ -106,7 +130,11 @@ def run(args: argparse.Namespace) -> int:
         if r["status"] != "ok":
             console.print(f"[red]error[/red] {escape(str(r['file']))}: {escape(r['error'])}",
                           highlight=False)
-    paths = write_tables(rows, args.out)
+    try:
+        paths = write_tables(rows, args.out)
+    except OSError as err:  # the disk filled or the folder went away since the check
+        raise UserError(f"--out {args.out}: {reason(err)}: free some space or choose another "
+                        "--out") from err
     n_bad = sum(r["status"] != "ok" for r in rows)
     console.print(f"{len(rows)} files: {len(rows) - n_bad} identified, {n_bad} failed, in "
                   f"{elapsed:.1f} s on {n_workers} workers; written "

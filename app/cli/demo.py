@@ -21,10 +21,12 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from app.acquire.events import Listener
-from app.cli.common import VERB_HELP, UserError
+from app.cli.common import VERB_HELP, UserError, check_output, check_range
+from app.cli.simulate import MAX_LOCATION_ERROR, MAX_NOISE
 from app.cli.summary import print_result
 from app.io.uff import write_frf_uff
 from app.pipeline import FRF_UFF, load
+from app.pipeline.formats import H5_SUFFIXES
 from hardware_mocks.benches import BENCHES, get_bench
 from processing.identify import IdentifyOptions, fit
 from processing.inertia import inertia_properties
@@ -172,7 +174,19 @@ def _free_name(base: str = "demo-run") -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_range("--noise", args.noise, 0, MAX_NOISE, "(relative to |H|)")
+    check_range("--location-error", args.location_error, 0, MAX_LOCATION_ERROR, "m")
+    check_range("--length", args.length, 0.1, 60, "s")
+    if args.frf_only and args.out is not None:
+        raise UserError("--frf-only writes no run file: leave out --out")
     if not args.frf_only:
+        if args.out is not None:
+            if args.out.suffix.lower() not in H5_SUFFIXES:
+                raise UserError(f"--out {args.out}: the demo writes a run file: give a .h5 "
+                                "name")
+            if args.out.exists():
+                raise UserError(f"{args.out} exists: choose another --out")
+            check_output(args.out)
         return _acquire(args, Console())
     console = Console()
     bench = get_bench(args.bench)

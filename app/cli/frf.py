@@ -28,10 +28,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from app.cli.common import VERB_HELP, UserError
+from app.cli.common import FLAGS, VERB_HELP, UserError, check_output, reason
 from app.io.frf_h5 import write_frf_h5
 from app.io.uff import write_frf_uff
-from app.pipeline import RUN_FILE, TIME_UFF, OpenError, RunReport, Settings, load
+from app.pipeline import FRF_H5, FRF_UFF, RUN_FILE, TIME_UFF, OpenError, RunReport, Settings, load
 from app.pipeline.formats import H5_SUFFIXES, UFF_SUFFIXES
 from processing.data import ESTIMATORS
 from processing.measurement import Measurement
@@ -50,6 +50,69 @@ def add_parser(sub: Any) -> None:
     add_processing_arguments(p, method_alias=True)
     p.add_argument("--binary", action="store_true", help="UFF output: write binary 58b records")
     p.set_defaults(run=run)
+
+
+#: the time-data options (their ``dest``) and their values when not given (``--coherence``
+#: is not one: the identification of any input weighs FRF values by it)
+TIME_OPTIONS: dict[str, object] = {
+    "excitation": None, "estimator": "H1", "nperseg": None, "overlap": None, "window": None,
+    "averages": None, "level": None, "record": None, "pretrigger": None, "ring": None,
+    "exp_tau": None, "carryover": None, "tail": None, "fmax": None}
+#: the options of Welch segments (random excitation) and of hammer records (impact)
+WELCH_OPTIONS = ("nperseg", "overlap", "window")
+HAMMER_OPTIONS = ("level", "record", "pretrigger", "ring", "exp_tau", "tail")
+#: the time-data options ``insitu frf`` uses on a run file (the points it averages, the band)
+RUN_FILE_OPTIONS = ("averages", "fmax")
+
+
+def ignored_options(args: argparse.Namespace, fmt: str, name: str, *,
+                    run_file_options: Sequence[str] = (),
+                    excitation: str | None = None) -> str | None:
+    """The one line naming the options given that do not apply to input ``name`` of format
+    ``fmt`` (None when all apply): time-data options on FRFs, on a run file (but
+    ``run_file_options``), Welch options on impact data, hammer options on random data
+    (``excitation``: the time records' excitation when known), ``--bootstrap`` on FRFs."""
+    given = [d for d, unset in TIME_OPTIONS.items() if getattr(args, d, unset) != unset]
+    if fmt in (FRF_UFF, FRF_H5):
+        if getattr(args, "bootstrap", None):
+            given.append("bootstrap")
+        why = f"{name} holds FRFs, not time records"
+    elif fmt == RUN_FILE:
+        given = [d for d in given if d not in run_file_options]
+        why = f"{name} is a run file: its records are processed with its plan's settings"
+    elif excitation == "impact":
+        given = [d for d in given if d in WELCH_OPTIONS]
+        why = "the excitation is impact (they cut the Welch segments of random excitation)"
+    elif excitation == "random":
+        given = [d for d in given if d in HAMMER_OPTIONS]
+        why = "the excitation is random (they set the records of hammer hits)"
+    else:
+        return None
+    if not given:
+        return None
+    flags = {**FLAGS, "excitation": "--excitation", "estimator": "--estimator",
+             "bootstrap": "--bootstrap"}
+    return f"{', '.join(flags[d] for d in given)} ignored: {why}"
+
+
+def warn_ignored(args: argparse.Namespace, fmt: str, path: Path, *,
+                 run_file_options: Sequence[str] = (),
+                 excitation: str | None = None) -> bool:
+    """Prints :func:`ignored_options`' line on stderr, if any; True when the time records'
+    excitation was known (``fmt`` not time records, or ``excitation`` given)."""
+    line = ignored_options(args, fmt, path.name, run_file_options=run_file_options,
+                           excitation=excitation)
+    if line:
+        print(f"insitu {getattr(args, 'verb', 'frf')}: warning: {line}", file=sys.stderr)
+    return fmt != TIME_UFF or excitation is not None
+
+
+def given_excitation(args: argparse.Namespace) -> str | None:
+    """The time records' excitation the options say (a hammer option given means impact),
+    or None when the data tell."""
+    if args.excitation is not None:
+        return str(args.excitation)
+    return "impact" if any(getattr(args, d) is not None for d in HAMMER_OPTIONS) else None
 
 
 def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
@@ -155,13 +218,22 @@ def run(args: argparse.Namespace) -> int:
     if suffix not in H5_SUFFIXES + UFF_SUFFIXES:
         raise UserError(f"--out {out}: unknown suffix {out.suffix!r}: use .uff or .unv (UFF 58) "
                         "or .h5 or .hdf5 (HDF5 FRF file)")
+    check_output(out, inputs=(args.file,))  # before the records are read
     fmt = RUN_FILE if args.file.suffix.lower() in H5_SUFFIXES else TIME_UFF
+    known = warn_ignored(args, fmt, args.file, run_file_options=RUN_FILE_OPTIONS,
+                         excitation=given_excitation(args))
     m = load_and_show(args.file, args, settings, fmt)
+    if not known:
+        warn_ignored(args, fmt, args.file, excitation=m.provenance.excitation)
     frfs, n_bad = m.frf, m.provenance.skipped
-    if suffix in H5_SUFFIXES:
-        write_frf_h5(out, m, source=str(args.file))
-    else:
-        write_frf_uff(out, frfs, binary=args.binary, coherence=True)
+    try:
+        if suffix in H5_SUFFIXES:
+            write_frf_h5(out, m, source=str(args.file))
+        else:
+            write_frf_uff(out, frfs, binary=args.binary, coherence=True)
+    except OSError as err:  # the folder went away or the disk filled since the check
+        raise UserError(f"--out {out}: {reason(err)}: free some space or choose another "
+                        "--out; no FRF file was written") from err
     print(f"{frfs.H.shape[0]} x {frfs.H.shape[1]} FRFs ({m.provenance.estimator}), "
           f"{frfs.freq.size} lines, written to {out}"
           + (f"; {n_bad} bad run(s) skipped, exit status 2" if n_bad else ""))

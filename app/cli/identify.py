@@ -22,18 +22,35 @@ from typing import Any
 
 from rich.console import Console
 
-from app.cli.common import VERB_HELP, UserError, fit_progress
-from app.cli.frf import add_processing_arguments, load_and_show, settings_from
+from app.cli.common import (
+    VERB_HELP,
+    UserError,
+    check_output,
+    check_range,
+    fit_progress,
+    write_output,
+)
+from app.cli.frf import (
+    add_processing_arguments,
+    given_excitation,
+    load_and_show,
+    settings_from,
+    warn_ignored,
+)
 from app.cli.summary import print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
 from app.io.runfile import run_mounts
 from app.pipeline import RUN_FILE, TIME_UFF, detect_format
-from app.pipeline.settings import TestUncertaintySettings
+from app.pipeline.settings import MAX_FMAX, TestUncertaintySettings
 from app.report.mount_system import mount_system
 from processing.data import FRFSet
 from processing.identify import IdentificationResult, IdentifyOptions, fit
 from processing.montecarlo import StatedUncertainty
 from processing.mounts import check_mounts
+
+#: most rounds of point refinement (each a whole identification; they stop sooner when a
+#: step moves no point by 0.01 mm or does not improve the fit)
+MAX_REFINE_ROUNDS = 20
 
 
 def add_parser(sub: Any) -> None:
@@ -53,7 +70,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--method", choices=("improved", "plain"), default="improved",
                    help="improved (default) or the article's plain method")
     p.add_argument("--refine-points", type=int, default=0, metavar="N",
-                   help="rounds of response-point location refinement from the data (e.g. 3)")
+                   help="rounds of response-point location refinement from the data (e.g. 3; "
+                        f"at most {MAX_REFINE_ROUNDS}; no bootstrap)")
     add_uncertainty_arguments(p)
     add_mount_arguments(p)
     add_processing_arguments(p.add_argument_group(
@@ -117,10 +135,8 @@ def add_mount_arguments(p: Any) -> None:
 
 def mounts_from(args: argparse.Namespace) -> MountsFile | None:
     """The mounts file, validated and checked for identifiability before any numerics."""
-    if args.excitation_hz is not None and not args.excitation_hz > 0:
-        raise UserError(f"--excitation-hz must be > 0, got {args.excitation_hz:g}")
-    if args.loss_factor_hz is not None and not args.loss_factor_hz > 0:
-        raise UserError(f"--loss-factor-hz must be > 0, got {args.loss_factor_hz:g}")
+    check_range("--excitation-hz", args.excitation_hz, 0, MAX_FMAX, "Hz", above=True)
+    check_range("--loss-factor-hz", args.loss_factor_hz, 0, MAX_FMAX, "Hz", above=True)
     if args.mounts is None:
         return None
     mounts = load_mounts(args.mounts)
@@ -145,19 +161,36 @@ def bootstrap_from(args: argparse.Namespace) -> int | None:
 
 def options_from(args: argparse.Namespace, stated: StatedUncertainty | None) -> IdentifyOptions:
     """The user's identification choices of the command line (checked, one line each)."""
-    if args.refine_points < 0:
-        raise UserError(f"--refine-points must be >= 0, got {args.refine_points}")
+    check_range("--refine-points", args.refine_points, 0, MAX_REFINE_ROUNDS, "rounds")
+    bands = {flag: band_from(flag, b) for flag, b in (("--mass-band", args.mass_band),
+                                                      ("--stiffness-band", args.stiffness_band))}
+    bootstrap = bootstrap_from(args)
+    if args.refine_points and bootstrap:
+        raise UserError("--refine-points runs no bootstrap (each round is one fit): drop "
+                        "--bootstrap or --refine-points")
     return IdentifyOptions(
         method=args.method,
-        mass_band=tuple(args.mass_band) if args.mass_band else None,
-        stiffness_band=tuple(args.stiffness_band) if args.stiffness_band else None,
+        mass_band=bands["--mass-band"],
+        stiffness_band=bands["--stiffness-band"],
         physical=args.physical,
         refine_points=args.refine_points,
         coherence_threshold=args.coherence,
         uncertainty=not args.no_uncertainty,
         stated=stated,
-        bootstrap=bootstrap_from(args),
+        bootstrap=bootstrap,
     )
+
+
+def band_from(flag: str, band: list[float] | None) -> tuple[float, float] | None:
+    """``--mass-band LO HI`` or ``--stiffness-band LO HI`` checked: 0 <= LO < HI, finite."""
+    if band is None:
+        return None
+    lo, hi = band
+    check_range(flag, lo, 0, MAX_FMAX, "Hz")
+    check_range(flag, hi, 0, MAX_FMAX, "Hz", above=True)
+    if not lo < hi:
+        raise UserError(f"{flag} {lo:g} {hi:g}: give the lower edge first (LO < HI, Hz)")
+    return float(lo), float(hi)
 
 
 @dataclass(frozen=True)
@@ -172,12 +205,17 @@ class _Mounts:
 def run(args: argparse.Namespace) -> int:
     options = options_from(args, stated_from(args))  # every option checked before any file
     settings = settings_from(args)
+    if args.out is not None:
+        check_output(args.out, inputs=(args.file,))
     mounts = _Mounts(mounts_from(args), args.excitation_hz, args.loss_factor_hz)
     fmt = detect_format(args.file)
+    known = warn_ignored(args, fmt, args.file, excitation=given_excitation(args))
     if fmt == TIME_UFF:
         how = f"{args.excitation} excitation" if args.excitation else "settings from the data"
         print(f"{args.file}: time records; computing FRFs ({how})")
     m = load_and_show(args.file, args, settings, fmt)
+    if not known:
+        warn_ignored(args, fmt, args.file, excitation=m.provenance.excitation)
     stored = run_mounts(args.file) if fmt == RUN_FILE and mounts.table is None else None
     if stored is not None:
         print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")
@@ -199,5 +237,5 @@ def _report(path: Path, out: Path | None, frf: FRFSet, result: IdentificationRes
     ms = mount_system(result, mounts.table, mounts.excitation_hz, mounts.loss_factor_hz)
     print_mount_system(ms, console, spreads=result.uncertainty is None)
     if out:
-        out.write_text(json.dumps({**result.to_json(), **ms.to_json()}, indent=2))
+        write_output(out, json.dumps({**result.to_json(), **ms.to_json()}, indent=2))
         console.print(f"result written to {out}")

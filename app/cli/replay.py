@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from app.cli.common import VERB_HELP, UserError, fit_progress
+from app.cli.common import VERB_HELP, UserError, check_output, fit_progress, write_output
 from app.cli.summary import print_result
 from app.io.runfile import read_run
 from app.pipeline import RUN_FILE, load
@@ -33,6 +33,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out is not None:
+        check_output(args.out, inputs=(args.file,))  # before the run is read
     data = read_run(args.file)
     if len(data.records) == 0:
         raise UserError(f"{args.file}: the run holds no record yet")
@@ -52,6 +54,6 @@ def run(args: argparse.Namespace) -> int:
                       "[yellow]differs from the FRFs stored by the live run[/yellow]")
     print_result(result, console)
     if args.out:
-        args.out.write_text(json.dumps(result.to_json(), indent=2))
+        write_output(args.out, json.dumps(result.to_json(), indent=2))
         console.print(f"result written to {args.out}")
     return 0

@@ -12,7 +12,14 @@ import os
 from pathlib import Path
 from typing import Any
 
-from app.cli.common import VERB_HELP, UserError, fit_progress
+from app.cli.common import (
+    VERB_HELP,
+    UserError,
+    check_output,
+    check_range,
+    fit_progress,
+    write_output,
+)
 
 
 def add_parser(sub: Any) -> None:
@@ -33,18 +40,19 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from app.cli.frf import show_reports
     from app.pipeline import OpenError
+    from app.pipeline.settings import MAX_FMAX
     from app.report.analysis import analyse
     from app.report.sources import open_source
     from processing.identify import IdentifyOptions
 
+    check_range("--excitation-hz", args.excitation_hz, 0, MAX_FMAX, "Hz", above=True)
     if not args.file.is_file():
         raise UserError(f"no such file {args.file}")
     out = args.out or args.file.with_suffix(".html")
+    check_output(out, inputs=(args.file,))  # the default too: beside the input
     from app.io.mounts import load_mounts
     from processing.mounts import check_mounts
 
-    if args.excitation_hz is not None and not args.excitation_hz > 0:
-        raise UserError(f"--excitation-hz must be > 0, got {args.excitation_hz:g}")
     mounts = load_mounts(args.mounts) if args.mounts is not None else None
     if mounts is not None:
         check_mounts(mounts.mounts)
@@ -65,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     _qt_app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(["insitu-report"])
     html = build_report(a, f"In situ identification report: {args.file.name}", mounts,
                         args.excitation_hz)
-    out.write_text(html, encoding="utf-8")
+    write_output(out, html)
     if a.result is None:  # the report still shows the FRFs and checks
         raise UserError(f"{args.file.name}: identification failed: {a.error}; the report of "
                         f"the FRFs and checks is in {out}")

@@ -216,13 +216,23 @@ def open_for_writing(path: str | Path) -> Iterator[UffWriter]:
     """Write to a temporary file beside ``path`` and move it into place on success."""
     target = Path(path)
     tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.part")
-    # os.open applies the umask to 0o666, as a plain open() would (mkstemp would give 0o600)
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        # os.open applies the umask to 0o666, as a plain open() would (mkstemp: 0o600)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except OSError as err:
+        raise _named(err, target) from err
     try:
         with os.fdopen(fd, "wb") as fh:
             yield UffWriter(fh)
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.errno:
+            raise _named(err, target) from err
         raise
+
+
+def _named(err: OSError, target: Path) -> OSError:
+    """``err`` naming the file the caller asked for, not the temporary file written first."""
+    return type(err)(err.errno, os.strerror(err.errno or 0), str(target))

@@ -15,6 +15,7 @@ Example
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import json
 import os
@@ -103,8 +104,10 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
                 f.create_dataset(name, data=data).attrs["units"] = _UNITS[name]
         os.replace(tmp, p)
     except OSError as err:
-        tmp.unlink(missing_ok=True)
-        raise FRFFileError(f"{p}: cannot write the FRF file: {str(err).splitlines()[0]}") from err
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        why = os.strerror(err.errno) if err.errno else str(err).splitlines()[0]
+        raise FRFFileError(f"{p}: cannot write the FRF file: {why}") from err
 
 
 def read_frf_measurement(path: str | Path) -> Measurement:

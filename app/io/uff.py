@@ -110,17 +110,6 @@ def _axis_text(x: NDArray[np.float64]) -> str:
     return f"{x.size} lines from {x[0]:g} to {x[-1]:g} Hz"
 
 
-def _check_finite(
-    values: NDArray[np.generic], x: NDArray[np.float64], where: str, what: str
-) -> None:
-    bad = ~np.isfinite(values)
-    if np.any(bad):
-        raise InputError(
-            f"{where}: {int(bad.sum())} NaN or infinite {what} value(s), the first at "
-            f"{x[bad][0]:g} Hz: drop those lines (often 0 Hz) or re-export the file"
-        )
-
-
 def _accelerance(
     ds: Dataset, x: NDArray[np.float64], units: UnitFactors, where: str
 ) -> NDArray[np.complex128]:
@@ -146,15 +135,15 @@ def _accelerance(
     data = np.asarray(ds.get("data"))
     if not np.iscomplexobj(data):
         raise InputError(f"{where}: FRF values are real; complex FRFs are needed: re-export them")
-    _check_finite(data, x, where, "FRF")
     ln, fn = exponents(ds, "ordinate")
     ld, fd = exponents(ds, "orddenom")
-    H = data.astype(np.complex128) * (units.to_si(ln, fn) / units.to_si(ld, fd))
     w = 2.0 * np.pi * x
-    if num == 11:
-        H = H * (1j * w)
-    elif num == 8:
-        H = H * -(w**2)
+    with np.errstate(invalid="ignore"):  # an infinite value stays undefined: load names it
+        H = data.astype(np.complex128) * (units.to_si(ln, fn) / units.to_si(ld, fd))
+        if num == 11:
+            H = H * (1j * w)
+        elif num == 8:
+            H = H * -(w**2)
     return H
 
 
@@ -183,7 +172,6 @@ def _coherence(
                 "export coherence on the FRF frequency axis"
             )
         values = np.real(np.asarray(ds.get("data")))
-        _check_finite(values, x, where, "coherence")
         if seen[r[0], e[0]] >= 0:
             raise InputError(
                 f"{where}: second coherence record for response {resp.label(r[0])} and "
@@ -222,14 +210,15 @@ def read_frf_measurement_uff(path: str | Path) -> Measurement:
         file; ``coherence`` when a type-6 record exists for every pair, else None. The
         provenance's ``notes`` give the file's units, its ordinate types and the coherence
         found (``"coherence: absent"``, ``"complete"``, ``"incomplete (k of n pairs)"``);
-        ``source`` is the file's name.
+        ``source`` is the file's name. NaN or infinite FRF or coherence values are kept as
+        the file holds them (:func:`app.pipeline.load` names them and leaves them out).
 
     Raises
     ------
     InputError
         Missing or unparsable file; no nodes; a DOF node without coordinates; no FRF
         records; a response/reference pair missing or given twice; frequency axes that
-        differ; NaN or infinite values; an ordinate type other than acceleration (12),
+        differ; an ordinate type other than acceleration (12),
         velocity (11) or displacement (8); a denominator other than force (13).
     """
     p = Path(path)
@@ -308,7 +297,7 @@ def _frf_grid(entries: list[_FrfEntry], resp: _DofIndex, exc: _DofIndex,
                 f"(datasets #{owner[ri, ei] + 1} and #{i + 1}): keep one record per pair"
             )
         owner[ri, ei] = i
-        H[ri, ei] = sign * values
+        H[ri, ei] = values if sign > 0 else -values  # no product: inf stays inf
     missing = np.argwhere(owner < 0)
     if missing.size:
         ri, ei = (int(v) for v in missing[0])

@@ -6,6 +6,7 @@ A fifth format is added here: a name in :data:`FORMATS`, its test in :func:`dete
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
@@ -13,9 +14,10 @@ from app.io.frf_h5 import FORMAT as FRF_H5_FORMAT
 from app.io.frf_h5 import h5_format, read_frf_measurement
 from app.io.uff import read_frf_measurement_uff
 from app.io.uff_time import uff_holds_time_data
-from app.pipeline.settings import Settings
+from app.pipeline.settings import OpenError, Settings
 from processing.blas import one_blas_thread
-from processing.measurement import Measurement
+from processing.data import InputError, finite_frfs
+from processing.measurement import Measurement, Report
 
 __all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "H5_SUFFIXES", "READERS", "RUN_FILE", "SUFFIXES",
            "TIME_UFF", "UFF_SUFFIXES", "detect_format", "load"]
@@ -97,13 +99,16 @@ def load(path: str | Path, settings: Settings | None = None, *,
         provenance: given or estimated here, the per-hit or per-block spectra, the
         exponential window, the hammer's usable band, and the reports (one line per run or
         point: verdicts, runs left out, ``skipped``; the coherence gate and rigidity check of
-        FRFs computed from records; none for FRF files).
+        FRFs computed from records; NaN or infinite FRF values of any format:
+        :func:`processing.data.finite_frfs`, their lines left out of every FRF, their
+        coherence counted as 0, one line each naming the FRFs and frequencies).
 
     Raises
     ------
     OpenError, InputError, OSError
         One line naming the problem and what to do (an :class:`OpenError` carries the
-        reports gathered before it).
+        reports gathered before it); FRFs undefined on every line, or on more lines than
+        :data:`processing.data.MAX_UNDEFINED_SHARE`, are refused, naming them.
 
     Examples
     --------
@@ -111,4 +116,12 @@ def load(path: str | Path, settings: Settings | None = None, *,
     >>> fit(m).properties.mass  # doctest: +SKIP
     """
     p = Path(path)
-    return READERS[fmt or detect_format(p)](p, settings or Settings())
+    m = READERS[fmt or detect_format(p)](p, settings or Settings())
+    try:
+        frf, said = finite_frfs(m.frf, p.name)
+    except InputError as err:
+        raise OpenError(str(err), m.provenance.reports) from err
+    if not said:
+        return m
+    return dataclasses.replace(m, frf=frf, provenance=dataclasses.replace(
+        m.provenance, reports=(*m.provenance.reports, *(Report(s) for s in said))))

@@ -197,9 +197,9 @@ def test_unreachable_scheduler_is_one_line(tmp_path: Path, files: list[Path],
 
 
 @pytest.mark.parametrize(("extra", "message"), [
-    (["--refine-points", "-1"], "--refine-points must be >= 0, got -1"),
+    (["--refine-points", "-1"], "--refine-points must be from 0 to 20 rounds, got -1"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes the local"),
-    (["--workers", "0"], "--workers must be at least 1, got 0"),
+    (["--workers", "0"], "--workers must be from 1 to 256 worker processes, got 0"),
     (["--overlap", "1.5"], "--overlap must be at least 0 and below 1"),
 ])
 def test_bad_options_are_one_line(files: list[Path], tmp_path: Path, extra: list[str],

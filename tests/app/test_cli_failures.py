@@ -143,3 +143,128 @@ def test_a_log_message_holding_a_traceback_is_one_line_without_it() -> None:
         "call last):\n  File \"x.py\", line 1, in f\nConnectionResetError: reset", None, None)
     assert _OneLine().format(record) == ("ERROR can.interfaces.socketcand.socketcand: Failed "
                                          "to receive: [Errno 104] Connection reset by peer")
+
+
+# --- output paths: checked before anything is read or computed --------------------------------
+
+
+@pytest.fixture
+def no_work(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Every way a verb reads its input or computes, made to record its call: a verb that
+    refuses its output up front leaves the list empty."""
+    calls: list[str] = []
+
+    def called(name: str) -> object:
+        def record(*args: object, **kwargs: object) -> None:
+            calls.append(name)
+            raise AssertionError(f"{name} called before the output was checked")
+        return record
+
+    import app.cli.batch
+    import app.cli.demo
+    import app.cli.frf
+    import app.cli.identify
+    import app.cli.replay
+    import app.cli.simulate
+    import app.report.sources
+
+    for module, name in [(app.cli.frf, "load"), (app.cli.identify, "detect_format"),
+                         (app.cli.identify, "load_and_show"), (app.cli.replay, "read_run"),
+                         (app.cli.replay, "load"), (app.report.sources, "load"),
+                         (app.cli.simulate, "get_bench"), (app.cli.batch, "open_client"),
+                         (app.cli.demo, "_acquire")]:
+        monkeypatch.setattr(module, name, called(f"{module.__name__}.{name}"))
+    return calls
+
+
+def _verbs(src: Path, out: Path) -> dict[str, list[str]]:
+    return {"frf": ["frf", str(src), "--out", str(out.with_suffix(".uff"))],
+            "identify": ["identify", str(src), "--out", str(out)],
+            "replay": ["replay", str(src.with_suffix(".h5")), "--out", str(out)],
+            "report": ["report", str(src), "--out", str(out.with_suffix(".html"))],
+            "simulate": ["simulate", "engine", "--out", str(out.with_suffix(".uff"))],
+            "demo": ["demo", "--out", str(out.with_suffix(".h5"))]}
+
+
+@pytest.mark.parametrize("verb", ["frf", "identify", "replay", "report", "simulate", "demo"])
+def test_output_in_a_missing_folder_is_one_line_before_any_work(
+        verb: str, tmp_path: Path, no_work: list[str],
+        capsys: pytest.CaptureFixture[str]) -> None:
+    src = tmp_path / "in.uff"
+    src.write_text("not read")
+    (tmp_path / "in.h5").write_text("not read")
+    out = tmp_path / "nonexistent_dir" / "x.json"
+    argv = _verbs(src, out)[verb]
+    assert main(argv) == 2
+    line = _one_line(capsys)
+    assert line.startswith(f"insitu {verb}: error: --out {argv[-1]}: folder "
+                           f"{out.parent} does not exist: create it or choose another --out")
+    assert no_work == [] and not out.parent.exists()
+
+
+def test_batch_output_folder_checked_before_any_work(
+        tmp_path: Path, no_work: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    src = tmp_path / "in.uff"
+    src.write_text("not read")
+    assert main(["batch", str(src), "--out", str(src)]) == 2
+    assert _one_line(capsys) == (f"insitu batch: error: --out {src} is a file, not a folder: "
+                                 "give a folder for the tables")
+    assert main(["batch", str(src), "--out", "/proc/insitu-campaign"]) == 2
+    assert _one_line(capsys) == ("insitu batch: error: --out /proc/insitu-campaign: folder "
+                                 "/proc is not writable: choose another --out")
+    assert no_work == []
+
+
+@pytest.mark.parametrize(("target", "message"), [
+    ("/proc/version", "--out /proc/version: folder /proc is not writable: choose another --out"),
+    ("/proc/1/x", "--out /proc/1/x: folder /proc/1 is not writable: choose another --out"),
+    ("/dev/null", "--out /dev/null is a device or special file, not a regular file"),
+    ("{tmp}", "--out {tmp} is a folder: give a file name in it"),
+    ("{tmp}/in.uff", "--out {tmp}/in.uff is the input file: it would be replaced"),
+])
+@pytest.mark.parametrize("verb", ["identify", "replay", "report"])
+def test_special_or_unsafe_output_is_refused_naming_it(
+        verb: str, target: str, message: str, tmp_path: Path, no_work: list[str],
+        capsys: pytest.CaptureFixture[str]) -> None:
+    src = tmp_path / ("in.h5" if verb == "replay" else "in.uff")
+    src.write_text("not read")
+    target = target.format(tmp=tmp_path).replace("in.uff", src.name)
+    assert main([verb, str(src), "--out", target]) == 2
+    assert _one_line(capsys).startswith(
+        f"insitu {verb}: error: " + message.format(tmp=tmp_path).replace("in.uff", src.name))
+    assert no_work == [] and src.read_text() == "not read"
+
+
+def test_write_failing_at_the_end_names_the_users_path_not_a_temporary_file(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The folder passed the check, then the disk filled: one line naming --out, the old
+    file kept whole, no temporary file left."""
+    import errno
+    import os
+
+    import app.io._uff_write
+
+    uff = tmp_path / "engine.uff"
+    assert main(["simulate", "engine-rigid", "--out", str(uff)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "r.json"
+    out.write_text("old result")
+    real_replace = os.replace
+
+    def disk_full(src: object, dst: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(src))
+
+    monkeypatch.setattr(os, "replace", disk_full)
+    assert main(["identify", str(uff), "--out", str(out), "--no-uncertainty"]) == 2
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line == (f"insitu identify: error: --out {out}: cannot write it (No space left on "
+                    "device): free some space or choose another --out")
+    frf_out = tmp_path / "frf.uff"
+    monkeypatch.setattr(app.io._uff_write.os, "replace", disk_full)
+    assert main(["simulate", "engine-rigid", "--out", str(frf_out)]) == 2
+    assert _one_line(capsys) == (f"insitu simulate: error: --out {frf_out}: cannot write it (No "
+                                 "space left on device): free some space or choose another --out")
+    monkeypatch.setattr(os, "replace", real_replace)
+    assert out.read_text() == "old result" and not frf_out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["engine.uff", "r.json"]

@@ -84,3 +84,123 @@ def test_options_that_depend_on_the_data_are_checked_once_per_file(
     assert main(["frf", str(src), "--out", str(out), "--method", "impact", "--record",
                  "4"]) == 0
     assert out.exists() and np.isfinite(out.stat().st_size)
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["identify", "{f}", "--refine-points", "1000000000"],
+     "--refine-points must be from 0 to 20 rounds, got 1000000000"),
+    (["identify", "{f}", "--refine-points", "-1"],
+     "--refine-points must be from 0 to 20 rounds, got -1"),
+    (["identify", "{f}", "--refine-points", "3", "--bootstrap", "50"],
+     "--refine-points runs no bootstrap (each round is one fit): drop --bootstrap or "
+     "--refine-points"),
+    (["identify", "{f}", "--mass-band", "50", "10"],
+     "--mass-band 50 10: give the lower edge first (LO < HI, Hz)"),
+    (["identify", "{f}", "--stiffness-band", "-1", "10"],
+     "--stiffness-band must be from 0 to 10000000 Hz, got -1"),
+    (["identify", "{f}", "--stiffness-band", "1", "inf"],
+     "--stiffness-band must be above 0 and at most 10000000 Hz, got inf"),
+    (["identify", "{f}", "--excitation-hz", "inf"],
+     "--excitation-hz must be above 0 and at most 10000000 Hz, got inf"),
+    (["identify", "{f}", "--loss-factor-hz", "nan"],
+     "--loss-factor-hz must be above 0 and at most 10000000 Hz, got nan"),
+    (["report", "{f}", "--excitation-hz", "1e300"],
+     "--excitation-hz must be above 0 and at most 10000000 Hz, got 1e+300"),
+    (["batch", "{f}", "--out", "{d}", "--workers", "100000"],
+     "--workers must be from 1 to 256 worker processes, got 100000"),
+    (["batch", "{f}", "--out", "{d}", "--refine-points", "50"],
+     "--refine-points must be from 0 to 20 rounds, got 50"),
+    (["simulate", "engine", "--out", "{d}/x.uff", "--noise", "nan"],
+     "--noise must be from 0 to 1 (relative to |H|), got nan"),
+    (["simulate", "engine", "--out", "{d}/x.uff", "--location-error", "5"],
+     "--location-error must be from 0 to 0.1 m, got 5"),
+    (["simulate", "engine", "--out", "{d}/x.uff", "--seed", "-1"],
+     "--seed must be from 0 to 4294967295, got -1"),
+    (["simulate", "engine", "--out", "{d}/x.h5"],
+     "--out {d}/x.h5: simulate writes UFF: give a .uff or .unv name"),
+    (["demo", "--frf-only", "--noise", "-0.5"],
+     "--noise must be from 0 to 1 (relative to |H|), got -0.5"),
+    (["demo", "--length", "1e9"], "--length must be from 0.1 to 60 s, got 1000000000"),
+    (["demo", "--frf-only", "--out", "{d}/x.h5"],
+     "--frf-only writes no run file: leave out --out"),
+])
+def test_numbers_out_of_range_are_one_line_naming_the_range_before_any_work(
+        argv: list[str], message: str, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Refused before the file is looked at (it does not exist) or anything is computed."""
+    words = [a.format(f=tmp_path / "not-read.uff", d=tmp_path) for a in argv]
+    assert main(words) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    expected = f"insitu {argv[0]}: error: " + message.format(d=tmp_path)
+    assert err == [expected], err
+    assert sorted(tmp_path.iterdir()) == []
+
+
+# --- options that do not apply to the input: named in one warning line ------------------------
+
+
+def _stop_at_load(monkeypatch: pytest.MonkeyPatch, module: str) -> None:
+    """The verb stops where it would read the file: the warning comes before."""
+    import importlib
+
+    from app.cli.common import UserError
+
+    def stop(*args: object, **kwargs: object) -> None:
+        raise UserError("stopped before reading")
+
+    monkeypatch.setattr(importlib.import_module(module), "load_and_show", stop)
+
+
+def test_time_options_on_an_frf_file_are_named_ignored(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from app.io.uff import write_frf_uff
+
+    uff = tmp_path / "engine.uff"
+    write_frf_uff(uff, get_bench("engine-rigid").frfset(), binary=True)
+    assert main(["identify", str(uff), "--nperseg", "256", "--overlap", "0.25",
+                 "--estimator", "H2", "--bootstrap", "50", "--no-uncertainty"]) == 2
+    capsys.readouterr()  # --bootstrap with --no-uncertainty: refused before the warning
+    assert main(["identify", str(uff), "--nperseg", "256", "--overlap", "0.25",
+                 "--estimator", "H2", "--bootstrap", "50"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["insitu identify: warning: --estimator, --nperseg, --overlap, --bootstrap "
+                   "ignored: engine.uff holds FRFs, not time records"], err
+    assert main(["identify", str(uff), "--coherence", "0.5", "--no-uncertainty"]) == 0
+    assert capsys.readouterr().err == ""  # the coherence gate applies to FRFs too
+
+
+def test_time_options_on_a_run_file_are_named_ignored(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    import h5py
+
+    run = tmp_path / "shaker.h5"
+    with h5py.File(run, "w") as f:  # not an FRF file: a run file to the format detection
+        f.attrs["format"] = "insitu-run"
+    _stop_at_load(monkeypatch, "app.cli.identify")
+    assert main(["identify", str(run), "--nperseg", "256", "--overlap", "0.5"]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[0] == (
+        "insitu identify: warning: --nperseg, --overlap ignored: shaker.h5 is a run file: its "
+        "records are processed with its plan's settings")
+    _stop_at_load(monkeypatch, "app.cli.frf")
+    # insitu frf averages a run file's first N records and cuts its band: those apply
+    assert main(["frf", str(run), "--averages", "3", "--fmax", "100", "--window", "hann"]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[0] == (
+        "insitu frf: warning: --window ignored: shaker.h5 is a run file: its records are "
+        "processed with its plan's settings")
+
+
+def test_welch_options_on_impact_data_are_named_ignored(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    src = _impact_file(tmp_path)
+    out = tmp_path / "frf.uff"
+    assert main(["frf", str(src), "--out", str(out), "--method", "impact", "--nperseg",
+                 "256"]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert warned == ["insitu frf: warning: --nperseg ignored: the excitation is impact (they "
+                      "cut the Welch segments of random excitation)"]
+    # the excitation read from the data: the warning comes once it is known
+    assert main(["frf", str(src), "--out", str(out), "--window", "hann"]) == 0
+    warned = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert warned == ["insitu frf: warning: --window ignored: the excitation is impact (they "
+                      "cut the Welch segments of random excitation)"]

@@ -34,6 +34,7 @@ from app.io import (
 )
 from app.io._uff_write import AxisInfo, open_for_writing
 from app.io.uff_geometry import assign_node_frames
+from app.pipeline import FRF_UFF, load
 from hardware_mocks.benches import get_bench
 from processing.data import FRFSet, Geometry, InputError
 
@@ -408,9 +409,13 @@ def raw_file(path: Path, records: list[tuple[int, int, np.ndarray]], binary: boo
 def test_nan_or_infinite_values(tmp_path: Path, bad: float, binary: bool) -> None:
     data = DATA.copy()
     data[2] = bad
-    with pytest.raises(InputError) as excinfo:
-        read_frf_uff(raw_file(tmp_path / "n.uff", [(4, 12, data)], binary))
-    one_line_error(excinfo, "1 NaN or infinite FRF value(s), the first at 2 Hz")
+    path = raw_file(tmp_path / "n.uff", [(4, 12, data)], binary)
+    held = read_frf_uff(path).H[0, 0]  # the reader gives what the file holds...
+    assert not np.isfinite(held[2]) and np.isfinite(np.delete(held, 2)).all()
+    with pytest.raises(InputError) as excinfo:  # ...the pipeline's load names it
+        load(path, fmt=FRF_UFF)
+    one_line_error(excinfo, "n.uff: NaN or infinite values in FRF 1+X/2+X (response/excitation) "
+                            "on 1 of 8 lines (2 Hz): more than 10% of the lines")
     force = np.ones(8)
     with pytest.raises(InputError) as excinfo:
         read_time_uff(raw_file(tmp_path / "t.uff", [(1, 13, force), (1, 12, data.real)], binary))
