@@ -366,7 +366,7 @@ def live_table(runs: int, work: Path) -> Section:
         def on_hit(self, hit: object) -> None:
             self.hit = time.monotonic()
 
-        def on_result(self, result: object, final: bool) -> None:
+        def on_result(self, measurement: object, result: object, final: bool) -> None:
             if final:
                 self.final = time.monotonic()
             elif not self.first:
