@@ -1,10 +1,10 @@
 """``insitu repair RUN.h5``: make a run file killed in the middle of a write readable by any tool.
 
 The writer opens the run file only while it appends a record, so after a crash the
-file is nearly always readable as it is. If the crash struck during a write, HDF5
-tools refuse the file ("already open for write"); ``insitu`` itself still reads it,
-and this verb rewrites it into a clean copy (every completed record kept) that
-then replaces it.
+file is nearly always readable as it is. If the crash struck during a write, the file
+is still marked open for writing: HDF5 tools refuse it, and so does ``insitu`` unless the
+writer had SWMR on. This verb clears the mark (as HDF5's ``h5clear -s``) and rewrites the
+file into a clean copy (every completed record kept) that then replaces it.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    data = read_run(args.file, with_data=False)  # one line if it is no run file
-    mended = repair(args.file)
+    mended = repair(args.file)  # one line if it is no run file
+    data = read_run(args.file, with_data=False)
     what = "repaired" if mended else "already readable by any HDF5 tool"
     print(f"{args.file}: {what}; {len(data.records)} records ({data.state})")
     return 0

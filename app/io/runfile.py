@@ -39,14 +39,15 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from app.io._hdf5_mark import clear_write_mark
 from app.io.mounts import MountsFile, MountsFileError, mounts_from_dict
 from drivers.base import ChannelConfig
 from processing.data import FRFSet, Geometry
 from processing.measurement import Measurement, Provenance
 
 __all__ = ["RESERVE_BYTES", "SCHEMA_VERSION", "ChannelInfo", "DiskFullError", "RecordTable",
-           "RunData", "RunFileError", "RunWriter", "iter_record_data", "read_run", "repair",
-           "reserve_path", "run_mounts", "write_mounts"]
+           "RunData", "RunFileError", "RunWriter", "WriteMarkError", "iter_record_data",
+           "read_run", "repair", "reserve_path", "run_mounts", "write_mounts"]
 
 logger = logging.getLogger(__name__)
 
@@ -69,6 +70,11 @@ _COLUMNS: dict[str, tuple[str, str]] = {
 
 class RunFileError(ValueError):
     """The run file is missing, foreign, of another schema version or damaged (one line)."""
+
+
+class WriteMarkError(RunFileError):
+    """The run file is still marked open for writing by a writer stopped while it wrote
+    (``insitu repair`` clears the mark; one line)."""
 
 
 class DiskFullError(RunFileError):
@@ -548,15 +554,28 @@ def repair(path: str | Path) -> bool:
     "open for writing" mark only if it struck during that write. Such a file is copied
     object by object into a fresh one that then replaces it (the original stays in place
     until the copy is complete); every record whose columns were all written reads back.
-    The reserve file a killed writer left beside it (:func:`reserve_path`) is deleted.
+    The reserve file a killed writer left beside it (:func:`reserve_path`) is deleted. A
+    writer killed without SWMR (the usual case) leaves a mark every HDF5 open refuses: it is
+    cleared first (:func:`app.io._hdf5_mark.clear_write_mark`, as HDF5's ``h5clear -s``).
     """
     p = Path(path)
-    with _open(p) as f:
+    try:
+        f = _open(p)
+    except WriteMarkError:
+        # killed while it held the file, SWMR off: every HDF5 open refuses it until its
+        # "open for writing" mark is cleared (HDF5's h5clear -s)
+        if not clear_write_mark(p):
+            raise
+        f = _open(p)
+        marked = True
+    else:
+        marked = False
+    with f:
         _drop_reserve(p)
-        if f.mode == "r" and not f.swmr_mode:
+        if f.mode == "r" and not f.swmr_mode and not marked:
             return False
     tmp = p.with_name(p.name + ".repair-tmp")
-    with h5py.File(p, "r", swmr=True) as src, h5py.File(tmp, "w", libver="latest") as dst:
+    with h5py.File(p, "r", swmr=not marked) as src, h5py.File(tmp, "w", libver="latest") as dst:
         dst.attrs.update(dict(src.attrs))
         for key in src:
             src.copy(src[key], dst, name=key)
@@ -601,15 +620,20 @@ def _open(p: Path, patience: float = 2.0) -> h5py.File:
             return h5py.File(p, "r")
         except OSError as err:
             first = err
-        if "already open for write" in str(first):
+        marked = "already open for write" in str(first)
+        if marked:
             # killed mid-write (or being written): the SWMR reader sees every whole record
+            # when the writer had SWMR on
             try:
                 return h5py.File(p, "r", swmr=True)
-            except OSError as err:
-                first = err
-        if "unable to lock file" not in str(first) or time.monotonic() > deadline:
+            except OSError:
+                pass
+        if not (marked or "unable to lock file" in str(first)) or time.monotonic() > deadline:
             break
         time.sleep(0.02)  # the writer holds the file for a few ms per record
+    if marked:  # still marked after the patience: no writer is at it any more
+        raise WriteMarkError(f"{p}: its writer was stopped while writing to it (the file is "
+                             f"still marked open for writing): mend it with insitu repair {p}")
     raise RunFileError(f"{p}: not a readable HDF5 run file (truncated or damaged?): "
                        f"{str(first).splitlines()[0]}") from first
 

@@ -80,3 +80,55 @@ def test_repair_refuses_a_file_that_is_no_run(tmp_path: Path, capsys: pytest.Cap
     assert main(["repair", str(p)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a readable HDF5 run file" in err[0]
+
+
+def test_repair_clears_the_mark_of_a_writer_killed_without_swmr(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """kill -9 while the writer holds the file (as it does for each record's few ms): HDF5
+    refuses every open, SWMR too; the reader says so in one line and ``insitu repair``
+    clears the mark (HDF5's h5clear -s), every record whole."""
+    p = tmp_path / "run.h5"
+    w = new_writer(p)
+    for k in range(2):
+        w.add_record(k, np.full((3, 64), float(k)), time=float(k), peak_force=1.0,
+                     auto_accepted=True, reason="")
+    child = textwrap.dedent(f"""
+        import os
+        from pathlib import Path
+        from app.io.runfile import _append
+        f = _append(Path({str(p)!r}))  # the writer's own open, for a record
+        f.flush()
+        os.kill(os.getpid(), 9)
+    """)
+    subprocess.run([sys.executable, "-c", child], timeout=60,
+                   cwd=Path(__file__).resolve().parents[2])
+    for swmr in (False, True):
+        with pytest.raises(OSError, match=r"already open for (SWMR )?writ"):
+            h5py.File(p, "r", swmr=swmr)
+    with pytest.raises(RunFileError, match=r"marked open for writing\): mend it with insitu "
+                                           r"repair"):
+        read_run(p)
+    assert main(["replay", str(p)]) == 2  # one line naming the repair
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"insitu repair {p}" in err[0]
+    assert main(["repair", str(p)]) == 0
+    _plain_open(p)
+    run = read_run(p)
+    assert len(run.records) == 2 and np.array_equal(run.records.data[1], np.ones((3, 64)))
+    assert repair(p) is False
+
+
+def test_the_checksum_is_hdf5_s(tmp_path: Path) -> None:
+    """lookup3 as HDF5 computes it: the stored checksum of superblocks HDF5 wrote."""
+    from app.io._hdf5_mark import lookup3
+
+    for n in range(3):
+        p = tmp_path / f"f{n}.h5"
+        with h5py.File(p, "w", libver="latest") as f:
+            f.attrs["n"] = "x" * n
+            f["d"] = np.arange(n + 1)
+        head = p.read_bytes()[:48]
+        end = 12 + 4 * head[9]
+        assert int.from_bytes(head[end:end + 4], "little") == lookup3(head[:end])
+    assert lookup3(b"") == 0xDEADBEEF
+    assert lookup3(b"Four score and seven years ago") == 0x17770551  # Jenkins' own check
