@@ -16,6 +16,7 @@ from app.acquire.plan import plan_differences
 from app.cli.main import main
 from app.io.runfile import read_run
 from app.mockbench.bench import InProcessBench, plan_for_bench
+from tests.app.cli_lines import one_error_line
 
 ROOT = Path(__file__).resolve().parents[2]
 SHAKER_PLAN = ROOT / "docs" / "shaker_plan.toml"  # fs 512 Hz, f_stop 200 Hz, level 0.5 V
@@ -42,13 +43,6 @@ def _no_device(monkeypatch: pytest.MonkeyPatch) -> list[str]:
     return made
 
 
-def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    assert "Traceback" not in err[0]
-    return err[0]
-
-
 def test_f_stop_above_nyquist_is_refused_before_the_run_file(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = _plan(tmp_path, "f_stop = 200.0", "f_stop = 2000.0")
@@ -58,7 +52,7 @@ def test_f_stop_above_nyquist_is_refused_before_the_run_file(
     out = tmp_path / "run.h5"
     assert main(["acquire", "--mock", "--bench", "engine-rigid", "--plan", str(path),
                  "--out", str(out)]) == 2
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert "shaker.f_stop: 2000 Hz is above the Nyquist frequency" in line
     assert "lower shaker.f_stop or raise record.fs" in line
     assert not out.exists()
@@ -74,7 +68,7 @@ def test_a_level_the_station_does_not_allow_is_refused_before_the_run_file(
     out = tmp_path / "run.h5"
     assert main(["acquire", "--mock", "--bench", "engine-rigid", "--plan", str(path),
                  "--out", str(out)]) == 2
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert line == (f"insitu acquire: error: {path}: shaker.level 50 V is above the 2 V that "
                     "in-process mock station allows for shaker 'shaker': lower shaker.level")
     assert not out.exists() and made == []
@@ -108,7 +102,7 @@ def test_a_stored_level_the_station_does_not_allow_is_refused_on_resume(
     size, before = out.stat().st_size, read_run(out, with_data=False)
     made = _no_device(monkeypatch)
     assert main(["acquire", "--resume", str(out)]) == 2
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert f"{out}:/plan: shaker.level 50 V is above the 2 V" in line
     assert line.endswith("the stored plan cannot run: start a new run")
     assert "--resume" not in line and made == []

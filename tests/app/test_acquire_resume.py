@@ -16,6 +16,7 @@ from app.acquire import HammerProcedure, RunState, ShakerProcedure, load_plan
 from app.cli.main import main
 from app.io.runfile import read_run
 from app.mockbench.bench import InProcessBench, plan_for_bench
+from tests.app.cli_lines import one_error_line
 
 ROOT = Path(__file__).resolve().parents[2]
 POINTS = [0, 1, 3, 4, 6, 8]  # six forces spanning the rigid-body motions
@@ -70,13 +71,6 @@ def _no_device(monkeypatch: pytest.MonkeyPatch) -> list[str]:
     return made
 
 
-def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    assert "Traceback" not in err[0]
-    return err[0]
-
-
 def test_a_different_record_length_is_refused_before_any_device(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
@@ -88,7 +82,7 @@ def test_a_different_record_length_is_refused_before_any_device(
                     .replace("length = 1.5", "length = 2.0"))
     made = _no_device(monkeypatch)
     assert main(["acquire", "--resume", str(out), "--plan", str(plan)]) == 2
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert line.startswith("insitu acquire: error: ")
     assert "record.length 1.5 s in run.h5, 2 s in plan.toml; " in line
     assert line.endswith(": resume with the stored plan (omit --plan) or start a new run")
@@ -114,7 +108,7 @@ def test_a_different_shaker_level_is_refused_before_any_device(
     plan.write_text(shaker_plan.read_text().replace("level = 0.5", "level = 1.5"))
     made = _no_device(monkeypatch)
     assert main(["acquire", "--resume", str(out), "--plan", str(plan)]) == 2
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert ("error: shaker.level 0.5 V in run.h5, 1.5 V in plan.toml: resume with the stored "
             "plan (omit --plan) or start a new run") in line
     assert made == [] and out.stat().st_size == size

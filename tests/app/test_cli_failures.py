@@ -14,6 +14,7 @@ from app.io.runfile import read_run
 from drivers.errors import DeviceNotAvailableError
 from drivers.transports import CanLink
 from hardware_mocks.bench_process import MockBench
+from tests.app.cli_lines import one_error_line
 from tests.app.test_cli_demo import POINTS, six_point_plans
 
 PLAN = Path(__file__).resolve().parents[2] / "docs" / "mock_bench_plan.toml"
@@ -35,13 +36,6 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _one_line(capsys: pytest.CaptureFixture[str]) -> str:
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    assert "Traceback" not in err[0]
-    return err[0]
-
-
 def test_unreachable_socketcand_is_one_line_in_bounded_time(caplog: pytest.LogCaptureFixture
                                                             ) -> None:
     link = CanLink(name="fe", interface="socketcand", host="127.0.0.1", port=_free_port(),
@@ -60,7 +54,7 @@ def test_acquire_on_a_dead_station_writes_no_file_and_claims_none(
     out = tmp_path / "dead.h5"
     assert main(["acquire", "--station", str(station), "--plan", str(PLAN), "--out",
                  str(out)]) == 2
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert "no record was acquired and no run file was written" in line
     assert "records are in" not in line and not out.exists()
 
@@ -69,7 +63,7 @@ def test_acquire_into_a_missing_folder_is_refused_up_front(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "nope" / "x.h5"
     assert main(["acquire", "--mock", "--out", str(out)]) == 2
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert f"folder {out.parent} does not exist" in line and not out.parent.exists()
 
 
@@ -77,20 +71,20 @@ def test_resume_takes_the_run_file_and_refuses_a_finished_run(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run.h5"
     assert main(["acquire", "--resume", str(out)]) == 2
-    assert "no run file to resume" in _one_line(capsys)
+    assert "no run file to resume" in one_error_line(capsys)
     assert main(["acquire", "--mock", "--bench", "engine-rigid", "--points", "0,1,3,4,6,8",
                  "--length", "0.5", "--out", str(out)]) == 0
     capsys.readouterr()
     size = out.stat().st_size
     assert read_run(out, with_data=False).state == "finished"
     assert main(["acquire", "--resume", str(out)]) == 2  # the README's form
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert "is a finished run (6 records): nothing to resume" in line
     assert out.stat().st_size == size  # the file is not touched
     assert main(["acquire", "--resume", str(out), "--out", str(tmp_path / "other.h5")]) == 2
-    assert "give the run file once" in _one_line(capsys)
+    assert "give the run file once" in one_error_line(capsys)
     assert main(["acquire", "--mock"]) == 2
-    assert "give --out RUN.h5" in _one_line(capsys)
+    assert "give --out RUN.h5" in one_error_line(capsys)
 
 
 def test_a_bug_is_one_line_naming_the_log_file(monkeypatch: pytest.MonkeyPatch,
@@ -102,7 +96,7 @@ def test_a_bug_is_one_line_naming_the_log_file(monkeypatch: pytest.MonkeyPatch,
 
     monkeypatch.setattr(replay, "run", boom)
     assert main(["replay", "x.h5"]) == 1
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert line.startswith("insitu replay: internal error: RuntimeError: something we did not "
                            "foresee (details in ")
     log = Path(line.split("details in ")[1].split(";")[0])
@@ -196,7 +190,7 @@ def test_output_in_a_missing_folder_is_one_line_before_any_work(
     out = tmp_path / "nonexistent_dir" / "x.json"
     argv = _verbs(src, out)[verb]
     assert main(argv) == 2
-    line = _one_line(capsys)
+    line = one_error_line(capsys)
     assert line.startswith(f"insitu {verb}: error: --out {argv[-1]}: folder "
                            f"{out.parent} does not exist: create it or choose another --out")
     assert no_work == [] and not out.parent.exists()
@@ -207,10 +201,10 @@ def test_batch_output_folder_checked_before_any_work(
     src = tmp_path / "in.uff"
     src.write_text("not read")
     assert main(["batch", str(src), "--out", str(src)]) == 2
-    assert _one_line(capsys) == (f"insitu batch: error: --out {src} is a file, not a folder: "
+    assert one_error_line(capsys) == (f"insitu batch: error: --out {src} is a file, not a folder: "
                                  "give a folder for the tables")
     assert main(["batch", str(src), "--out", "/proc/insitu-campaign"]) == 2
-    assert _one_line(capsys) == ("insitu batch: error: --out /proc/insitu-campaign: folder "
+    assert one_error_line(capsys) == ("insitu batch: error: --out /proc/insitu-campaign: folder "
                                  "/proc is not writable: choose another --out")
     assert no_work == []
 
@@ -230,7 +224,7 @@ def test_special_or_unsafe_output_is_refused_naming_it(
     src.write_text("not read")
     target = target.format(tmp=tmp_path).replace("in.uff", src.name)
     assert main([verb, str(src), "--out", target]) == 2
-    assert _one_line(capsys).startswith(
+    assert one_error_line(capsys).startswith(
         f"insitu {verb}: error: " + message.format(tmp=tmp_path).replace("in.uff", src.name))
     assert no_work == [] and src.read_text() == "not read"
 
@@ -263,8 +257,9 @@ def test_write_failing_at_the_end_names_the_users_path_not_a_temporary_file(
     frf_out = tmp_path / "frf.uff"
     monkeypatch.setattr(app.io._uff_write.os, "replace", disk_full)
     assert main(["simulate", "engine-rigid", "--out", str(frf_out)]) == 2
-    assert _one_line(capsys) == (f"insitu simulate: error: --out {frf_out}: cannot write it (No "
-                                 "space left on device): free some space or choose another --out")
+    assert one_error_line(capsys) == (
+        f"insitu simulate: error: --out {frf_out}: cannot write it (No space left on device): "
+        "free some space or choose another --out")
     monkeypatch.setattr(os, "replace", real_replace)
     assert out.read_text() == "old result" and not frf_out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["engine.uff", "r.json"]
