@@ -36,14 +36,24 @@ __all__ = ["RecordingProcedure", "resumed_plan"]
 logger = logging.getLogger(__name__)
 
 
-def resumed_plan(run: RunData, plan: TestPlan | None, name: str | None = None) -> TestPlan:
+def resumed_plan(run: RunData, plan: TestPlan | None, name: str | None = None,
+                 fix: str = "resume with the stored plan") -> TestPlan:
     """The plan stored in ``run`` (a run file to resume); ``plan``, when given, must not
     differ from it (:func:`~app.acquire.plan.plan_differences`), or :class:`PlanError`
-    says where, in one line. ``name`` is the run file's name in it (default its path)."""
+    says where, in one line ending with ``fix`` (how to resume). ``name`` is the run file's
+    name in it (default its path). A stored plan that no longer parses is refused too."""
     path = Path(run.path)
-    stored = parse_plan(run.plan_data, f"{path}:/plan")
+    try:
+        stored = parse_plan(run.plan_data, f"{path}:/plan")
+    except PlanError as err:
+        raise PlanError(f"{path} cannot be resumed (start a new run): its stored plan is "
+                        f"refused: {err}") from err
     if plan is None:
         return stored
+    diff = plan_differences(stored, plan, name or str(path), Path(plan.source).name)
+    if diff:
+        raise PlanError(f"{'; '.join(diff)}: {fix} or start a new run")
+    return stored
     diff = plan_differences(stored, plan, name or str(path), Path(plan.source).name)
     if diff:
         raise PlanError(f"{'; '.join(diff)}: resume with the stored plan or start a new run")

@@ -44,8 +44,8 @@ from app.acquire import HammerProcedure, Listener, load_plan
 from app.acquire.events import HitRecord, RunState
 from app.acquire.events import Progress as RunProgress
 from app.acquire.overrides import override_run, parse_override
-from app.acquire.plan import PlanError, TestPlan, parse_plan, plan_differences
-from app.acquire.recording import RecordingProcedure
+from app.acquire.plan import PlanError, TestPlan
+from app.acquire.recording import RecordingProcedure, resumed_plan
 from app.acquire.shaker import ShakerProcedure
 from app.acquire.space import check_disk_space
 from app.cli.common import VERB_HELP, UserError
@@ -279,15 +279,10 @@ def _resume_checks(args: argparse.Namespace, plan: TestPlan | None) -> TestPlan:
     ``--plan`` that differs from it, a station or bench other than the run's."""
     run = read_run(args.out, with_data=False)
     try:
-        stored = parse_plan(run.plan_data, f"{args.out}:/plan")
+        stored = resumed_plan(run, plan, args.out.name,
+                              "resume with the stored plan (omit --plan)")
     except PlanError as err:
-        raise UserError(f"{args.out} cannot be resumed (start a new run): its stored plan is "
-                        f"refused: {err}") from err
-    if plan is not None:
-        diff = plan_differences(stored, plan, args.out.name, args.plan.name)
-        if diff:
-            raise UserError(f"{'; '.join(diff)}: resume with the stored plan (omit --plan) "
-                            "or start a new run")
+        raise UserError(str(err)) from err
     bench = _stored_bench(run.station_data)
     source = run.station_data.get("source")
     if bench is not None:
