@@ -58,14 +58,14 @@ def records_left(proc: RecordingProcedure) -> int:
 
 
 def expected_bytes(proc: RecordingProcedure) -> tuple[int, int]:
-    """Bytes the run will add to its disk, and the records counted in them (see the module
-    docstring)."""
+    """Bytes the run will add to its disk, and the records it still has to acquire (see the
+    module docstring)."""
     left = records_left(proc)
     counted = math.ceil(left * (1 + MARGIN))
     record = 8 * proc.record_values() + _COLUMN_BYTES
     n_force = proc.plan.n_references
     frf = (len(proc.rows) - n_force) * len(proc.plan.excitations) * proc.frf_lines() * (16 + 8)
-    return counted * record + frf + RESERVE_BYTES + OVERHEAD, counted
+    return counted * record + frf + RESERVE_BYTES + OVERHEAD, left
 
 
 def check_disk_space(proc: RecordingProcedure) -> None:
@@ -75,10 +75,9 @@ def check_disk_space(proc: RecordingProcedure) -> None:
         free = shutil.disk_usage(folder).free
     except OSError:
         return  # no folder (refused elsewhere) or a file system that cannot tell
-    need, _ = expected_bytes(proc)
+    need, left = expected_bytes(proc)
     if need <= free:
         return
-    left = records_left(proc)
     raise DiskSpaceError(
         f"{proc.path}: the run needs about {need / _MB:.1f} MB ({left} {proc.record_word}s and "
         f"{MARGIN:.0%} more for rejected ones, {8 * proc.record_values() / _MB:.2f} MB each; "
