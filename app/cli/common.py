@@ -115,13 +115,12 @@ def reason(err: OSError) -> str:
 def write_output(path: Path, text: str, option: str = "--out") -> None:
     """``text`` (UTF-8) written to a temporary file beside ``path`` and moved onto it: an
     old file stays whole if the write fails; a failure is one line naming ``path``."""
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.part")
+    from app.io.replace import replacing
+
     try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
+        with replacing(path) as tmp:
+            tmp.write_text(text, encoding="utf-8")
     except OSError as err:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
         raise UserError(f"{option} {path}: {reason(err)}: free some space or choose another "
                         f"{option}") from err
 

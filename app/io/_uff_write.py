@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import secrets
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.io._uff_common import UnitFactors
+from app.io.replace import replacing
 from processing.data import Geometry
 
 _LINE = "%-80s\n"
@@ -213,26 +213,10 @@ def _ascii_values(flat: NDArray[np.float64], even: bool, is_complex: bool) -> st
 
 @contextlib.contextmanager
 def open_for_writing(path: str | Path) -> Iterator[UffWriter]:
-    """Write to a temporary file beside ``path`` and move it into place on success."""
-    target = Path(path)
-    tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.part")
-    try:
+    """Write to a temporary file beside ``path`` and move it into place on success
+    (:func:`app.io.replace.replacing`)."""
+    with replacing(path) as tmp:
         # os.open applies the umask to 0o666, as a plain open() would (mkstemp: 0o600)
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    except OSError as err:
-        raise _named(err, target) from err
-    try:
         with os.fdopen(fd, "wb") as fh:
             yield UffWriter(fh)
-        os.replace(tmp, target)
-    except BaseException as err:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        if isinstance(err, OSError) and err.errno:
-            raise _named(err, target) from err
-        raise
-
-
-def _named(err: OSError, target: Path) -> OSError:
-    """``err`` naming the file the caller asked for, not the temporary file written first."""
-    return type(err)(err.errno, os.strerror(err.errno or 0), str(target))

@@ -15,7 +15,6 @@ Example
 
 from __future__ import annotations
 
-import contextlib
 import datetime
 import json
 import os
@@ -24,6 +23,7 @@ from typing import Any
 
 import h5py
 
+from app.io.replace import replacing
 from processing.data import FRFSet, Geometry
 from processing.measurement import Measurement, Provenance
 
@@ -83,9 +83,8 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
     p = Path(path)
     prov = frf.provenance if isinstance(frf, Measurement) else Provenance()
     frf = frf.frf if isinstance(frf, Measurement) else frf
-    tmp = p.with_name(p.name + ".tmp")
     try:
-        with h5py.File(tmp, "w") as f:
+        with replacing(p) as tmp, h5py.File(tmp, "w") as f:
             f.create_group("provenance").attrs.update(prov.stored())
             f.attrs.update({
                 "format": FORMAT, "schema_version": SCHEMA_VERSION, "source": source,
@@ -102,10 +101,7 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
                 values["coherence"] = frf.coherence
             for name, data in values.items():
                 f.create_dataset(name, data=data).attrs["units"] = _UNITS[name]
-        os.replace(tmp, p)
     except OSError as err:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
         why = os.strerror(err.errno) if err.errno else str(err).splitlines()[0]
         raise FRFFileError(f"{p}: cannot write the FRF file: {why}") from err
 
