@@ -97,14 +97,12 @@ def ignored_options(args: argparse.Namespace, fmt: str, name: str, *,
 
 def warn_ignored(args: argparse.Namespace, fmt: str, path: Path, *,
                  run_file_options: Sequence[str] = (),
-                 excitation: str | None = None) -> bool:
-    """Prints :func:`ignored_options`' line on stderr, if any; True when the time records'
-    excitation was known (``fmt`` not time records, or ``excitation`` given)."""
+                 excitation: str | None = None) -> None:
+    """Prints :func:`ignored_options`' line on stderr, if any."""
     line = ignored_options(args, fmt, path.name, run_file_options=run_file_options,
                            excitation=excitation)
     if line:
         print(f"insitu {getattr(args, 'verb', 'frf')}: warning: {line}", file=sys.stderr)
-    return fmt != TIME_UFF or excitation is not None
 
 
 def given_excitation(args: argparse.Namespace) -> str | None:
@@ -181,10 +179,13 @@ def settings_from(args: argparse.Namespace, **kwargs: Any) -> Settings:
                     fmax=args.fmax, **kwargs)
 
 
-def load_and_show(path: Path, args: argparse.Namespace, settings: Settings,
-                  fmt: str | None = None) -> Measurement:
+def load_and_show(path: Path, args: argparse.Namespace, settings: Settings, fmt: str, *,
+                  run_file_options: Sequence[str] = ()) -> Measurement:
     """``path``'s measurement through the pipeline (:func:`app.pipeline.load`), its reports
-    printed (a run left out: one stderr line); a spinner on a terminal while it reads."""
+    printed (a run left out: one stderr line); a spinner on a terminal while it reads. The
+    options given that do not apply are named (:func:`warn_ignored`; ``run_file_options``
+    those that apply to a run file): before the reading, or after it when the time records'
+    excitation comes from the data."""
     import contextlib
 
     from rich.console import Console
@@ -192,6 +193,8 @@ def load_and_show(path: Path, args: argparse.Namespace, settings: Settings,
     err = Console(stderr=True)
     # a spinner on a terminal's stderr while the file is read (a time UFF takes seconds)
     spinner = err.status(f"reading {path.name}") if err.is_terminal else contextlib.nullcontext()
+    excitation = given_excitation(args)
+    warn_ignored(args, fmt, path, run_file_options=run_file_options, excitation=excitation)
     try:
         with spinner:
             m = load(path, settings, fmt=fmt)
@@ -199,6 +202,8 @@ def load_and_show(path: Path, args: argparse.Namespace, settings: Settings,
         show_reports(args, err.reports)
         raise
     show_reports(args, m.provenance.reports)
+    if fmt == TIME_UFF and excitation is None:
+        warn_ignored(args, fmt, path, excitation=m.provenance.excitation)
     return m
 
 
@@ -220,11 +225,7 @@ def run(args: argparse.Namespace) -> int:
                         "or .h5 or .hdf5 (HDF5 FRF file)")
     check_output(out, inputs=(args.file,))  # before the records are read
     fmt = RUN_FILE if args.file.suffix.lower() in H5_SUFFIXES else TIME_UFF
-    known = warn_ignored(args, fmt, args.file, run_file_options=RUN_FILE_OPTIONS,
-                         excitation=given_excitation(args))
-    m = load_and_show(args.file, args, settings, fmt)
-    if not known:
-        warn_ignored(args, fmt, args.file, excitation=m.provenance.excitation)
+    m = load_and_show(args.file, args, settings, fmt, run_file_options=RUN_FILE_OPTIONS)
     frfs, n_bad = m.frf, m.provenance.skipped
     try:
         if suffix in H5_SUFFIXES:

@@ -30,13 +30,7 @@ from app.cli.common import (
     fit_progress,
     write_output,
 )
-from app.cli.frf import (
-    add_processing_arguments,
-    given_excitation,
-    load_and_show,
-    settings_from,
-    warn_ignored,
-)
+from app.cli.frf import add_processing_arguments, load_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
 from app.io.runfile import run_mounts
@@ -209,13 +203,10 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.out, inputs=(args.file,))
     mounts = _Mounts(mounts_from(args), args.excitation_hz, args.loss_factor_hz)
     fmt = detect_format(args.file)
-    known = warn_ignored(args, fmt, args.file, excitation=given_excitation(args))
     if fmt == TIME_UFF:
         how = f"{args.excitation} excitation" if args.excitation else "settings from the data"
         print(f"{args.file}: time records; computing FRFs ({how})")
     m = load_and_show(args.file, args, settings, fmt)
-    if not known:
-        warn_ignored(args, fmt, args.file, excitation=m.provenance.excitation)
     stored = run_mounts(args.file) if fmt == RUN_FILE and mounts.table is None else None
     if stored is not None:
         print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")

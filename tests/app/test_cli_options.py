@@ -139,16 +139,15 @@ def test_numbers_out_of_range_are_one_line_naming_the_range_before_any_work(
 # --- options that do not apply to the input: named in one warning line ------------------------
 
 
-def _stop_at_load(monkeypatch: pytest.MonkeyPatch, module: str) -> None:
-    """The verb stops where it would read the file: the warning comes before."""
-    import importlib
-
+def _stop_at_load(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The verb stops where it would read the file (the pipeline's load, which every verb
+    reaches through ``app.cli.frf.load_and_show``): the warning comes before."""
     from app.cli.common import UserError
 
     def stop(*args: object, **kwargs: object) -> None:
         raise UserError("stopped before reading")
 
-    monkeypatch.setattr(importlib.import_module(module), "load_and_show", stop)
+    monkeypatch.setattr("app.cli.frf.load", stop)
 
 
 def test_time_options_on_an_frf_file_are_named_ignored(
@@ -177,12 +176,12 @@ def test_time_options_on_a_run_file_are_named_ignored(
     run = tmp_path / "shaker.h5"
     with h5py.File(run, "w") as f:  # not an FRF file: a run file to the format detection
         f.attrs["format"] = "insitu-run"
-    _stop_at_load(monkeypatch, "app.cli.identify")
+    _stop_at_load(monkeypatch)
     assert main(["identify", str(run), "--nperseg", "256", "--overlap", "0.5"]) == 2
     assert capsys.readouterr().err.strip().splitlines()[0] == (
         "insitu identify: warning: --nperseg, --overlap ignored: shaker.h5 is a run file: its "
         "records are processed with its plan's settings")
-    _stop_at_load(monkeypatch, "app.cli.frf")
+    _stop_at_load(monkeypatch)
     # insitu frf averages a run file's first N records and cuts its band: those apply
     assert main(["frf", str(run), "--averages", "3", "--fmax", "100", "--window", "hann"]) == 2
     assert capsys.readouterr().err.strip().splitlines()[0] == (
