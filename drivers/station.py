@@ -28,6 +28,17 @@
     transport = { url = "/dev/ttyUSB1", baudrate = 115200 }
     options = { heartbeat = 0.5, ramp = 1.0 }
 
+A transport is one of four kinds, told apart by its first key: a serial ``url``, a
+python-can ``interface``, NI-DAQmx device names (``nidaqmx = "cDAQ1Mod1"`` or a list of
+modules) or a VISA resource string (``visa = "TCPIP0::10.0.0.5::inst0::INSTR"``, with an
+optional PyVISA ``backend`` such as ``"@py"``).
+
+A top-level ``[simulation]`` table says that the vendor APIs (nidaqmx, PyVISA) of this
+station are the simulated ones, driven by a built-in bench's physics
+(``bench = "engine-rigid"``); :attr:`StationConfig.simulation` keeps it as it is, empty
+for a real station. The drivers never read it: the application injects the simulated
+APIs at each driver's boundary.
+
 A top-level ``[extra]`` table is kept as it is (:attr:`StationConfig.extra`) for
 tools that share the file (``insitu mock-bench`` puts its control address there).
 
@@ -57,9 +68,12 @@ from drivers.errors import one_line
 __all__ = [
     "CanTransportConfig",
     "DeviceConfig",
+    "NiDaqTransportConfig",
     "SerialTransportConfig",
     "StationConfig",
     "StationConfigError",
+    "Transport",
+    "VisaTransportConfig",
     "load_station",
     "parse_station",
 ]
@@ -101,12 +115,31 @@ class CanTransportConfig:
 
 
 @dataclass(frozen=True)
+class NiDaqTransportConfig:
+    """NI-DAQmx devices (module names as NI MAX shows them), in the order their inputs are
+    numbered."""
+
+    devices: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class VisaTransportConfig:
+    """A VISA resource string and the PyVISA backend to open it with (None: PyVISA's default)."""
+
+    resource: str
+    backend: str | None = None
+
+
+Transport = SerialTransportConfig | CanTransportConfig | NiDaqTransportConfig | VisaTransportConfig
+
+
+@dataclass(frozen=True)
 class DeviceConfig:
     """One device of the station."""
 
     name: str
     backend: str
-    transport: SerialTransportConfig | CanTransportConfig
+    transport: Transport
     fs: float | None = None
     channels: tuple[ChannelConfig, ...] = ()
     options: Mapping[str, Any] = field(default_factory=dict)
@@ -114,12 +147,14 @@ class DeviceConfig:
 
 @dataclass(frozen=True)
 class StationConfig:
-    """The whole station: a name, its devices by name, and the free-form ``[extra]`` table."""
+    """The whole station: a name, its devices by name, the ``[simulation]`` table (empty for
+    real hardware) and the free-form ``[extra]`` table."""
 
     name: str
     devices: Mapping[str, DeviceConfig]
     source: str = "station.toml"
     extra: Mapping[str, Any] = field(default_factory=dict)
+    simulation: Mapping[str, Any] = field(default_factory=dict)
 
 
 _DEVICE_KEYS = {"backend", "transport", "fs", "channels", "options"}
@@ -198,14 +233,36 @@ def _channel(ctx: _Ctx, raw: object, key: str) -> ChannelConfig:
     return ChannelConfig(name, inp, quantity, float(sens), iepe, float(rng), node, direction)
 
 
-def _transport(ctx: _Ctx, raw: object, key: str) -> SerialTransportConfig | CanTransportConfig:
+_TRANSPORT_KINDS = ("url", "interface", "nidaqmx", "visa")
+
+
+def _transport(ctx: _Ctx, raw: object, key: str) -> Transport:
     t = ctx.table(raw, key)
-    if ("url" in t) == ("interface" in t):
-        raise ctx.fail(key, "give either url (serial) or interface (CAN), not both or neither")
+    kinds = [k for k in _TRANSPORT_KINDS if k in t]
+    if len(kinds) != 1:
+        raise ctx.fail(key, "give exactly one of url (serial), interface (CAN), nidaqmx "
+                            "(NI-DAQmx device) or visa (VISA resource)")
     if "url" in t:
         ctx.unknown(t, {"url", "baudrate"}, key)
         baud = ctx.number(t, "baudrate", key, integer=True, default=115200)
         return SerialTransportConfig(ctx.string(t, "url", key), int(baud))
+    if "nidaqmx" in t:
+        ctx.unknown(t, {"nidaqmx"}, key)
+        names = t["nidaqmx"]
+        names = [names] if isinstance(names, str) else names
+        if (not isinstance(names, list) or not names
+                or not all(isinstance(n, str) and n for n in names)):
+            raise ctx.fail(f"{key}.nidaqmx", "must be a device name or a list of names, "
+                                             f"got {t['nidaqmx']!r}")
+        if len(set(names)) != len(names):
+            raise ctx.fail(f"{key}.nidaqmx", f"a device is listed twice in {names!r}")
+        return NiDaqTransportConfig(tuple(names))
+    if "visa" in t:
+        ctx.unknown(t, {"visa", "backend"}, key)
+        backend = t.get("backend")
+        if backend is not None:
+            backend = ctx.string(t, "backend", key)
+        return VisaTransportConfig(ctx.string(t, "visa", key), backend)
     interface = ctx.string(t, "interface", key)
     fd = t.get("fd", False)
     if not isinstance(fd, bool):
@@ -250,8 +307,11 @@ def parse_station(data: Mapping[str, Any], source: str = "station.toml",
                   check_backends: bool = True) -> StationConfig:
     """Validate a parsed station file; raises :class:`StationConfigError` naming the bad key."""
     ctx = _Ctx(source)
-    ctx.unknown(data, {"station", "devices", "extra"}, "(top level)")
+    ctx.unknown(data, {"station", "devices", "extra", "simulation"}, "(top level)")
     extra = ctx.table(data.get("extra", {}), "extra")
+    simulation = ctx.table(data.get("simulation", {}), "simulation")
+    if simulation:
+        ctx.string(simulation, "bench", "simulation")
     station = ctx.table(data.get("station", {}), "station")
     ctx.unknown(station, {"name"}, "station")
     name = station.get("name", Path(source).stem)
@@ -274,7 +334,7 @@ def parse_station(data: Mapping[str, Any], source: str = "station.toml",
                                f"channel name {ch.name!r} already used by device "
                                f"{owner[ch.name]!r}")
             owner[ch.name] = dev.name
-    return StationConfig(name, devices, source, dict(extra))
+    return StationConfig(name, devices, source, dict(extra), dict(simulation))
 
 
 def load_station(path: str | Path) -> StationConfig:

@@ -41,9 +41,11 @@ logger = logging.getLogger(__name__)
 
 
 def station_summary(station: StationConfig) -> dict[str, Any]:
-    """The station as JSON-able data for the run file (its ``[extra]`` table too)."""
+    """The station as JSON-able data for the run file (its ``[extra]`` and ``[simulation]``
+    tables too)."""
     out: dict[str, Any] = {"name": station.name, "source": station.source, "devices": {},
-                           "extra": json.loads(json.dumps(station.extra, default=str))}
+                           "extra": json.loads(json.dumps(station.extra, default=str)),
+                           "simulation": json.loads(json.dumps(station.simulation, default=str))}
     for name, dev in station.devices.items():
         out["devices"][name] = {
             "backend": dev.backend, "fs": dev.fs, "transport": asdict(dev.transport),

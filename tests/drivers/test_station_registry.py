@@ -12,7 +12,14 @@ from drivers.base import ChannelConfig, TimeBlock
 from drivers.frontend_can import CanFrontEnd
 from drivers.hammer_serial import SerialHammer
 from drivers.shaker_scpi import ScpiShaker
-from drivers.station import CanTransportConfig, StationConfigError, load_station, parse_station
+from drivers.station import (
+    CanTransportConfig,
+    NiDaqTransportConfig,
+    StationConfigError,
+    VisaTransportConfig,
+    load_station,
+    parse_station,
+)
 
 STATION = """
 [station]
@@ -91,7 +98,7 @@ def test_station_builds_devices(tmp_path: Path) -> None:
         (('backend = "shaker-scpi"', 'backend = "shaker-9000"'),
          "devices.shaker.backend: unknown backend 'shaker-9000'"),
         (('transport = { url = "loop://" }', 'transport = { url = "loop://", interface = "x" }'),
-         "devices.shaker.transport: give either url"),
+         "devices.shaker.transport: give exactly one of url"),
         (("direction = [2, 0, 0]", "direction = [0, 0, 0]"),
          "devices.frontend.channels[0].direction: must be a non-zero"),
         (("iepe = true", "iepe = 1"), "devices.frontend.channels[0].iepe: must be true or false"),
@@ -141,3 +148,31 @@ def test_entry_point_backend(monkeypatch: pytest.MonkeyPatch) -> None:
         registry.get_backend("not-a-device")
     assert str(err.value) == (f"backend 'not-a-device' is {TimeBlock!r}, "
                               "not a drivers.base.Device subclass")
+
+
+def test_nidaqmx_and_visa_transports_and_simulation() -> None:
+    cfg = parse_station({
+        "simulation": {"bench": "engine-rigid"},
+        "devices": {
+            "daq": {"backend": "frontend-can", "fs": 1024,
+                    "transport": {"nidaqmx": ["cDAQ1Mod1", "cDAQ1Mod2"]}},
+            "gen": {"backend": "shaker-scpi",
+                    "transport": {"visa": "TCPIP0::127.0.0.1::5025::SOCKET", "backend": "@py"}},
+        }}, check_backends=False)
+    assert cfg.simulation == {"bench": "engine-rigid"}
+    assert cfg.devices["daq"].transport == NiDaqTransportConfig(("cDAQ1Mod1", "cDAQ1Mod2"))
+    assert cfg.devices["gen"].transport == VisaTransportConfig(
+        "TCPIP0::127.0.0.1::5025::SOCKET", "@py")
+    assert parse_station({"devices": {"d": {"backend": "x", "transport": {"nidaqmx": "Dev1"}}}},
+                         check_backends=False).simulation == {}
+    for transport, message in [({"nidaqmx": []}, "nidaqmx: must be a device name"),
+                               ({"nidaqmx": ["A", "A"]}, "listed twice"),
+                               ({"visa": "X", "baud": 3}, "transport.baud: unknown key"),
+                               ({"visa": "X", "url": "loop://"}, "give exactly one of")]:
+        with pytest.raises(StationConfigError, match=message):
+            parse_station({"devices": {"d": {"backend": "x", "transport": transport}}},
+                          check_backends=False)
+    with pytest.raises(StationConfigError, match=r"simulation\.bench: missing"):
+        parse_station({"simulation": {"seed": 1},
+                       "devices": {"d": {"backend": "x", "transport": {"nidaqmx": "Dev1"}}}},
+                      check_backends=False)
