@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[dev]'
+	$(BIN)/python -m pip install -q -e '.[dev,ni,visa,tdms,mdf]'
 	$(BIN)/python -c 'from processing._welch_kernel import compile_ahead; compile_ahead()'
 	touch $(STAMP)
 
