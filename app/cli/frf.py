@@ -1,8 +1,11 @@
 """``insitu frf INPUT [--out FRF.uff|FRF.h5]``: FRFs and coherence from time data.
 
-INPUT is a UFF file of time records or a run file (``.h5``) written by ``insitu acquire``.
+INPUT is a UFF file of time records, a TDMS (NI) or MDF 4 (.mf4) file of time records with
+its channel map (``--channels MAP.toml``, or ``INPUT.map.toml`` beside it: which channel is
+the force, which node and direction each response measures, docs/time-files.md), or a run
+file (``.h5``) written by ``insitu acquire``.
 
-UFF: each run (its records sharing a load case: one force, the accelerations) gives
+UFF, TDMS, MDF: each run (its records sharing a load case: one force, the accelerations) gives
 the FRF column of its excitation DOF; runs at the same DOF are averaged together.
 ``--method random`` (shaker: continuous random, Welch with Hann window and overlap;
 a periodic force, e.g. periodic chirp, one record per period with a rectangular window
@@ -31,7 +34,19 @@ from typing import Any
 from app.cli.common import FLAGS, VERB_HELP, UserError, check_output, reason
 from app.io.frf_h5 import write_frf_h5
 from app.io.uff import write_frf_uff
-from app.pipeline import FRF_H5, FRF_UFF, RUN_FILE, TIME_UFF, OpenError, RunReport, Settings, load
+from app.pipeline import (
+    FRF_H5,
+    FRF_UFF,
+    RUN_FILE,
+    TIME_FORMATS,
+    TIME_MDF,
+    TIME_TDMS,
+    OpenError,
+    RunReport,
+    Settings,
+    detect_format,
+    load,
+)
 from app.pipeline.formats import H5_SUFFIXES, UFF_SUFFIXES
 from processing.data import ESTIMATORS
 from processing.measurement import Measurement
@@ -42,8 +57,9 @@ def add_parser(sub: Any) -> None:
                        description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", type=Path,
-                   help="UFF file with geometry and time records (58, type 1), or a run "
-                        "file (.h5) written by insitu acquire")
+                   help="UFF file with geometry and time records (58, type 1), a TDMS or MDF "
+                        "file of time records (with --channels), or a run file (.h5) written by "
+                        "insitu acquire")
     p.add_argument("--out", type=Path,
                    help="FRF file to write: .uff/.unv (UFF 58) or .h5/.hdf5 (HDF5 FRF file); "
                         "default INPUT's name with _frf.uff")
@@ -57,7 +73,7 @@ def add_parser(sub: Any) -> None:
 TIME_OPTIONS: dict[str, object] = {
     "excitation": None, "estimator": "H1", "nperseg": None, "overlap": None, "window": None,
     "averages": None, "level": None, "record": None, "pretrigger": None, "ring": None,
-    "exp_tau": None, "carryover": None, "tail": None, "fmax": None}
+    "exp_tau": None, "carryover": None, "tail": None, "fmax": None, "channels": None}
 #: the options of Welch segments (random excitation) and of hammer records (impact)
 WELCH_OPTIONS = ("nperseg", "overlap", "window")
 HAMMER_OPTIONS = ("level", "record", "pretrigger", "ring", "exp_tau", "tail")
@@ -73,6 +89,8 @@ def ignored_options(args: argparse.Namespace, fmt: str, name: str, *,
     ``run_file_options``), Welch options on impact data, hammer options on random data
     (``excitation``: the time records' excitation when known), ``--bootstrap`` on FRFs."""
     given = [d for d, unset in TIME_OPTIONS.items() if getattr(args, d, unset) != unset]
+    if fmt in TIME_FORMATS and "channels" in given:  # time records: a map or not, said apart
+        given.remove("channels")
     if fmt in (FRF_UFF, FRF_H5):
         if getattr(args, "bootstrap", None):
             given.append("bootstrap")
@@ -91,7 +109,7 @@ def ignored_options(args: argparse.Namespace, fmt: str, name: str, *,
     if not given:
         return None
     flags = {**FLAGS, "excitation": "--excitation", "estimator": "--estimator",
-             "bootstrap": "--bootstrap"}
+             "bootstrap": "--bootstrap", "channels": "--channels"}
     return f"{', '.join(flags[d] for d in given)} ignored: {why}"
 
 
@@ -116,6 +134,10 @@ def given_excitation(args: argparse.Namespace) -> str | None:
 def add_processing_arguments(p: Any, *, method_alias: bool = False) -> None:
     """The options that turn time records into FRFs (shared with ``insitu identify``)."""
     flags = ("--excitation", "--method") if method_alias else ("--excitation",)
+    p.add_argument("--channels", type=Path, metavar="MAP.toml",
+                   help="TDMS or MDF file: its channel map (force and response channels, "
+                        "nodes, directions, units, runs; docs/time-files.md); default: "
+                        "FILE.map.toml beside it")
     p.add_argument(*flags, dest="excitation", choices=("random", "impact"),
                    help="time data: shaker random or hammer impact (default: from the force "
                         "channel, an impulsive force is a hammer test; a hammer option given "
@@ -176,7 +198,7 @@ def settings_from(args: argparse.Namespace, **kwargs: Any) -> Settings:
                     carryover=None if args.carryover is None else args.carryover == "on",
                     tail=None if args.tail is None else args.tail == "on",
                     coherence=args.coherence,
-                    fmax=args.fmax, **kwargs)
+                    fmax=args.fmax, channel_map=getattr(args, "channels", None), **kwargs)
 
 
 def load_and_show(path: Path, args: argparse.Namespace, settings: Settings, fmt: str, *,
@@ -195,6 +217,11 @@ def load_and_show(path: Path, args: argparse.Namespace, settings: Settings, fmt:
     spinner = err.status(f"reading {path.name}") if err.is_terminal else contextlib.nullcontext()
     excitation = given_excitation(args)
     warn_ignored(args, fmt, path, run_file_options=run_file_options, excitation=excitation)
+    if fmt in TIME_FORMATS and fmt not in (TIME_TDMS, TIME_MDF) and getattr(
+            args, "channels", None) is not None:
+        print(f"insitu {getattr(args, 'verb', 'frf')}: warning: --channels ignored: "
+              f"{path.name} is a UFF file, its records name their channels' DOFs and units",
+              file=sys.stderr)
     try:
         with spinner:
             m = load(path, settings, fmt=fmt)
@@ -202,7 +229,7 @@ def load_and_show(path: Path, args: argparse.Namespace, settings: Settings, fmt:
         show_reports(args, err.reports)
         raise
     show_reports(args, m.provenance.reports)
-    if fmt == TIME_UFF and excitation is None:
+    if fmt in TIME_FORMATS and excitation is None:
         warn_ignored(args, fmt, path, excitation=m.provenance.excitation)
     return m
 
@@ -224,7 +251,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out {out}: unknown suffix {out.suffix!r}: use .uff or .unv (UFF 58) "
                         "or .h5 or .hdf5 (HDF5 FRF file)")
     check_output(out, inputs=(args.file,))  # before the records are read
-    fmt = RUN_FILE if args.file.suffix.lower() in H5_SUFFIXES else TIME_UFF
+    fmt = detect_format(args.file)
+    if fmt in (FRF_UFF, FRF_H5):  # FRFs are no input of insitu frf: read as time records
+        fmt = RUN_FILE if args.file.suffix.lower() in H5_SUFFIXES else TIME_FORMATS[0]
     m = load_and_show(args.file, args, settings, fmt, run_file_options=RUN_FILE_OPTIONS)
     frfs, n_bad = m.frf, m.provenance.skipped
     try:

@@ -4,7 +4,8 @@ The file is a run file (``.h5``, written by ``insitu acquire``: its raw hits are
 processed as ``insitu replay`` does), an HDF5 FRF file (``.h5``, written by
 ``insitu frf``; the two are told apart by the root attribute ``format``), or a UFF
 file holding FRFs (dataset 58, function type 4) with geometry, or time records
-(function type 1, one run per excitation, see ``insitu frf``): then the FRFs and
+(function type 1, one run per excitation, see ``insitu frf``), or a TDMS or MDF file of
+time records with its channel map (``--channels``, docs/time-files.md): then the FRFs and
 their coherence are computed first with the time-data options below, the coherence
 gate keeps low-coherence lines out of the fit, and an exponential window's damping
 is removed from C. Bad time runs are reported on one line each and left out; the
@@ -34,7 +35,7 @@ from app.cli.frf import add_processing_arguments, load_and_show, settings_from
 from app.cli.summary import print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
 from app.io.runfile import run_mounts
-from app.pipeline import RUN_FILE, TIME_UFF, detect_format
+from app.pipeline import RUN_FILE, TIME_FORMATS, detect_format
 from app.pipeline.settings import MAX_FMAX, TestUncertaintySettings
 from app.report.mount_system import mount_system
 from processing.data import FRFSet
@@ -52,6 +53,7 @@ def add_parser(sub: Any) -> None:
                        description=__doc__)
     p.add_argument("file", type=Path,
                    help="UFF file with geometry (15/2411) and FRFs or time records (58), "
+                        "a TDMS or MDF file of time records (with --channels), "
                         "or a run file (.h5) written by insitu acquire, or an FRF file (.h5) "
                         "written by insitu frf")
     p.add_argument("--out", type=Path, help="write the result JSON here")
@@ -69,7 +71,8 @@ def add_parser(sub: Any) -> None:
     add_uncertainty_arguments(p)
     add_mount_arguments(p)
     add_processing_arguments(p.add_argument_group(
-        "time data (UFF 58 time records instead of FRFs: FRFs are computed first)"))
+        "time data (UFF 58 time records, TDMS or MDF files instead of FRFs: FRFs are "
+        "computed first)"))
     p.set_defaults(run=run)
 
 
@@ -203,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.out, inputs=(args.file,))
     mounts = _Mounts(mounts_from(args), args.excitation_hz, args.loss_factor_hz)
     fmt = detect_format(args.file)
-    if fmt == TIME_UFF:
+    if fmt in TIME_FORMATS:
         how = f"{args.excitation} excitation" if args.excitation else "settings from the data"
         print(f"{args.file}: time records; computing FRFs ({how})")
     m = load_and_show(args.file, args, settings, fmt)

@@ -23,7 +23,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Literal, overload
+from typing import Any, Literal, Protocol, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,7 +45,7 @@ from app.io._uff_write import AxisInfo, open_for_writing
 from app.io.uff_geometry import assign_node_frames, read_geometry
 from processing.data import Geometry, InputError
 
-__all__ = ["TimeFile", "TimeRun", "read_time_file", "read_time_uff", "uff_holds_time_data",
+__all__ = ["TimeFile", "TimeRun", "TimeSource", "read_time_file", "read_time_uff", "uff_holds_time_data",
            "write_time_uff"]
 
 log = logging.getLogger(__name__)
@@ -114,6 +114,28 @@ class TimeRun:
     @property
     def n_samples(self) -> int:
         return int(self.force.size)
+
+
+class TimeSource(Protocol):
+    """A file of time runs read one run at a time: a time UFF (:class:`TimeFile`) or a TDMS
+    or MDF file through its channel map (:class:`app.io.time_channels.MappedTimeFile`)."""
+
+    @property
+    def path(self) -> Path: ...
+
+    @property
+    def load_cases(self) -> tuple[int, ...]:
+        """The runs' load case numbers, in the file's order."""
+        ...
+
+    def read_run(self, load_case: int, force_only: bool = False) -> TimeRun:
+        """Run ``load_case`` in SI units (``force_only``: its force alone); InputError naming
+        the load case and the problem."""
+        ...
+
+    def geometry(self) -> Geometry:
+        """The node coordinates, m."""
+        ...
 
 
 def _rate(ds: Dataset, x: NDArray[np.float64], where: str) -> float:

@@ -1,5 +1,9 @@
 """The input formats and the one dispatch from a file to its measurement.
 
+Time records come as a time UFF, or as a TDMS or MDF file read through a channel map
+(``docs/time-files.md``); the three go through one code to their FRFs
+(:func:`app.pipeline.time_uff.open_time_records`).
+
 A fifth format is added here: a name in :data:`FORMATS`, its test in :func:`detect_format`
 (headers only) and its reader (``(path, Settings) -> Measurement``) in :data:`READERS`.
 """
@@ -9,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from app.io.frf_h5 import FORMAT as FRF_H5_FORMAT
 from app.io.frf_h5 import h5_format, read_frf_measurement
@@ -19,13 +24,21 @@ from processing.blas import one_blas_thread
 from processing.data import InputError, finite_frfs
 from processing.measurement import Measurement, Report
 
-__all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "H5_SUFFIXES", "READERS", "RUN_FILE", "SUFFIXES",
-           "TIME_UFF", "UFF_SUFFIXES", "detect_format", "load"]
+if TYPE_CHECKING:
+    from app.io.time_channels import MappedTimeFile, RawFile
+
+__all__ = ["FORMATS", "FRF_H5", "FRF_UFF", "H5_SUFFIXES", "MDF_SUFFIXES", "READERS", "RUN_FILE",
+           "SUFFIXES", "TDMS_SUFFIXES", "TIME_FORMATS", "TIME_MDF", "TIME_TDMS", "TIME_UFF",
+           "UFF_SUFFIXES", "detect_format", "load"]
 
 FRF_UFF = "frf-uff"
 TIME_UFF = "time-uff"
 RUN_FILE = "run-file"
 FRF_H5 = "frf-h5"
+TIME_TDMS = "time-tdms"
+TIME_MDF = "time-mdf"
+#: the formats of time records (FRFs computed from them by one code, the time options apply)
+TIME_FORMATS = (TIME_UFF, TIME_TDMS, TIME_MDF)
 
 #: format -> what it is, for messages and file dialogs
 FORMATS = {
@@ -33,20 +46,40 @@ FORMATS = {
     TIME_UFF: "UFF file of time records (dataset 58, function type 1) with geometry",
     RUN_FILE: "run file (.h5) written by insitu acquire",
     FRF_H5: "FRF file (.h5) written by insitu frf",
+    TIME_TDMS: "TDMS file of time records (NI) with a channel map",
+    TIME_MDF: "MDF file of time records (ASAM MDF 4) with a channel map",
 }
 UFF_SUFFIXES = (".uff", ".unv")
 H5_SUFFIXES = (".h5", ".hdf5")
+TDMS_SUFFIXES = (".tdms",)
+MDF_SUFFIXES = (".mf4", ".mdf")
 #: every suffix some format is read from
-SUFFIXES = UFF_SUFFIXES + H5_SUFFIXES
+SUFFIXES = UFF_SUFFIXES + H5_SUFFIXES + TDMS_SUFFIXES + MDF_SUFFIXES
 
 Reader = Callable[[Path, Settings], Measurement]
 
 
+def _lead_in(p: Path) -> bytes:
+    """The file's first 8 bytes (empty when it cannot be read: its reader then says why)."""
+    try:
+        with p.open("rb") as f:
+            return f.read(8)
+    except OSError:
+        return b""
+
+
 def detect_format(path: str | Path) -> str:
-    """The format of ``path``: an HDF5 file (by suffix) is an FRF file or a run file by its
-    root attribute ``format``; any other file is UFF, of time records or of FRFs."""
+    """The format of ``path``: a TDMS file (lead-in ``TDSm``) or an MDF file (``MDF     ``)
+    by its first bytes, else by its suffix (its reader then refuses a file that is not one);
+    an HDF5 file (by suffix) is an FRF file or a run file by its root attribute ``format``;
+    any other file is UFF, of time records or of FRFs."""
     p = Path(path)
-    if p.suffix.lower() in H5_SUFFIXES:
+    head, suffix = _lead_in(p), p.suffix.lower()
+    if head.startswith(b"TDSm") or (suffix in TDMS_SUFFIXES and not head.startswith(b"MDF ")):
+        return TIME_TDMS
+    if head == b"MDF     " or suffix in MDF_SUFFIXES:
+        return TIME_MDF
+    if suffix in H5_SUFFIXES:
         return FRF_H5 if h5_format(p) == FRF_H5_FORMAT else RUN_FILE
     return TIME_UFF if uff_holds_time_data(p) else FRF_UFF
 
@@ -71,12 +104,43 @@ def _run_file(path: Path, settings: Settings) -> Measurement:
     return open_run_file(path, settings)
 
 
+def _time_tdms(path: Path, settings: Settings) -> Measurement:
+    from app.io.tdms import TdmsRaw  # npTDMS (an extra): loaded when such a file comes
+    from app.pipeline.time_uff import open_time_records
+
+    return open_time_records(_mapped(TdmsRaw(path), settings), settings)
+
+
+def _time_mdf(path: Path, settings: Settings) -> Measurement:
+    from app.io.mdf import MdfRaw  # asammdf (an extra): loaded when such a file comes
+    from app.pipeline.time_uff import open_time_records
+
+    return open_time_records(_mapped(MdfRaw(path), settings), settings)
+
+
+def _mapped(raw: RawFile, settings: Settings) -> MappedTimeFile:
+    """A TDMS or MDF file's runs through its channel map (``settings.channel_map``, else the
+    map beside the file)."""
+    from app.io.channel_map import default_map_path, read_channel_map
+    from app.io.time_channels import MappedTimeFile
+
+    given = settings.channel_map
+    path = given if given is not None else default_map_path(raw.path)
+    if given is None and not path.is_file():
+        raise OpenError(f"{raw.path.name} needs a channel map (which channel is the force, "
+                        "which node and direction each response measures): give --channels "
+                        f"MAP.toml or put {path.name} beside it (docs/time-files.md)")
+    return MappedTimeFile(raw, read_channel_map(path))
+
+
 #: format -> reader
 READERS: dict[str, Reader] = {
     FRF_UFF: _frf_uff,
     TIME_UFF: _time_uff,
     RUN_FILE: _run_file,
     FRF_H5: _frf_h5,
+    TIME_TDMS: _time_tdms,
+    TIME_MDF: _time_mdf,
 }
 
 

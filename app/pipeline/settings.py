@@ -6,6 +6,7 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal
 
 from processing.data import InputError
@@ -90,6 +91,8 @@ class Settings:
         is refused; a run whose force is aligned by host timing only is refused too: it is
         not identifiable) or ``"usable"`` (points without one are reported and left out,
         FRFs computed for any run)
+    channel_map : TDMS and MDF files: their channel map (``docs/time-files.md``); None: the
+        file's name with ``.map.toml`` beside it (``run.map.toml`` for ``run.tdms``)
     """
 
     excitation: Literal["random", "impact"] | None = None
@@ -109,6 +112,7 @@ class Settings:
     coherence: float = 0.8
     fmax: float | None = None
     run_points: Literal["all", "usable"] = "all"
+    channel_map: Path | None = None
 
     def __post_init__(self) -> None:
         """Every option checked once, here, in the units the user typed; one line each."""

@@ -1,4 +1,7 @@
-"""UFF time records -> FRFs: runs grouped by excitation DOF, averaged, checked.
+"""Time records -> FRFs: runs grouped by excitation DOF, averaged, checked.
+
+The runs come from a time UFF or from a TDMS or MDF file through its channel map
+(:class:`app.io.uff_time.TimeSource`): one code computes the FRFs of all three.
 
 Each run (its records sharing a load case: one force, the accelerations) gives the FRF
 column of its excitation DOF; runs at the same DOF are averaged together. ``random``
@@ -20,7 +23,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from app.io.uff_time import TimeFile, TimeRun, read_time_file
+from app.io.uff_time import TimeRun, TimeSource, read_time_file
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
 from processing.data import FRFSet, InputError
@@ -52,7 +55,7 @@ from processing.measurement import Measurement, Provenance
 from processing.spectral import CrossSpectra, SpectralAccumulator, combine, frf, record_spectra
 from processing.units import MIN_UNITS, TimeUnits, UnitSpectra, record_units, welch_units
 
-__all__ = ["open_time_uff"]
+__all__ = ["open_time_records", "open_time_uff"]
 
 #: one FRF column: H (n_resp, 1, n_f), coherence, frequency lines (Hz), and the spectra of
 #: its hits or blocks (for the bootstrap, :mod:`processing.bootstrap`; None when too few)
@@ -213,7 +216,7 @@ class _Force:
 
 
 class _Passes:
-    """The runs of a time UFF file as the passes over it read them, one run at a time.
+    """The runs of a time-records file as the passes over it read them, one run at a time.
 
     ``bad`` maps the load case of each run found bad so far to its problem (kept from one
     attempt to the next); ``good`` holds the runs read whole without a problem. A run found
@@ -222,7 +225,7 @@ class _Passes:
     every run had been checked first.
     """
 
-    def __init__(self, file: TimeFile, bad: dict[int, str], good: set[int]) -> None:
+    def __init__(self, file: TimeSource, bad: dict[int, str], good: set[int]) -> None:
         self.file, self.bad, self.good = file, bad, good
         self.late = False
 
@@ -548,9 +551,14 @@ def _resolve(forces: list[_Force], runs: _Passes, s: Settings,
 
 
 def open_time_uff(path: Path, s: Settings) -> Measurement:
-    """The measurement of the time runs of a UFF file: FRFs with coherence and geometry,
-    estimated here, with the per-hit or per-block spectra, the exponential window's tau and
-    the hammer's usable band.
+    """The measurement of the time runs of a UFF file (:func:`open_time_records`)."""
+    return open_time_records(read_time_file(path), s)  # headers only: runs read when reached
+
+
+def open_time_records(file: TimeSource, s: Settings) -> Measurement:
+    """The measurement of the time runs of a file (a time UFF, a TDMS or MDF file through its
+    channel map): FRFs with coherence and geometry, estimated here, with the per-hit or
+    per-block spectra, the exponential window's tau and the hammer's usable band.
 
     The FRFs are on the lines up to ``s.fmax`` (default fs / 2.56); the reports (in the
     provenance) are each run's verdicts, each bad run (skipped), the coherence gate and the
@@ -562,17 +570,17 @@ def open_time_uff(path: Path, s: Settings) -> Measurement:
     responses (hammer tests, burst records), then each run whole once for its spectra.
     Memory holds one run and the spectra, never the file's samples.
     """
-    file = read_time_file(path)  # headers only: every run read when a pass reaches it
     bad: dict[int, str] = {}
     good: set[int] = set()
     while True:  # again without a run found bad after its force counted in a setting
-        m = _attempt(path, file, _Passes(file, bad, good), s)
+        m = _attempt(file.path, file, _Passes(file, bad, good), s)
         if m is not None:
             return m
 
 
-def _attempt(path: Path, file: TimeFile, runs: _Passes, s: Settings) -> Measurement | None:
-    """:func:`open_time_uff` with the runs known bad so far left out; None when a run is
+def _attempt(path: Path, file: TimeSource, runs: _Passes, s: Settings,
+             ) -> Measurement | None:
+    """:func:`open_time_records` with the runs known bad so far left out; None when a run is
     found bad after its force counted in a setting."""
     forces = runs.forces(s)
     levels: dict[int, float] = {}
