@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import os
+import traceback
 from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
@@ -111,6 +112,7 @@ class _Opened:
             self.mdf = self.lib.MDF(self.fh)
         except Exception as err:  # asammdf raises many kinds on a damaged file
             self.fh.close()
+            _half_built(err)
             raise _unreadable(self.path, err) from err
         return self.mdf
 
@@ -119,6 +121,19 @@ class _Opened:
             self.mdf.close()
         finally:
             self.fh.close()
+
+
+def _half_built(err: BaseException) -> None:
+    """Closes the temporary file of each MDF object a failed opening left half built and
+    marks it closed: its ``__del__`` would close it and fail on the blocks never read (an
+    exception Python can only print, at some later moment)."""
+    for frame, _ in traceback.walk_tb(err.__traceback__):
+        obj = frame.f_locals.get("self")
+        if obj is not None and type(obj).__module__.startswith("asammdf.blocks.mdf_v"):
+            tmp = getattr(obj, "_tempfile", None)
+            if tmp is not None:
+                tmp.close()
+            obj._closed = True
 
 
 def _rate(t: Any, where: str) -> float:
