@@ -13,15 +13,15 @@ from pathlib import Path
 
 #: verb -> its one line of help: ``insitu --help`` lists them without importing the verbs
 VERB_HELP = {
-    'identify': 'identify inertia parameters and K, C from a UFF, run, TDMS or MDF file',
+    'identify': 'identify inertia parameters and K, C from a file',
     'simulate': "write a simulated bench's FRFs as UFF",
     'demo': 'run the main job on the built-in simulated bench',
-    'frf': 'FRFs and coherence from time records (UFF, TDMS, MDF) or a run file',
+    'frf': 'FRFs and coherence from time records or a run file',
     'mock-bench': 'run a simulated bench and print its station file',
     'acquire': 'acquire a test plan into an HDF5 run file',
     'replay': 'recompute FRFs and identification from a run file',
     'repair': 'make a crashed run file readable by any HDF5 tool',
-    'export': "write a run's raw records as TDMS, MDF 4 or UFF time records",
+    'export': "a run's records as TDMS, MDF 4 or UFF time records",
     'gui': 'start the desktop application',
     'report': 'write the HTML report of a run, an FRF file or a UFF file',
     'batch': 'identify many files on a Dask cluster, one table',

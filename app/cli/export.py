@@ -64,8 +64,9 @@ def run_records(path: Path, every: bool = False) -> tuple[Any, list[int], list[A
     whole = np.all(np.isfinite(rec.data), axis=(1, 2))
     keep = np.flatnonzero(whole & (True if every else rec.accepted))
     if keep.size == 0:
-        raise UserError(f"{path}: no record to export (none used{'' if every else ' (--all for the rejected ones)'}"
-                        " or every one has lost samples)")
+        hint = "" if every else " (--all for the rejected ones)"
+        raise UserError(f"{path}: no record to export (none used{hint} or every one has lost "
+                        "samples)")
     runs = []
     for k, i in enumerate(keep.tolist()):
         point = plan.excitations[int(rec.point[i])]

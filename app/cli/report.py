@@ -1,8 +1,9 @@
 """``insitu report FILE [--out report.html]``: the test report, without a GUI.
 
 FILE is any file ``insitu identify`` reads: a run file (its records processed again), an
-FRF file (``.h5``), a UFF file of FRFs or of time records (FRFs computed with the
-default time-data settings of ``insitu frf``; a bad run is reported and left out).
+FRF file (``.h5``), a UFF file of FRFs or of time records, a TDMS or MDF file of time
+records with its channel map (FRFs computed with the default time-data settings of
+``insitu frf``; a bad run is reported and left out).
 """
 
 from __future__ import annotations
@@ -26,7 +27,11 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser("report", help=VERB_HELP["report"],
                        description=__doc__)
     p.add_argument("file", type=Path,
-                   help="run file or FRF file (.h5), UFF file of FRFs or time records (.uff)")
+                   help="run file or FRF file (.h5), UFF file of FRFs or time records (.uff), "
+                        "TDMS or MDF file of time records (.tdms, .mf4)")
+    p.add_argument("--channels", type=Path, metavar="MAP.toml",
+                   help="TDMS or MDF file: its channel map (docs/time-files.md); default: "
+                        "FILE.map.toml beside it")
     p.add_argument("--out", type=Path, help="HTML file (default: FILE with .html)")
     p.add_argument("--physical", action="store_true",
                    help="constrain the inertia to physically consistent values")
@@ -57,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     if mounts is not None:
         check_mounts(mounts.mounts)
     try:
-        m, _ = open_source(args.file)
+        m, _ = open_source(args.file, args.channels)
     except OpenError as err:
         show_reports(args, err.reports)
         raise

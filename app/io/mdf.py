@@ -6,8 +6,8 @@ an MDF file is read or written, never when the command line starts. An MDF file 
 channel groups, each with a master (time) channel its other channels are sampled on; a
 group's name here is its acquisition name, else its comment, else its number from 0.
 asammdf reads a file it is given open (its own opening of a damaged file leaves an object
-whose clean-up fails), and its values are the physical ones (the channels' conversions
-applied).
+whose clean-up fails), held open until the reader goes; its values are the physical ones
+(the channels' conversions applied).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import os
 import traceback
+import weakref
 from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
@@ -63,21 +64,18 @@ class MdfRaw:
                              "'MDF     '): give an MDF file (.mf4) written by a logger or "
                              "insitu export")
         self._path = path
-        self._lib = asammdf()
+        opened = _Opened(asammdf(), path)
+        self._mdf = opened.__enter__()
+        weakref.finalize(self, opened.__exit__)
         self._groups: list[tuple[str, tuple[str, ...]]] = []
-        with self._open() as mdf:
-            for i, g in enumerate(mdf.groups):
-                cg = g.channel_group
-                name = (getattr(cg, "acq_name", "") or getattr(cg, "comment", "") or str(i))
-                self._groups.append((str(name), tuple(ch.name for ch in g.channels)))
+        for i, g in enumerate(self._mdf.groups):
+            cg = g.channel_group
+            name = (getattr(cg, "acq_name", "") or getattr(cg, "comment", "") or str(i))
+            self._groups.append((str(name), tuple(ch.name for ch in g.channels)))
 
     @property
     def path(self) -> Path:
         return self._path
-
-    def _open(self) -> Any:
-        """The file read by asammdf from an open file (closed with the MDF object)."""
-        return _Opened(self._lib, self._path)
 
     def index(self) -> list[tuple[str, tuple[str, ...]]]:
         return list(self._groups)
@@ -85,23 +83,22 @@ class MdfRaw:
     def read(self, group: int, names: Sequence[str]) -> list[RawSignal]:
         where = f"{self._path.name}: group {self._groups[group][0]!r}"
         out = []
-        with self._open() as mdf:
-            for name in names:
-                try:
-                    sig = mdf.get(name, group=group)
-                    values, t = np.asarray(sig.samples), np.asarray(sig.timestamps, dtype=float)
-                except Exception as err:  # asammdf raises many kinds on a damaged file
-                    raise _unreadable(self._path, err) from err
-                if values.dtype.kind not in "iuf":
-                    raise InputError(f"{where}: channel {name!r} holds {values.dtype} values, "
-                                     "not numbers: map a measured channel")
-                out.append(RawSignal(values.astype(np.float64, copy=False),
-                                     _rate(t, f"{where}: channel {name!r}"), str(sig.unit or "")))
+        for name in names:
+            try:
+                sig = self._mdf.get(name, group=group)
+                values, t = np.asarray(sig.samples), np.asarray(sig.timestamps, dtype=float)
+            except Exception as err:  # asammdf raises many kinds on a damaged file
+                raise _unreadable(self._path, err) from err
+            if values.dtype.kind not in "iuf":
+                raise InputError(f"{where}: channel {name!r} holds {values.dtype} values, "
+                                 "not numbers: map a measured channel")
+            out.append(RawSignal(values.astype(np.float64, copy=False),
+                                 _rate(t, f"{where}: channel {name!r}"), str(sig.unit or "")))
         return out
 
 
 class _Opened:
-    """``with _Opened(lib, path) as mdf``: the file open, asammdf's MDF on it, both closed."""
+    """The file open and asammdf's MDF on it (``__enter__``), both closed by ``__exit__``."""
 
     def __init__(self, lib: ModuleType, path: Path) -> None:
         self.lib, self.path = lib, path

@@ -11,6 +11,7 @@ first (:func:`check_tdms`) and a truncated file is refused.
 from __future__ import annotations
 
 import logging
+import weakref
 from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
@@ -77,18 +78,21 @@ def check_tdms(path: Path) -> None:
 
 
 class TdmsRaw:
-    """A TDMS file's groups and channels (:class:`app.io.time_channels.RawFile`)."""
+    """A TDMS file's groups and channels (:class:`app.io.time_channels.RawFile`), the file
+    held open (its metadata read once, the samples when asked for) until the object goes."""
 
     def __init__(self, path: Path) -> None:
         check_tdms(path)
         self._path = path
-        self._lib = nptdms()
+        lib = nptdms()
         try:
-            meta = self._lib.TdmsFile.read_metadata(str(path))
-            self._groups = [(g.name, tuple(c.name for c in g.channels())) for g in meta.groups()]
+            self._file = lib.TdmsFile.open(str(path))
         except (ValueError, KeyError, OSError, EOFError) as err:
             raise InputError(f"cannot read TDMS file {path.name} ({err}): check that it is a "
                              "complete TDMS file") from err
+        weakref.finalize(self, self._file.close)
+        self._groups = [(g.name, tuple(c.name for c in g.channels()))
+                        for g in self._file.groups()]
 
     @property
     def path(self) -> Path:
@@ -101,10 +105,9 @@ class TdmsRaw:
         gname = self._groups[group][0]
         out = []
         try:
-            with self._lib.TdmsFile.open(str(self._path)) as f:
-                for name in names:
-                    ch = f[gname][name]
-                    out.append(_signal(ch, ch[:], f"{self._path.name}: group {gname!r}"))
+            for name in names:
+                ch = self._file[gname][name]
+                out.append(_signal(ch, ch[:], f"{self._path.name}: group {gname!r}"))
         except (ValueError, KeyError, OSError, EOFError) as err:
             raise InputError(f"cannot read TDMS file {self._path.name} ({err}): check that it "
                              "is a complete TDMS file") from err
@@ -145,8 +148,10 @@ def write_time_tdms(path: Path, runs: Sequence[TimeRun], groups: Sequence[str],
             objects: list[Any] = [lib.GroupObject(gname, properties=gprops)]
             rows = [run.force, *run.responses]
             for k, (name, row) in enumerate(zip(channels, rows, strict=True)):
-                objects.append(lib.ChannelObject(gname, name, np.ascontiguousarray(row), properties={
-                    "wf_increment": 1.0 / run.fs, "wf_start_offset": 0.0,
-                    "wf_samples": int(row.size), "unit_string": "N" if k == 0 else "m/s^2"}))
+                objects.append(lib.ChannelObject(
+                    gname, name, np.ascontiguousarray(row), properties={
+                        "wf_increment": 1.0 / run.fs, "wf_start_offset": 0.0,
+                        "wf_samples": int(row.size),
+                        "unit_string": "N" if k == 0 else "m/s^2"}))
             w.write_segment(objects)
     log.info("wrote %d runs to %s", len(runs), path)

@@ -128,9 +128,9 @@ class MappedTimeFile:
             return [names.index(g) for g in self.map.groups]
         chosen = [i for i, (_, chans) in enumerate(self._index) if needed in chans]
         if not chosen:
+            every = sorted({c for _, cs in self._index for c in cs})
             raise InputError(f"{self._where()}: no group holds channel {needed!r} (the file's "
-                             f"channels: {_listed(sorted({c for _, cs in self._index for c in cs}))}"
-                             "): fix the channel map's names")
+                             f"channels: {_listed(every)}): fix the channel map's names")
         return chosen
 
     def _check_channels(self, groups: list[int]) -> None:
@@ -212,8 +212,9 @@ class MappedTimeFile:
                              "every channel of a run at one rate")
         sizes = {signals[c.name].samples.size for c in specs}
         if len(sizes) > 1:
-            raise InputError(f"{lc}: channels of different lengths ({', '.join(map(str, sorted(sizes)))}"
-                             " samples): record every channel of a run with the same length")
+            shown = ", ".join(map(str, sorted(sizes)))
+            raise InputError(f"{lc}: channels of different lengths ({shown} samples): record "
+                             "every channel of a run with the same length")
         rows = []
         for c in specs:
             s = signals[c.name]

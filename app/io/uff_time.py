@@ -45,8 +45,8 @@ from app.io._uff_write import AxisInfo, open_for_writing
 from app.io.uff_geometry import assign_node_frames, read_geometry
 from processing.data import Geometry, InputError
 
-__all__ = ["TimeFile", "TimeRun", "TimeSource", "read_time_file", "read_time_uff", "uff_holds_time_data",
-           "write_time_uff"]
+__all__ = ["TimeFile", "TimeRun", "TimeSource", "read_time_file", "read_time_uff",
+           "uff_holds_time_data", "write_time_uff"]
 
 log = logging.getLogger(__name__)
 

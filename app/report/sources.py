@@ -7,6 +7,7 @@ default settings, as ``insitu identify`` does (a run file's records processed ag
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from app.pipeline import SUFFIXES, Settings, detect_format, load
@@ -19,9 +20,10 @@ __all__ = ["SETTINGS", "SUFFIXES", "load_frfs", "open_source"]
 SETTINGS = Settings()
 
 
-def open_source(path: str | Path) -> tuple[Measurement, str]:
+def open_source(path: str | Path, channel_map: Path | None = None) -> tuple[Measurement, str]:
     """The measurement of ``path`` (its reports in its provenance) and the file's format
-    (:data:`app.pipeline.FORMATS`).
+    (:data:`app.pipeline.FORMATS`); ``channel_map``: a TDMS or MDF file's channel map (None:
+    the one beside the file, ``docs/time-files.md``).
 
     Raises
     ------
@@ -32,10 +34,13 @@ def open_source(path: str | Path) -> tuple[Measurement, str]:
     if p.suffix.lower() not in SUFFIXES:
         raise InputError(
             f"{p.name}: unknown file type {p.suffix!r}: open a UFF file of FRFs or time "
-            f"records (.uff, .unv), a run file or an FRF file ({', '.join(SUFFIXES[2:])})"
+            f"records (.uff, .unv), a run file or an FRF file (.h5, .hdf5), or a TDMS or MDF "
+            "file of time records (.tdms, .mf4, .mdf)"
         )
     fmt = detect_format(p)
-    return load(p, SETTINGS, fmt=fmt), fmt
+    settings = SETTINGS if channel_map is None else dataclasses.replace(
+        SETTINGS, channel_map=channel_map)
+    return load(p, settings, fmt=fmt), fmt
 
 
 def load_frfs(path: str | Path) -> FRFSet:

@@ -203,7 +203,8 @@ def test_point_channel_layout_and_scaled_units(tmp_path: Path) -> None:
                     [*runs[0].resp_nodes, 999], np.vstack([runs[0].resp_dirs, [0, 0, 1]]))
     write_time_tdms(tmp_path / "c.tdms", [whole], ["recording"], [*NAMES, "Point"])
     b = get_bench("engine-rigid")
-    lines = ['geometry = "t.uff"', "", "[layout]", 'runs = "point-channel"', 'point_channel = "Point"', "",
+    lines = ['geometry = "t.uff"', "", "[layout]", 'runs = "point-channel"',
+             'point_channel = "Point"', "",
              "[force]", 'channel = "Force"', 'unit = "mV"', 'sensitivity = "2.25 mV/N"', ""]
     for n, nd, d in zip(NAMES[1:], b.resp_nodes, b.resp_dirs, strict=True):
         axis = "xyz"[int(np.argmax(np.abs(d)))]
