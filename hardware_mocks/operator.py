@@ -231,8 +231,8 @@ class MockShakerOperator:
     ----------
     *shakers : BenchDrive
         The mock shakers (SG-1 or 33500 generator mocks), on the bench's physics. With
-        ``n`` of them, the plan's points are driven ``n`` at a time (:attr:`app.acquire.plan.TestPlan.drives`): point
-        ``index`` gets shaker ``index % n``.
+        ``n`` of them, the plan's points are driven ``n`` at a time
+        (:attr:`app.acquire.plan.TestPlan.drives`): point ``index`` gets shaker ``index % n``.
     """
 
     def __init__(self, *shakers: BenchDrive) -> None:
