@@ -206,6 +206,10 @@ class VisaGenerator(ExcitationDevice):
                                       f"within {self.reply_timeout:g} s: check that it is on "
                                       f"and reachable at {self.resource}", self.name)
         text = one_line(str(err).splitlines()[0] if str(err) else type(err).__name__)
+        if not self.identity:  # pyvisa-py connects lazily: a refused connection shows here
+            return DeviceNotAvailableError(f"{self.name}: cannot open {self.resource} ({text}): "
+                                           "check the resource string and that the generator "
+                                           "is on and reachable", self.name)
         return DeviceNotAvailableError(f"{self.name}: lost the generator at {self.resource} "
                                        f"during {what} ({text}): check the cable or network",
                                        self.name)
@@ -224,7 +228,8 @@ class VisaGenerator(ExcitationDevice):
                 return str(self._inst.query(command)).strip()
             except errors as err:
                 failure = self._fail(err, repr(command[:40]))
-        self._emergency_off()
+        if self.identity:  # configured: its output may be on
+            self._emergency_off()
         raise failure
 
     def _drop_late_replies(self) -> None:
