@@ -7,7 +7,6 @@ from __future__ import annotations
 import socket
 import sys
 import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -98,8 +97,8 @@ def test_a_setting_the_generator_refuses_turns_the_output_off_and_names_it(rm) -
 
 def test_another_makers_generator_is_refused_by_its_identity(rm) -> None:
     gen = _gen(rm, "USB0::0x1AB1::0x0642::DG1ZA000000001::INSTR")
-    with pytest.raises(DeviceInitializationError, match="is not a Keysight 33500/33600 "
-                       "generator .identity 'Rigol Technologies,DG1022Z"):
+    with pytest.raises(DeviceInitializationError, match=r"is not a Keysight 33500/33600 "
+                       r"generator \(identity 'Rigol Technologies,DG1022Z"):
         gen.open()
     gen.shutdown()
 
@@ -153,9 +152,9 @@ def test_literal_commands_of_a_burst_random_drive_on_the_simulated_33500() -> No
     assert (abs(arb.reshape(2, 1000)[:, 251:]) == 0).all()
     on = arb.reshape(2, 1000)[:, :250]
     vpp = 2 * 0.2 / (on**2).mean() ** 0.5  # twice the RMS in the bursts, crest factor
-    volt = [c for c in mock.commands if c.startswith("VOLT ")][0]
+    volt = next(c for c in mock.commands if c.startswith("VOLT "))
     assert float(volt.split()[1]) == pytest.approx(vpp, rel=0.02)
-    upload = [c for c in mock.commands if c.startswith("DATA:ARB:DAC")][0]
+    upload = next(c for c in mock.commands if c.startswith("DATA:ARB:DAC"))
     assert upload.startswith("DATA:ARB:DAC INSITU,")
     assert mock.commands == [
         "*IDN?", "OUTP OFF", "*RST", "*CLS", "OUTP:LOAD INF", "VOLT:OFFS 0", "SYST:ERR?",
@@ -185,11 +184,10 @@ def test_output_off_does_not_wait_on_a_generator_that_stopped_reading() -> None:
             return writer(cmd)
 
         gen._inst.write = stuck
-        t0 = time.monotonic()
-        with pytest.raises(DeviceTimeoutError, match="OUTP OFF not sent within 0.4 s: turn the "
-                           "generator's output off by hand"):
+        with pytest.raises(DeviceTimeoutError, match=r"OUTP OFF not sent within 0\.4 s: turn "
+                           r"the generator's output off by hand"):
             gen.stop()
-        assert time.monotonic() - t0 < 5.0  # bounded (0.4 s), whatever the machine's load
+        assert not release.is_set()  # stop() returned while the write was still blocked
         release.set()
         gen._inst.write = writer
         gen.shutdown()
