@@ -33,10 +33,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from hardware_mocks.bench_control import BenchControl, BenchControlError
+from hardware_mocks.bench_drive import BenchDrive
 from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.physics import TIP_DURATION, TIP_PEAK
-from hardware_mocks.shaker_device import ShakerDevice
 
 __all__ = ["MockOperator", "MockShakerOperator", "RemoteOperator", "RemoteShakerOperator",
            "check_points", "excitation_index"]
@@ -229,13 +229,13 @@ class MockShakerOperator:
 
     Parameters
     ----------
-    *shakers : ShakerDevice
-        The mock shakers, on the bench's physics. With ``n`` of them, the plan's points
-        are driven ``n`` at a time (:attr:`app.acquire.plan.TestPlan.drives`): point
-        ``index`` gets shaker ``index % n``.
+    *shakers : BenchDrive
+        The mock shakers (SG-1 or 33500 generator mocks), on the bench's physics. With
+        ``n`` of them, the plan's points are driven ``n`` at a time
+        (:attr:`app.acquire.plan.TestPlan.drives`): point ``index`` gets shaker ``index % n``.
     """
 
-    def __init__(self, *shakers: ShakerDevice) -> None:
+    def __init__(self, *shakers: BenchDrive) -> None:
         if not shakers or any(s.physics is None for s in shakers):
             raise ValueError("the mock shaker has no bench (physics=None)")
         self.shakers = shakers

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from hardware_mocks.bench_drive import BenchDrive
 from hardware_mocks.physics import BenchPhysics
 from hardware_mocks.pty_port import PtyPort
 from hardware_mocks.serial_device import SerialMockDevice
@@ -63,9 +64,6 @@ ERRORS = {
     103: "Amplifier fault; output off",
 }
 FUNCTIONS = ("RAND", "BRAN", "CHIRP", "SIN")
-#: random multisine: longest period (s) and most lines
-RANDOM_PERIOD = 16.0
-RANDOM_LINES = 4096
 
 
 @dataclass
@@ -75,7 +73,7 @@ class ShakerFaults:
     silent: bool = False
 
 
-class ShakerDevice(SerialMockDevice):
+class ShakerDevice(BenchDrive, SerialMockDevice):
     """The generator/amplifier as seen from its serial port.
 
     Parameters
@@ -104,15 +102,9 @@ class ShakerDevice(SerialMockDevice):
                  serial_number: str = "0007", exc: int | None = None,
                  force_per_volt: float = 50.0, seed: int = 0, sensor: int = 0,
                  t_origin: float | None = None) -> None:
+        BenchDrive.__init__(self, physics, force_per_volt, seed, sensor)
         self.max_level = max_level
-        self.sensor = sensor
         self.serial_number = serial_number
-        self.physics = physics
-        self.force_per_volt = force_per_volt
-        self._exc: int | None = None
-        self._seed = seed
-        self._multisine: tuple[tuple[float, float], NDArray[np.float64],
-                               NDArray[np.float64]] | None = None
         self._t_origin = time.monotonic() if t_origin is None else t_origin
         self.faults = ShakerFaults()
         self.commands: list[str] = []
@@ -148,22 +140,6 @@ class ShakerDevice(SerialMockDevice):
             return list(self._errors)
 
     # -- the shaker on the bench ----------------------------------------------------------------
-    @property
-    def exc(self) -> int | None:
-        """Excitation DOF index the shaker pushes on, None while detached."""
-        return self._exc
-
-    def attach(self, exc: int | None) -> None:
-        """Attach the shaker's stinger to excitation DOF ``exc`` of the bench (None detaches)."""
-        if exc is not None:
-            if self.physics is None:
-                raise ValueError("this shaker has no bench to attach to (physics=None)")
-            n = len(self.physics.bench.exc_nodes)
-            if not 0 <= exc < n:
-                raise ValueError(f"excitation index {exc} out of range 0..{n - 1}")
-            self.physics.add_source(self)
-        self._exc = exc
-
     def force(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         """Force on the structure (N) at host instants ``t`` (s, ``time.monotonic()``).
 
@@ -191,29 +167,10 @@ class ShakerDevice(SerialMockDevice):
             u = np.mod(tau, period)
             wave = np.sin(2 * np.pi * (f0 * u + (f1 - f0) * u**2 / (2 * period)))
         else:
-            wave = self._random(tau, f0, f1)
+            wave = self.multisine(tau, f0, f1)
             if func == "BRAN":
                 wave = wave * (np.mod(tau, period) < duty * period)
         return np.asarray(self.force_per_volt * env * wave)
-
-    def _random(self, tau: NDArray[np.float64], f0: float, f1: float) -> NDArray[np.float64]:
-        """Unit-RMS random-phase multisine over ``[f0, f1]`` Hz at times ``tau`` (s)."""
-        if self._multisine is None or self._multisine[0] != (f0, f1):
-            df = max(1.0 / RANDOM_PERIOD, (f1 - f0) / RANDOM_LINES)
-            freqs = np.arange(np.ceil(f0 / df), np.floor(f1 / df) + 1) * df
-            freqs = freqs[freqs > 0]
-            if freqs.size == 0:
-                freqs = np.array([max(f0, df)])
-            phases = np.random.default_rng(self._seed).uniform(0, 2 * np.pi, freqs.size)
-            self._multisine = ((f0, f1), freqs, phases)
-        _, freqs, phases = self._multisine
-        amp = np.sqrt(2.0 / freqs.size)
-        out = np.empty_like(tau)
-        for i in range(0, tau.size, 256):  # bounded memory: 256 x n_lines at a time
-            chunk = tau[i : i + 256]
-            out[i : i + 256] = amp * np.cos(2 * np.pi * np.outer(chunk, freqs) + phases).sum(
-                axis=1)
-        return out
 
     def amplifier_fault(self) -> None:
         """Trip the amplifier: output off, error 103 queued."""
@@ -221,9 +178,8 @@ class ShakerDevice(SerialMockDevice):
             self._fail(103)
 
     def shutdown(self) -> None:
-        if self.physics is not None:
-            self.physics.remove_source(self)
-        super().shutdown()
+        self.detach_from_bench()
+        SerialMockDevice.shutdown(self)
 
     def __enter__(self) -> ShakerDevice:
         return self

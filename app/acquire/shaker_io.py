@@ -22,6 +22,7 @@ from app.acquire.procedure import StopRequestedError
 from app.acquire.streams import READ_TIMEOUT
 from drivers.base import AcquisitionFrontEnd, DeviceState, ExcitationDevice
 from drivers.errors import DeviceError, DeviceTimeoutError
+from drivers.generator_visa import VisaGenerator
 from drivers.shaker_scpi import ScpiShaker, ShakerError
 
 __all__ = ["BURST_PRE", "BlockStream", "ShakerDrive", "ShakerDrives", "burst_onset"]
@@ -140,6 +141,8 @@ class ShakerDrive:
             errs = dev.errors()
             why = "; ".join(f"{c} {t}" for c, t in errs) or "no error reported"
             return f"{dev.name}: output went off during the block ({why})"
+        if isinstance(dev, VisaGenerator):  # no watchdog, no ramp: its queue and output asked
+            return dev.output_problem()
         return "" if dev.state is DeviceState.RUNNING else f"{dev.name}: output is off"
 
     def off(self, stream: BlockStream) -> None:

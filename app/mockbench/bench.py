@@ -3,7 +3,8 @@
 :func:`plan_for_bench` gives the test plan of a built-in bench (the article's
 engine: 4 triaxial points, 18 forces; the block: 4 points, 9 forces).
 :class:`InProcessBench` starts the simulated front end (python-can ``virtual``
-bus), hammer digitiser and shaker (pseudo-terminals) on one shared physics, and
+bus), hammer digitiser and shaker (pseudo-terminals; or a function generator on a TCP
+socket) on one shared physics, and
 gives the station that connects the real drivers to them, with a simulated
 operator for each procedure (``operator`` hits, ``shaker_operator`` moves the shaker).
 
@@ -25,12 +26,14 @@ import numpy as np
 
 from app.acquire.plan import TestPlan, parse_plan
 from drivers.station import StationConfig, parse_station
+from hardware_mocks.bench_drive import BenchDrive
 from hardware_mocks.benches import Bench, get_bench
 from hardware_mocks.frontend_device import FrontEndDevice, shaker_force_inputs
+from hardware_mocks.generator_33500 import Generator33500
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.operator import MockOperator, MockShakerOperator
 from hardware_mocks.physics import HEARTBEAT, REPLY_TIMEOUT, STALL_TIMEOUT, BenchPhysics
-from hardware_mocks.shaker_device import bench_shakers, shaker_name
+from hardware_mocks.shaker_device import ShakerDevice, bench_shakers, shaker_name
 
 __all__ = ["InProcessBench", "plan_for_bench"]
 
@@ -83,6 +86,21 @@ def plan_for_bench(name: str, *, points: Sequence[int] | None = None, hits: int 
     }, f"built-in plan {name}")
 
 
+#: the shaker generators an in-process bench can have (:class:`InProcessBench` ``generator``)
+GENERATORS = ("sg-1", "33500")
+
+
+def _shaker_entry(dev: BenchDrive) -> dict[str, Any]:
+    """The station entry of a mock shaker generator (its drivers get the mocks' patience)."""
+    if isinstance(dev, Generator33500):
+        return {"backend": "generator-visa",
+                "transport": {"visa": dev.resource, "backend": "@py"},
+                "options": {"reply_timeout": REPLY_TIMEOUT}}
+    assert isinstance(dev, ShakerDevice)
+    return {"backend": "shaker-scpi", "transport": {"url": dev.path, "baudrate": 115200},
+            "options": {"reply_timeout": REPLY_TIMEOUT, "heartbeat": HEARTBEAT}}
+
+
 class InProcessBench:
     """Simulated front end + hammer on one bench, in this process, and their station.
 
@@ -109,13 +127,22 @@ class InProcessBench:
         signal (seed) and its force sensor on its own front-end input (``F1_fe``,
         ``F2_fe``...; with more than one, these replace ``F_fe``); their generators
         share one time origin (bursts start together, as one generator's channels).
+    generator : {"sg-1", "33500"}
+        What drives the shaker's amplifier: the SG-1 generator/amplifier on a
+        pseudo-terminal (backend ``shaker-scpi``), or a simulated Keysight 33500 function
+        generator on a TCP socket, reached through PyVISA's pyvisa-py backend (backend
+        ``generator-visa``, resource ``TCPIP0::127.0.0.1::PORT::SOCKET``; one shaker).
     """
 
     def __init__(self, name: str = "engine", *, fs_frontend: float = 1024.0,
                  fs_hammer: float = 4096.0, accel_noise: float = 0.0, force_noise: float = 0.0,
                  hammer_ppm: float = 0.0, hammer_offset: float = 0.0,
                  operator: dict[str, Any] | None = None, fe_force: bool = True,
-                 force_per_volt: float = 50.0, shakers: int = 1) -> None:
+                 force_per_volt: float = 50.0, shakers: int = 1,
+                 generator: str = "sg-1") -> None:
+        if generator not in GENERATORS or (generator == "33500" and shakers != 1):
+            raise ValueError(f"generator {generator!r} with {shakers} shakers: choose "
+                             "sg-1 (1 or more shakers) or 33500 (one shaker)")
         self.bench = get_bench(name)
         self.physics = BenchPhysics(self.bench)
         n_resp = len(self.bench.resp_nodes)
@@ -127,7 +154,10 @@ class InProcessBench:
                                        tail=4.0)
         self.hammer = HammerDevice(self.physics, ppm=hammer_ppm, offset=hammer_offset,
                                    noise=force_noise)
-        self.shakers = bench_shakers(self.physics, shakers, force_per_volt=force_per_volt)
+        self.shakers: list[BenchDrive] = (
+            [Generator33500(self.physics, force_per_volt=force_per_volt)]
+            if generator == "33500"
+            else list(bench_shakers(self.physics, shakers, force_per_volt=force_per_volt)))
         self.shaker = self.shakers[0]
         dirs = self.bench.resp_dirs
         chans = [{"name": n, "input": i, "quantity": "acceleration", "sensitivity": 10.2,
@@ -138,10 +168,8 @@ class InProcessBench:
             chans.append({"name": force, "input": n_resp + k, "quantity": "force",
                           "sensitivity": 2.25, "range": 5.0})
         patient = {"stall_timeout": STALL_TIMEOUT, "reply_timeout": REPLY_TIMEOUT}
-        shaker_devices = {shaker_name(k): {
-            "backend": "shaker-scpi", "transport": {"url": dev.path, "baudrate": 115200},
-            "options": {"reply_timeout": REPLY_TIMEOUT, "heartbeat": HEARTBEAT}}
-            for k, dev in enumerate(self.shakers)}
+        shaker_devices = {shaker_name(k): _shaker_entry(dev)
+                          for k, dev in enumerate(self.shakers)}
         self.station: StationConfig = parse_station({
             "station": {"name": f"in-process mock bench ({name})"},
             "devices": {
