@@ -53,9 +53,10 @@ class InputSignals:
     ----------
     physics : BenchPhysics
         The bench.
-    wiring : sequence of int
-        Per input: index of the bench response DOF it measures, :data:`FORCE` or
-        :func:`shaker_force`; inputs beyond the list (up to ``n_inputs``) are open.
+    wiring : sequence of int or None
+        Per input: index of the bench response DOF it measures, :data:`FORCE`,
+        :func:`shaker_force`, or None (open); inputs beyond the list (up to ``n_inputs``)
+        are open.
     n_inputs : int
         Number of inputs of the device.
     accel_noise, force_noise : float
@@ -69,7 +70,7 @@ class InputSignals:
         Seed of the noise.
     """
 
-    def __init__(self, physics: BenchPhysics, wiring: Sequence[int], n_inputs: int, *,
+    def __init__(self, physics: BenchPhysics, wiring: Sequence[int | None], n_inputs: int, *,
                  accel_noise: float = 0.0, force_noise: float = 0.0,
                  tail: float | None = None, source_block: float = 0.1, seed: int = 0) -> None:
         if len(wiring) > n_inputs:
@@ -82,10 +83,11 @@ class InputSignals:
         self.tail = tail
         self.source_block = source_block
         self._rng = np.random.default_rng(seed)
-        self._resp_rows = [i for i, w in enumerate(self.wiring) if w >= 0]
-        self._resp_dofs = [w for w in self.wiring if w >= 0]
-        self._force_rows = [i for i, w in enumerate(self.wiring) if w == FORCE]
-        self._sensor_rows = [i for i, w in enumerate(self.wiring) if w < FORCE]
+        wired = [(i, w) for i, w in enumerate(self.wiring) if w is not None]
+        self._resp_rows = [i for i, w in wired if w >= 0]
+        self._resp_dofs = [w for _, w in wired if w >= 0]
+        self._force_rows = [i for i, w in wired if w == FORCE]
+        self._sensor_rows = [i for i, w in wired if w < FORCE]
         self.clock = DeviceClock(1024.0)
         self.produced = 0  # samples taken since start
         self._pending = np.zeros((n_inputs, 0))
