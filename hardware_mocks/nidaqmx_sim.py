@@ -474,9 +474,10 @@ class SimTask:
         assert self.signals is not None and self.clock is not None
         next_event = self._n_event
         period = min(0.01, max(self._n_event, 1) / self.clock.fs / 4)
+        mine = self.modules()
         while not self._stop.wait(period):
-            self.system.check_removal(self.clock)
-            gone = [m.name for m in self.modules() if m.removed]
+            self.system.check_removal()
+            gone = [m.name for m in mine if m.removed]
             if gone:
                 with self._cond:
                     self._error = _error(f"Device cannot be accessed. Device: {gone[0]}",
@@ -601,7 +602,7 @@ class SimulatedNiDaqmx:
         """Pull ``module`` out of the chassis now."""
         self.modules[module].removed = True
 
-    def check_removal(self, clock: DeviceClock) -> None:
+    def check_removal(self) -> None:
         """Carry out :attr:`remove_after` once its time has come (on the host clock)."""
         if self.remove_after is None:
             return
