@@ -16,6 +16,11 @@ the acquisition resumes to complete the points that now lack hits. With a real
 station and a shaker plan, the run waits at each point until the shaker is
 attached there (press Enter).
 
+A station file with a ``[simulation]`` table (``docs/ni_station.toml``) runs its real
+drivers on simulated vendor APIs (NI-DAQmx) driven by that built-in bench, with a simulated
+operator (:mod:`app.mockbench.simulated`); such a run, too, stops at a pause, its records
+kept.
+
 ``--station BENCH.toml --mock-operator`` acquires on a mock bench running in
 another process (``insitu mock-bench --station BENCH.toml``), through the same
 drivers and transports as real hardware; a simulated operator hits each point
