@@ -34,6 +34,7 @@ ENTRY_POINT_GROUP = "insitu.drivers"
 #: built-in backends: name -> (module, class name)
 BACKENDS: dict[str, tuple[str, str]] = {
     "frontend-can": ("drivers.frontend_can", "CanFrontEnd"),
+    "frontend-nidaqmx": ("drivers.frontend_nidaqmx", "NiDaqFrontEnd"),
     "generator-visa": ("drivers.generator_visa", "VisaGenerator"),
     "hammer-serial": ("drivers.hammer_serial", "SerialHammer"),
     "shaker-scpi": ("drivers.shaker_scpi", "ScpiShaker"),

@@ -5,15 +5,9 @@ share one process), answers commands, and streams sample frames paced by its
 own :class:`~hardware_mocks.physics.DeviceClock`. Inputs are wired to the bench:
 by default inputs 0..11 carry the 12 accelerometer DOFs of the bench and input
 12 the force (the hammer's, plus the force sensor of a shaker attached to the
-bench). Each hit on the shared :class:`BenchPhysics` and the force of every
-attached continuous source (a shaker) are turned into the model's
-accelerations by linear convolution with the model's band-limited impulse
-responses (:func:`hardware_mocks.signals.simulate`, nothing wraps around) on the
-front end's own sample grid, plus sensor noise. Continuous forces are sampled
-in blocks of ``source_block`` s, :data:`LOOKAHEAD` samples ahead of the
-samples being sent: the response starting more than that many samples before
-its force (below 1e-5 of the peak) is left out, and a change of the shaker's
-output shows up within ``source_block`` s. An input wired to
+bench). What the inputs carry, hits and shakers on the shared :class:`BenchPhysics`
+turned into the model's accelerations on the front end's own sample grid, is
+:class:`hardware_mocks.input_signals.InputSignals`. An input wired to
 ``shaker_force(k)`` carries the force sensor of the shakers whose ``sensor`` is
 ``k`` only (two shakers driven at once, each with its own force sensor).
 
@@ -41,22 +35,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hardware_mocks.benches import get_bench
-from hardware_mocks.physics import BenchPhysics, DeviceClock, sampled_pulse
-from hardware_mocks.signals import simulate
+from hardware_mocks.input_signals import FORCE, LOOKAHEAD, InputSignals, shaker_force
+from hardware_mocks.physics import BenchPhysics, DeviceClock
 
 __all__ = ["FORCE", "LOOKAHEAD", "FrontEndDevice", "FrontEndFaults", "shaker_force",
            "shaker_force_inputs"]
 
 logger = logging.getLogger(__name__)
-
-FORCE = -1  #: wiring code: the input carries the hammer force
-
-
-def shaker_force(sensor: int) -> int:
-    """Wiring code of an input that carries the force sensor ``sensor`` of a shaker only
-    (:attr:`hardware_mocks.shaker_device.ShakerDevice.sensor`)."""
-    return -2 - sensor
-
 
 def shaker_force_inputs(shakers: int, suffix: str = "") -> list[tuple[str, int]]:
     """Channel name and wiring code of a mock bench's front-end force inputs.
@@ -75,8 +60,6 @@ def shaker_force_inputs(shakers: int, suffix: str = "") -> list[tuple[str, int]]
 FULL = 8388607
 RATES = (256, 512, 1024, 2048, 4096)
 RANGES_MV = (1000, 5000, 10000)
-#: samples of the non-causal lead of the band-limited response that are simulated
-LOOKAHEAD = 64
 
 
 @dataclass
@@ -145,12 +128,11 @@ class FrontEndDevice:
             sensitivity = [2.25 if w < 0 else 10.2 for w in self.wiring]
         self.sensitivity = np.zeros(self.N_INPUTS)
         self.sensitivity[: len(sensitivity)] = sensitivity
-        self.accel_noise = accel_noise
-        self.force_noise = force_noise
         self.ppm = ppm
         self.offset = offset
-        self.tail = tail
-        self.source_block = source_block
+        self.signals = InputSignals(self.physics, self.wiring, self.N_INPUTS,
+                                    accel_noise=accel_noise, force_noise=force_noise,
+                                    tail=tail, source_block=source_block, seed=seed)
         self.serial_number = serial_number
         self.faults = FrontEndFaults()
         self.rate = 1024
@@ -161,13 +143,8 @@ class FrontEndDevice:
         self.running = False
         self.frames_sent = 0
         self.commands: list[bytes] = []
-        self._rng = np.random.default_rng(seed)
         self._bus = can.Bus(interface=interface, channel=channel, fd=True)
         self._clock = DeviceClock(self.rate)
-        self._resp_rows = [i for i, w in enumerate(self.wiring) if w >= 0]
-        self._resp_dofs = [w for w in self.wiring if w >= 0]
-        self._force_rows = [i for i, w in enumerate(self.wiring) if w == FORCE]
-        self._sensor_rows = [i for i, w in enumerate(self.wiring) if w < FORCE]
         self._reset_stream()
         self._stop = threading.Event()
         self._unplugged = threading.Event()
@@ -178,12 +155,19 @@ class FrontEndDevice:
         self._produced = 0
         self._seq = 0
         self._frame_no = 0
-        self._pending = np.zeros((self.N_INPUTS, 0))
-        self._hit_cursor = len(self.physics.hits())
-        self._forced_until = 0  # continuous forces simulated up to this sample
         self._overload_mask = 0
         self._overflow_flag = False
         self._last_status = time.monotonic()
+
+    @property
+    def accel_noise(self) -> float:
+        """Accelerometer noise, m/s^2 RMS."""
+        return self.signals.accel_noise
+
+    @property
+    def force_noise(self) -> float:
+        """Force sensor noise, N RMS."""
+        return self.signals.force_noise
 
     @property
     def clock(self) -> DeviceClock:
@@ -224,8 +208,7 @@ class FrontEndDevice:
                 # one instant for both: only samples whose shaker forces are simulated are
                 # sent, however long the simulation took (a loaded host)
                 due = self._clock.due()
-                self._absorb_hits()
-                self._absorb_sources(due)
+                self.signals.advance(due)
                 self._emit_due(due)
                 if time.monotonic() - self._last_status >= 0.1:
                     self._status()
@@ -272,88 +255,15 @@ class FrontEndDevice:
             self._ack(op, 0)
         elif op == 3:  # START
             clock = DeviceClock(self.rate, self.ppm, self.offset)
-            ir = self.physics.impulse_response(clock.true_rate, 0)  # computed once per rate
+            self.physics.impulse_response(clock.true_rate, 0)  # computed once per rate
             self._ack(op, 0)
             self._clock = clock
             self._clock.start()
             self._reset_stream()
-            # simulate what the shakers did before the start, so their response is steady
-            self._forced_until = -(ir.h.shape[-1] - ir.lead)
+            self.signals.start(clock)
             self.running = True
         else:
             self._ack(op, 3)
-
-    def _add_pending(self, signal: NDArray[np.float64], k_start: int, what: str = "") -> None:
-        """Add ``signal`` (N_INPUTS, n), starting at device sample ``k_start``, to what is
-        still to be sent. Samples already sent are left out; for a ``what`` (a hit) this
-        is reported when more than its :data:`LOOKAHEAD` samples of lead are lost."""
-        start = k_start - self._produced
-        if start < 0:
-            if what and -start > LOOKAHEAD:
-                logger.warning("mock front end: %s registered %d samples late", what,
-                               -start - LOOKAHEAD)
-            signal, start = signal[:, -start:], 0
-        if signal.shape[1] == 0:
-            return
-        end = start + signal.shape[1]
-        if end > self._pending.shape[1]:
-            grow = np.zeros((self.N_INPUTS, end - self._pending.shape[1]))
-            self._pending = np.concatenate([self._pending, grow], axis=1)
-        self._pending[:, start:end] += signal
-
-    def _signal(self, force: NDArray[np.float64], acc: NDArray[np.float64],
-                sensor: int | None = None) -> NDArray[np.float64]:
-        """Inputs (N_INPUTS, n) from the force on the bench and all response DOFs'
-        accelerations; ``sensor``: the force sensor that measures it (a shaker's), if any."""
-        signal = np.zeros((self.N_INPUTS, acc.shape[1]))
-        signal[self._resp_rows] = acc[self._resp_dofs]
-        signal[self._force_rows] = force
-        if sensor is not None:
-            rows = [i for i, w in enumerate(self.wiring) if w == shaker_force(sensor)]
-            signal[rows] = force
-        return signal
-
-    def _absorb_hits(self) -> None:
-        """Add the response to each new hit to the samples still to be sent."""
-        new = self.physics.hits(self._hit_cursor)
-        self._hit_cursor += len(new)
-        rate = self._clock.true_rate
-        for hit in new:
-            ir = self.physics.impulse_response(rate, hit.exc)
-            k0 = int(np.floor((hit.t0 - self._clock.t_first) * rate)) - LOOKAHEAD
-            n = (int(np.ceil(self.tail * rate)) if self.tail is not None
-                 else int(np.ceil(hit.duration * rate)) + LOOKAHEAD + ir.h.shape[-1] - ir.lead)
-            force = sampled_pulse(self._clock.instants(k0, n), 1.0 / rate, [hit])
-            self._add_pending(self._signal(force, simulate(ir, force[None, :])), k0, "hit")
-
-    def _absorb_sources(self, due: int) -> None:
-        """Simulate the continuous forces (shakers) one block ahead of sample ``due``."""
-        rate = self._clock.true_rate
-        block = max(1, int(np.ceil(self.source_block * rate)))
-        until = due + LOOKAHEAD + block
-        while self._forced_until < until:
-            a = self._forced_until
-            n = max(block, until - a)
-            self._forced_until = a + n
-            for exc, sensor, f in self.physics.source_forces(self._clock.instants(a, n)):
-                ir = self.physics.impulse_response(rate, exc)
-                padded = np.zeros(LOOKAHEAD + n + ir.h.shape[-1] - ir.lead)
-                padded[LOOKAHEAD : LOOKAHEAD + n] = f
-                self._add_pending(self._signal(padded, simulate(ir, padded[None, :]), sensor),
-                                  a - LOOKAHEAD)
-
-    def _physical(self, n: int) -> NDArray[np.float64]:
-        out = np.zeros((self.N_INPUTS, n))
-        k = min(n, self._pending.shape[1])
-        out[:, :k] = self._pending[:, :k]
-        self._pending = self._pending[:, k:]
-        if self.accel_noise:
-            out[self._resp_rows] += self.accel_noise * self._rng.standard_normal(
-                (len(self._resp_rows), n))
-        if self.force_noise:
-            rows = self._force_rows + self._sensor_rows
-            out[rows] += self.force_noise * self._rng.standard_normal((len(rows), n))
-        return out
 
     def _emit_due(self, due: int) -> None:
         """Send the whole frames of the samples before sample ``due``."""
@@ -362,7 +272,7 @@ class FrontEndDevice:
             f = self.faults
             if f.overflow:  # samples lost inside the device
                 lost = f.overflow - f.overflow % per_frame
-                self._physical(lost)
+                self.signals.take(lost)
                 self._produced += lost
                 self._seq += lost // per_frame
                 self._overflow_flag = True
@@ -371,7 +281,7 @@ class FrontEndDevice:
             if f.seq_jump:
                 self._seq += f.seq_jump
                 f.seq_jump = 0
-            volts = self._physical(per_frame) * self.sensitivity[:, None] / 1000.0
+            volts = self.signals.take(per_frame) * self.sensitivity[:, None] / 1000.0
             counts = np.round(volts / (self.range_mv[:, None] / 1000.0) * FULL).astype(np.int64)
             over = np.abs(counts) > FULL
             counts = np.clip(counts, -FULL, FULL)

@@ -16,6 +16,11 @@ the acquisition resumes to complete the points that now lack hits. With a real
 station and a shaker plan, the run waits at each point until the shaker is
 attached there (press Enter).
 
+A station file with a ``[simulation]`` table (``docs/ni_station.toml``) runs its real
+drivers on simulated vendor APIs (NI-DAQmx) driven by that built-in bench, with a simulated
+operator (:mod:`app.mockbench.simulated`); such a run, too, stops at a pause, its records
+kept.
+
 ``--station BENCH.toml --mock-operator`` acquires on a mock bench running in
 another process (``insitu mock-bench --station BENCH.toml``), through the same
 drivers and transports as real hardware; a simulated operator hits each point
@@ -52,8 +57,9 @@ from app.cli.common import VERB_HELP, UserError
 from app.io.runfile import read_run
 from drivers.station import StationConfig, load_station
 
-if TYPE_CHECKING:  # the mock bench is imported by --mock and --mock-operator only
+if TYPE_CHECKING:  # the mock bench is imported by --mock, --mock-operator and [simulation]
     from app.mockbench.bench import InProcessBench
+    from app.mockbench.simulated import SimulatedStation
     from hardware_mocks.operator import RemoteOperator, RemoteShakerOperator
 
 #: what a pause that waits for the operator to attach the shaker says first
@@ -150,14 +156,34 @@ def _in_process_bench(name: str, fs: float, shakers: int = 1) -> InProcessBench:
     return InProcessBench(name, fs_frontend=fs, shakers=shakers)
 
 
+def _simulated_station(station: StationConfig) -> SimulatedStation:
+    """The simulated vendor APIs and operator of a station with a ``[simulation]`` table;
+    one line where they cannot be built."""
+    from app.mockbench.simulated import SimulatedStation, SimulationError
+
+    try:
+        return SimulatedStation(station)
+    except SimulationError as err:
+        raise UserError(str(err)) from err
+
+
 def _procedure(plan: TestPlan, station: StationConfig, args: argparse.Namespace,
-               bench: InProcessBench | None) -> RecordingProcedure:
+               bench: InProcessBench | None, sim: SimulatedStation | None = None
+               ) -> RecordingProcedure:
+    options = sim.device_options if sim is not None else None
     if plan.method == "shaker":
+        if sim is not None and sim.shaker_operator is None:
+            raise UserError(f"{station.source}: a shaker plan, but the simulated station has "
+                            "no simulated shaker: use a hammer plan")
+        operator = bench.shaker_operator if bench else sim.shaker_operator if sim else None
         return ShakerProcedure(plan, station, args.out, resume=args.resume,
-                               listeners=[bench.shaker_operator] if bench else [],
-                               confirm_attach=bench is None and not args.mock_operator)
+                               listeners=[operator] if operator is not None else [],
+                               confirm_attach=operator is None and not args.mock_operator,
+                               device_options=options)
+    operator = bench.operator if bench else sim.operator if sim else None
     return HammerProcedure(plan, station, args.out, resume=args.resume,
-                           listeners=[bench.operator] if bench else [])
+                           listeners=[operator] if operator is not None else [],
+                           device_options=options)
 
 
 def _remote_operator(station: StationConfig, plan: TestPlan, stack: contextlib.ExitStack
@@ -389,6 +415,7 @@ def run(args: argparse.Namespace) -> int:
     again = _again(args)
     with _stop_signals(), contextlib.ExitStack() as stack:
         bench = None
+        sim = None
         if args.mock or args.station is None:
             fs = plan.record.fs if plan is not None else 1024.0
             shakers = plan.n_references if plan is not None else 1
@@ -401,7 +428,12 @@ def run(args: argparse.Namespace) -> int:
             if plan is None:
                 raise UserError("give --plan FILE (or --mock for the built-in bench's plan)")
             _check_bench_shakers(plan, station)
-        proc = _procedure(plan, station, args, bench)
+            if station.simulation:
+                if args.mock_operator:
+                    raise UserError(f"{station.source} simulates its bench ([simulation]), "
+                                    "with its own simulated operator: drop --mock-operator")
+                sim = stack.enter_context(_simulated_station(station))
+        proc = _procedure(plan, station, args, bench, sim)
         check_disk_space(proc)  # before any device opens or the file is created
         operator = None
         if args.mock_operator:
@@ -411,15 +443,16 @@ def run(args: argparse.Namespace) -> int:
         gave_up = ""
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), console=console) as progress:
+            simulated = bench is not None or sim is not None  # nobody at the bench to fix it
             bars = ProgressBars(progress, proc.plan, console,
-                                quiet_pause=operator is not None or bench is not None)
+                                quiet_pause=operator is not None or simulated)
             proc.add_listener(bars)
             proc.start()
             try:
                 while proc.wait(0.2) is not RunState.FINISHED and proc.running:
                     if ((operator is not None and operator.error) or (
                             proc.state is RunState.PAUSED
-                            and (operator is not None or bench is not None))):
+                            and (operator is not None or simulated))):
                         # a simulated bench: nobody there to fix and resume: stop, the
                         # records are kept
                         gave_up = (operator.error if operator is not None else "") or \

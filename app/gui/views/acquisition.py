@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from PySide6 import QtCore, QtWidgets
 
@@ -36,6 +36,9 @@ from app.pipeline import RUN_FILE
 from app.report.analysis import message_of
 from processing.identify import IdentificationResult
 from processing.measurement import Measurement
+
+if TYPE_CHECKING:
+    from app.mockbench.simulated import SimulatedStation
 
 __all__ = ["AcquisitionView"]
 
@@ -66,6 +69,8 @@ class AcquisitionView(QtWidgets.QWidget):
         self._shown: Measurement | None = None  # the run's measurement, once shown
         self.state: RunState = RunState.IDLE
         self._pause_asked = False
+        #: a station file's [simulation]: its simulated vendor APIs and operator, for one run
+        self._simulated: SimulatedStation | None = None
         top = self._run_controls()
         left = self._progress_panel()
         self.bridge = AcquisitionBridge(self)
@@ -216,18 +221,34 @@ class AcquisitionView(QtWidgets.QWidget):
         shaker = plan.method == "shaker"
         if simulated and mock is not None:
             listeners.append(mock.shaker_operator if shaker else mock.operator)
+        options = None
+        self._end_simulation()
+        if mock is None and station.simulation:  # a station file simulating its vendor APIs
+            from app.mockbench.simulated import SimulatedStation, SimulationError
+
+            try:
+                self._simulated = SimulatedStation(station)
+            except SimulationError as err:
+                self.message.emit("error", f"cannot start: {err}")
+                return False
+            operator = self._simulated.shaker_operator if shaker else self._simulated.operator
+            if self.operator_box.isChecked() and operator is not None:
+                listeners.append(operator)
+                simulated = True
+            options = self._simulated.device_options
         try:
             partial = not plan.check(station, strict=False).ok
             path.parent.mkdir(parents=True, exist_ok=True)
             if shaker:
                 self.procedure = ShakerProcedure(
                     plan, station, path, listeners=listeners, partial=partial,
-                    confirm_attach=not simulated,
+                    confirm_attach=not simulated, device_options=options,
                     heartbeat=MOCK_HEARTBEAT if mock is not None else SHAKER_HEARTBEAT)
             else:
                 self.procedure = HammerProcedure(plan, station, path, listeners=listeners,
-                                                 partial=partial)
+                                                 partial=partial, device_options=options)
         except (ValueError, OSError) as err:
+            self._end_simulation()
             self.message.emit("error", f"cannot start: {message_of(err)}")
             return False
         self.word = "block" if shaker else "hit"
@@ -399,7 +420,14 @@ class AcquisitionView(QtWidgets.QWidget):
             self.session.set_result(result)
 
     @QtCore.Slot(object)
+    def _end_simulation(self) -> None:
+        """Close the simulated vendor APIs of the last run's station, if any."""
+        sim, self._simulated = self._simulated, None
+        if sim is not None:
+            sim.shutdown()
+
     def _finished(self, state: RunState) -> None:
+        self._end_simulation()  # the procedure has released its devices
         self.plots.stop()
         self._set_state(state)
         self.projections.highlight(None)
@@ -433,6 +461,7 @@ class AcquisitionView(QtWidgets.QWidget):
         if self.procedure is not None and self.procedure.running:
             self.procedure.stop()
             self.procedure.wait(timeout)
+        self._end_simulation()
         self.plots.live.timer.stop()
 
 
