@@ -39,7 +39,7 @@ has no watchdog and no output ramp: the driver turns the output off (``OUTP OFF`
 ``shutdown()`` and at interpreter exit (``atexit``; the command line turns SIGTERM and
 SIGHUP into a stop, which shuts the devices down). An ``OUTP OFF`` never waits more than
 ``reply_timeout`` s for a silent or unplugged generator. A host that dies without running
-any of these (``kill -9``, a power cut) leaves the output on: see ``docs/hardware_generator.md``.
+any of these (``kill -9``, a power cut) leaves the output on: see ``docs/hardware.md``.
 
 Example
 -------
@@ -186,9 +186,10 @@ class VisaGenerator(ExcitationDevice):
         if not isinstance(config.transport, VisaTransportConfig):
             raise ValueError(f"device {config.name!r}: generator-visa needs a VISA resource "
                              "(transport = { visa = \"TCPIP0::HOST::5025::SOCKET\" })")
-        opts: dict[str, Any] = {"backend": config.transport.backend, **config.options,
-                                **overrides}
-        return cls(config.name, config.transport.resource, **opts)
+        opts: dict[str, Any] = {"resource": config.transport.resource,
+                                "backend": config.transport.backend, **config.options,
+                                **overrides}  # a simulated station's own socket, say
+        return cls(config.name, **opts)
 
     @classmethod
     def setting_limits(cls, config: DeviceConfig) -> dict[str, tuple[float, float]]:

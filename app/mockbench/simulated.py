@@ -5,7 +5,9 @@ simulated vendor APIs (:mod:`hardware_mocks`) driven by that built-in bench's ph
 :class:`SimulatedStation` builds the bench (:class:`~hardware_mocks.physics.BenchPhysics`),
 one fake API per device, handed to the driver at its boundary as keyword overrides of
 ``from_config`` (the procedures' ``device_options``), and the simulated operator who hits
-where the run asks (:class:`~hardware_mocks.operator.MockOperator` on the physics).
+where the run asks (:class:`~hardware_mocks.operator.MockOperator` on the physics), or who
+moves the simulated shaker (a ``generator-visa`` device: a simulated Keysight 33500 and its
+amplifier) to each point a shaker plan names.
 
 The ``[simulation]`` table (besides ``bench``; every key optional):
 
@@ -40,10 +42,11 @@ import numpy as np
 
 from drivers.station import DeviceConfig, NiDaqTransportConfig, StationConfig
 from hardware_mocks.benches import BENCHES, get_bench
+from hardware_mocks.generator_33500 import Generator33500
 from hardware_mocks.input_signals import FORCE
 from hardware_mocks.nidaqmx_sim import NI9234_RATES, SimModule, SimulatedNiDaqmx
-from hardware_mocks.operator import MockOperator
-from hardware_mocks.physics import STALL_TIMEOUT, BenchPhysics
+from hardware_mocks.operator import MockOperator, MockShakerOperator
+from hardware_mocks.physics import REPLY_TIMEOUT, STALL_TIMEOUT, BenchPhysics
 
 __all__ = ["SIMULATED_BACKENDS", "SimulatedStation", "SimulationError"]
 
@@ -51,6 +54,8 @@ __all__ = ["SIMULATED_BACKENDS", "SimulatedStation", "SimulationError"]
 G0 = 9.80665
 #: a station channel measures a bench response DOF when their directions are this close (cos)
 SAME_DIRECTION = 0.999
+#: the simulated shaker's force per volt of its generator's output, N/V (the built-in benches')
+SHAKER_FORCE_PER_VOLT = 50.0
 _KEYS = {"bench", "accel_noise", "force_noise", "settle", "nidaqmx_driver", "nidaqmx_modules",
          "nidaqmx_rates", "remove_module"}
 
@@ -126,6 +131,29 @@ def simulated_nidaqmx(sim: SimulatedStation, dev: DeviceConfig) -> dict[str, Any
     return {"api": api, "stall_timeout": STALL_TIMEOUT}
 
 
+def simulated_generator(sim: SimulatedStation, dev: DeviceConfig) -> dict[str, Any]:
+    """The simulated Keysight 33500 of a ``generator-visa`` device: a function generator on a
+    TCP socket of this host driving a shaker on the bench (its force on the front end's
+    force input), reached through PyVISA's pyvisa-py as the real one on the LAN; the
+    station's resource string is replaced by the socket's."""
+    if sim.shaker_operator is not None:
+        raise sim.fail("bench", f"devices.{dev.name}: one simulated shaker per station")
+    gen = Generator33500(sim.physics, force_per_volt=SHAKER_FORCE_PER_VOLT)
+    sim.closers.append(_Closing(gen))
+    sim.shaker_operator = MockShakerOperator(gen)
+    return {"resource": gen.resource, "backend": "@py", "reply_timeout": REPLY_TIMEOUT}
+
+
+class _Closing:
+    """``close()`` of a mock whose own word for it is ``shutdown()``."""
+
+    def __init__(self, mock: Generator33500) -> None:
+        self.mock = mock
+
+    def close(self) -> None:
+        self.mock.shutdown()
+
+
 #: The simulated vendor API of each backend, for stations with a ``[simulation]`` table.
 #:
 #: ``backend name -> factory(sim, device) -> keyword overrides``: ``sim`` is the
@@ -141,6 +169,7 @@ def simulated_nidaqmx(sim: SimulatedStation, dev: DeviceConfig) -> dict[str, Any
 #: as :class:`~hardware_mocks.operator.MockShakerOperator`). Adding a backend is one entry.
 SIMULATED_BACKENDS: dict[str, Callable[[SimulatedStation, DeviceConfig], dict[str, Any]]] = {
     "frontend-nidaqmx": simulated_nidaqmx,
+    "generator-visa": simulated_generator,
 }
 
 

@@ -73,6 +73,24 @@ def test_documented_station_identifies_the_bench(tmp_path: Path) -> None:
     assert_identifies(json.loads(res.read_text()), get_bench("engine-rigid").model)
 
 
+def test_documented_shaker_plan_through_the_simulated_generator(tmp_path: Path) -> None:
+    """docs/ni_shaker_plan.toml (one block a point, shorter settling) on the documented
+    station: the 33500 (generator-visa through pyvisa-py) drives the shaker, the cDAQ reads
+    its force and the responses; the bench is identified, the output off at the end."""
+    text = (DOCS / "ni_shaker_plan.toml").read_text()
+    assert "\naverages = 3\n" in text and "\nsettle = 1.0\n" in text
+    plan = tmp_path / "plan.toml"
+    plan.write_text(text.replace("\naverages = 3\n", "\naverages = 1\n")
+                    .replace("\nsettle = 1.0\n", "\nsettle = 0.5\n"))
+    out = tmp_path / "run.h5"
+    assert main(["acquire", "--station", str(DOCS / "ni_station.toml"), "--plan", str(plan),
+                 "--out", str(out)]) == 0
+    run = read_run(out, with_data=False)
+    assert run.method == "shaker" and run.state == "finished" and len(run.records) == 9
+    assert run.station_data["devices"]["shaker"]["backend"] == "generator-visa"
+    assert_identifies(json.loads(json.dumps(run.result)), get_bench("engine-rigid").model)
+
+
 def test_without_the_nidaqmx_package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                      capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setitem(sys.modules, "nidaqmx", None)

@@ -251,7 +251,17 @@ class AcquisitionView(QtWidgets.QWidget):
             self._end_simulation()
             self.message.emit("error", f"cannot start: {message_of(err)}")
             return False
-        self.word = "block" if shaker else "hit"
+        self._show_new_run(plan, path)
+        self.procedure.start()
+        self._set_state(RunState.RUNNING)
+        self.message.emit("info" if not partial else "warning", _started(
+            plan, path, partial, "; ".join(self.procedure.geometry_report.messages)))
+        return True
+
+    def _show_new_run(self, plan: TestPlan, path: Path) -> None:
+        """The view made ready for a new run of ``plan`` into ``path``: its words (hit or
+        block), an empty table, the progress bar counting the plan's stops, clear plots."""
+        self.word = "block" if plan.method == "shaker" else "hit"
         self._shown = None
         self.run_path.setText(str(path))
         self.hits = []
@@ -272,11 +282,6 @@ class AcquisitionView(QtWidgets.QWidget):
         self.progress_label.setText("")
         self.plots.start(self.word, plan.n_references)
         self._pause_asked = False
-        self.procedure.start()
-        self._set_state(RunState.RUNNING)
-        self.message.emit("info" if not partial else "warning", _started(
-            plan, path, partial, "; ".join(self.procedure.geometry_report.messages)))
-        return True
 
     def pause(self) -> None:
         """Pause after the current hit or block (devices stopped, the shaker output off)."""
