@@ -20,7 +20,7 @@ test: $(STAMP)
 	$(BIN)/ruff check app drivers processing hardware_mocks tests benchmarks
 	$(BIN)/lint-imports
 	$(BIN)/mypy
-	$(BIN)/python -m pytest -n 2
+	$(BIN)/python -m pytest -n auto --maxschedchunk 1
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/identify.py

@@ -67,9 +67,9 @@ from drivers.errors import (
     DeviceInitializationError,
     DeviceNotAvailableError,
     DeviceTimeoutError,
-    ProtocolError,
     one_line,
 )
+from drivers.scpi import read_error_queue
 from drivers.station import DeviceConfig, VisaTransportConfig
 
 __all__ = ["GeneratorError", "VisaGenerator"]
@@ -252,19 +252,7 @@ class VisaGenerator(ExcitationDevice):
 
     def errors(self) -> list[tuple[int, str]]:
         """Empty the generator's error queue: ``[(code, text), ...]``, oldest first."""
-        out: list[tuple[int, str]] = []
-        for _ in range(self.max_error_reads):
-            reply = self.query("SYST:ERR?")
-            code_s, _, text = reply.partition(",")
-            try:
-                code = int(code_s)
-            except ValueError:
-                raise ProtocolError(f"{self.name}: SYST:ERR? answered {reply!r}",
-                                    self.name) from None
-            if code == 0:
-                return out
-            out.append((code, text.strip().strip('"')))
-        return out
+        return read_error_queue(self.query, self.name, self.max_error_reads)
 
     def command(self, *commands: str) -> None:
         """Send a batch of settings, then read the error queue; on an error, output off and

@@ -29,6 +29,7 @@ from drivers.errors import (
     DeviceTimeoutError,
     ProtocolError,
 )
+from drivers.scpi import read_error_queue
 from drivers.station import DeviceConfig, SerialTransportConfig
 from drivers.transports import SerialLink
 
@@ -125,19 +126,7 @@ class ScpiShaker(ExcitationDevice):
 
     def errors(self) -> list[tuple[int, str]]:
         """Empty the device's error queue: ``[(code, text), ...]``, oldest first."""
-        out: list[tuple[int, str]] = []
-        for _ in range(self.max_error_reads):
-            reply = self.query("SYST:ERR?")
-            code_s, _, text = reply.partition(",")
-            try:
-                code = int(code_s)
-            except ValueError:
-                raise ProtocolError(f"{self.name}: SYST:ERR? answered {reply!r}",
-                                    self.name) from None
-            if code == 0:
-                return out
-            out.append((code, text.strip('"')))
-        return out
+        return read_error_queue(self.query, self.name, self.max_error_reads)
 
     def command(self, command: str) -> None:
         """Send a setting and check the error queue; on an error, output off and raise."""

@@ -78,6 +78,23 @@ class BenchDrive:
         """Stop the device and leave the bench (idempotent); each device's own."""
         raise NotImplementedError
 
+    def _fail(self, code: int) -> None:
+        """Queue SCPI error ``code`` (each generator mock keeps its own error queue)."""
+        raise NotImplementedError
+
+    def _number(self, arg: str, low: float, high: float) -> float | None:
+        """A command's number argument within ``[low, high]``; else None, with -224 (not a
+        number) or -222 (out of range) queued as the generators do."""
+        try:
+            value = float(arg)
+        except ValueError:
+            self._fail(-224)
+            return None
+        if not low <= value <= high:
+            self._fail(-222)
+            return None
+        return value
+
     def multisine(self, tau: NDArray[np.float64], f0: float, f1: float) -> NDArray[np.float64]:
         """Unit-RMS random-phase multisine over ``[f0, f1]`` Hz at times ``tau`` (s): at most
         :data:`RANDOM_LINES` lines, a period of at least :data:`RANDOM_PERIOD` s."""

@@ -319,17 +319,6 @@ class Generator33500(BenchDrive):
         else:
             self._fail(-113)
 
-    def _number(self, arg: str, low: float, high: float) -> float | None:
-        try:
-            value = float(arg)
-        except ValueError:
-            self._fail(-224)
-            return None
-        if not low <= value <= high:
-            self._fail(-222)
-            return None
-        return value
-
     def _set_load(self, arg: str) -> None:
         if arg.upper() in ("INF", "9.9E+37"):
             self.load = "INF"

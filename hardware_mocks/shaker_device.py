@@ -230,17 +230,6 @@ class ShakerDevice(BenchDrive, SerialMockDevice):
     def _reply(self, text: str) -> None:
         self._port.write(text.encode("ascii") + b"\n")
 
-    def _number(self, arg: str, low: float, high: float) -> float | None:
-        try:
-            value = float(arg)
-        except ValueError:
-            self._fail(-224)
-            return None
-        if not low <= value <= high:
-            self._fail(-222)
-            return None
-        return value
-
     def _command(self, cmd: str) -> None:
         if not cmd:
             return

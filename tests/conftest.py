@@ -8,6 +8,8 @@ import signal
 import tempfile
 from pathlib import Path
 
+import pytest
+
 _LOGS = Path(tempfile.mkdtemp(prefix="insitu-log-"))
 os.environ.setdefault("INSITU_LOG", str(_LOGS / "insitu.log"))
 
@@ -16,3 +18,24 @@ os.environ.setdefault("INSITU_LOG", str(_LOGS / "insitu.log"))
 # that stop ``insitu acquire`` as an operator's Ctrl-C does would then wait for nothing.
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The ``slow`` tests (the real-time runs on the mock benches, tens of seconds each) first,
+    each group in its own order: with ``--maxschedchunk 1`` the workers take the tests one
+    or two at a time, so the long ones run side by side from the start instead of one
+    worker finishing them alone at the end."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto``: two workers per core free now, at most two per core and at least one.
+
+    Most of the long tests wait on real-time mock benches, so two workers share a core
+    well on a quiet machine; on a busy one fewer workers keep the benches' streams in time.
+    Free cores as :func:`processing.spectral.free_cores` counts them (the runnable threads
+    of ``/proc/loadavg``)."""
+    from processing.spectral import free_cores
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+    return max(1, min(2 * cores, 2 * free_cores()))

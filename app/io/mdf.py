@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from app.io._optional import optional_package
 from app.io.time_channels import RawSignal, snapped_rate
 from app.io.uff_time import TimeRun
 from processing.data import InputError
@@ -37,12 +38,7 @@ MAGIC = b"MDF     "
 
 def asammdf() -> ModuleType:
     """asammdf, or one line naming the extra to install."""
-    try:
-        import asammdf as lib
-    except ImportError as err:
-        raise InputError("reading or writing MDF files needs asammdf, an optional part of "
-                         "insitu: pip install 'insitu[mdf]'") from err
-    return lib
+    return optional_package("asammdf", "reading or writing MDF files", "asammdf", "mdf")
 
 
 def _unreadable(path: Path, err: BaseException) -> InputError:

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from app.io._optional import optional_package
 from app.io.time_channels import RawSignal, snapped_rate
 from app.io.uff_time import TimeRun
 from processing.data import InputError
@@ -36,12 +37,7 @@ _INCOMPLETE = 0xFFFF_FFFF_FFFF_FFFF  # next-segment offset of a segment never fi
 
 def nptdms() -> ModuleType:
     """npTDMS, or one line naming the extra to install."""
-    try:
-        import nptdms as lib
-    except ImportError as err:
-        raise InputError("reading or writing TDMS files needs npTDMS, an optional part of "
-                         "insitu: pip install 'insitu[tdms]'") from err
-    return lib
+    return optional_package("nptdms", "reading or writing TDMS files", "npTDMS", "tdms")
 
 
 def check_tdms(path: Path) -> None:

@@ -43,6 +43,7 @@ class Recorder(Listener):
         self.events.append(("finished", state))
 
 
+@pytest.mark.slow
 def test_engine_identified_within_tolerance_and_replay_is_identical(tmp_path: Path) -> None:
     path = tmp_path / "run.h5"
     plan = plan_for_bench("engine-rigid", points=POINTS, length=1.5)
@@ -124,6 +125,7 @@ def _within_noisy_tolerances(mass: float, cog: Any, inertia_cog: Any, K: Any, mo
     assert_allclose(K, model.K, atol=0.05 * np.abs(model.K).max())
 
 
+@pytest.mark.slow
 def test_noisy_sensors_with_the_articles_bands(noisy_run: tuple[Path, Any, Any],
                                                tmp_path: Path) -> None:
     path, _, model = noisy_run
@@ -137,6 +139,7 @@ def test_noisy_sensors_with_the_articles_bands(noisy_run: tuple[Path, Any, Any],
 @pytest.mark.xfail(strict=False, reason="issue 12 part 3: the noisy run differs from run to run "
                    "(hit timing); with the automatic bands some runs give mass -0.6 %, CoG "
                    "1.3 mm, K 0.7 % (within the tolerances), others 91-93 kg for 110 kg")
+@pytest.mark.slow
 def test_noisy_sensors_default(noisy_run: tuple[Path, Any, Any]) -> None:
     _, result, model = noisy_run
     assert result is not None

@@ -6,6 +6,7 @@ import threading
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from app.acquire import HammerProcedure, Listener, RunState
 from app.io.runfile import read_run
@@ -50,6 +51,7 @@ def test_double_hit_and_overload_are_rejected_and_replaced(tmp_path: Path) -> No
     assert list(run.records.point) == [0, 0, 1, 1]
 
 
+@pytest.mark.slow
 def test_corrupted_hammer_frames_are_counted_and_the_hit_rejected(tmp_path: Path) -> None:
     plan = plan_for_bench("engine-rigid", points=POINTS, length=0.5)
     ev = Events()

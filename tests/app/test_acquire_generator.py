@@ -64,6 +64,7 @@ def _chirp_plan(points: list[int], averages: int = 1):
         "averages": averages, "nperseg": 512, "ramp": 0.1, "settle": 1.0})
 
 
+@pytest.mark.slow
 def test_chirp_plan_through_the_simulated_33500_identifies_the_engine(tmp_path: Path) -> None:
     path = tmp_path / "generator.h5"
     rec = Recorder()

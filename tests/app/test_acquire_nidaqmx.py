@@ -59,6 +59,7 @@ def _acquire(station: Path, tmp_path: Path) -> int:
                  "--out", str(tmp_path / "run.h5")])
 
 
+@pytest.mark.slow
 def test_documented_station_identifies_the_bench(tmp_path: Path) -> None:
     out = tmp_path / "run.h5"
     assert main(["acquire", "--station", str(DOCS / "ni_station.toml"), "--plan",
@@ -73,6 +74,7 @@ def test_documented_station_identifies_the_bench(tmp_path: Path) -> None:
     assert_identifies(json.loads(res.read_text()), get_bench("engine-rigid").model)
 
 
+@pytest.mark.slow
 def test_documented_shaker_plan_through_the_simulated_generator(tmp_path: Path) -> None:
     """docs/ni_shaker_plan.toml (one block a point, shorter settling) on the documented
     station: the 33500 (generator-visa through pyvisa-py) drives the shaker, the cDAQ reads

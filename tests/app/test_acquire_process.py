@@ -75,6 +75,7 @@ def mock_bench(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
     yield from running_bench(tmp_path, "--bench", BENCH)
 
 
+@pytest.mark.slow
 def test_acquire_in_another_process_identifies_the_bench(
         mock_bench: tuple[subprocess.Popen[str], Path], tmp_path: Path,
         capsys: pytest.CaptureFixture[str]) -> None:

@@ -38,6 +38,7 @@ def pair_bench(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
     yield from running_bench(tmp_path, "--shakers", "2", "--bench", BENCH, "--fe-rate", f"{fs:g}")
 
 
+@pytest.mark.slow
 def test_pair_plan_acquired_from_another_process_identifies_the_bench(
         pair_bench: tuple[subprocess.Popen[str], Path], tmp_path: Path,
         capsys: pytest.CaptureFixture[str]) -> None:

@@ -21,6 +21,7 @@ from processing.inertia import inertia_properties
 POINTS = [0, 1, 3, 4, 6, 8, 9, 12, 15]
 
 
+@pytest.mark.slow
 def test_serial_hammer_aligned_on_the_common_channel_identifies_the_mass(tmp_path: Path) -> None:
     path = tmp_path / "serial.h5"
     plan = plan_for_bench("engine-rigid", points=POINTS, length=1.5)

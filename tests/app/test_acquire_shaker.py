@@ -78,6 +78,7 @@ def _wait(pred, timeout: float = 60.0) -> bool:
     return False
 
 
+@pytest.mark.slow
 def test_chirp_run_identifies_the_engine_and_replay_is_identical(tmp_path: Path) -> None:
     path = tmp_path / "shaker.h5"
     # periodic chirp, one 1 s period per block, leakage-free with a rectangular window;
@@ -201,6 +202,7 @@ def test_stop_during_the_ramp_turns_the_output_off_at_once(tmp_path: Path) -> No
     assert not rec.hits  # stopped before the first block
 
 
+@pytest.mark.slow
 def test_burst_random_plan_acquired_and_identified_from_the_command_line(
         tmp_path: Path) -> None:
     """docs/shaker_burst_plan.toml on the built-in engine bench: ``insitu acquire --mock``,

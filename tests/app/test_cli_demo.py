@@ -54,6 +54,7 @@ def _silent_bench(monkeypatch: pytest.MonkeyPatch, heal_after: float | None) -> 
     monkeypatch.setattr(mockbench, "InProcessBench", Flaky)
 
 
+@pytest.mark.slow
 def test_demo_resumes_a_paused_simulated_bench(monkeypatch: pytest.MonkeyPatch,
                                                tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
@@ -67,6 +68,7 @@ def test_demo_resumes_a_paused_simulated_bench(monkeypatch: pytest.MonkeyPatch,
     assert run.state == "finished" and int(run.records.accepted.sum()) == len(POINTS)
 
 
+@pytest.mark.slow
 def test_demo_stops_when_the_bench_stays_silent(monkeypatch: pytest.MonkeyPatch,
                                                tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:

@@ -103,6 +103,7 @@ def test_a_bug_is_one_line_naming_the_log_file(monkeypatch: pytest.MonkeyPatch,
     assert "Traceback" in log.read_text() and "second line" in log.read_text()
 
 
+@pytest.mark.slow
 def test_piped_output_keeps_every_digit_and_shows_progress(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:

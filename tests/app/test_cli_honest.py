@@ -64,6 +64,7 @@ def test_mount_rates_have_the_95_percent_spreads_of_the_other_tables(
     assert float(row.group(4)) == pytest.approx(1.96 * m0["std"]["loss_factors"][0], rel=0.03)
 
 
+@pytest.mark.slow
 def test_one_hit_a_point_is_not_a_coherence_check_in_any_view(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
         capsys: pytest.CaptureFixture[str]) -> None:

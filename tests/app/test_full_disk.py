@@ -83,6 +83,7 @@ def test_a_plan_the_disk_cannot_hold_is_refused_before_the_run(
     assert opened == [] and not out.exists() and not reserve_path(out).exists()
 
 
+@pytest.mark.slow
 def test_a_disk_that_fills_mid_run_keeps_the_records_then_resume_completes_it(
         small_disk: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = small_disk / "run.h5"

@@ -153,6 +153,7 @@ def test_two_correlated_shakers_identify_the_engine(tmp_path: Path) -> None:
     assert json.loads(replayed.read_text())["theta"] == res["theta"]
 
 
+@pytest.mark.slow
 def test_two_shakers_acquired_on_the_mock_bench_and_identified(tmp_path: Path) -> None:
     """``insitu acquire --mock`` of docs/shaker_pair_plan.toml: two mock SG-1s on the
     bench, each force on its own front-end input, five drives, then ``insitu identify``."""

@@ -99,6 +99,7 @@ def test_waveforms_ramp_and_attachment(engine_physics_factory) -> None:
         assert physics.continuous_force(t) == {}
 
 
+@pytest.mark.slow
 def test_two_shakers_each_on_its_own_force_input(engine_physics_factory,
                                                  request: pytest.FixtureRequest) -> None:
     """Two shakers driven at once (different random signals), each force sensor on its own

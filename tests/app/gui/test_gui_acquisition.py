@@ -76,6 +76,7 @@ def _verdict_cells(window: MainWindow, row: int) -> tuple[str, str, str]:
     return _text(t, row, 6), _text(t, row, 5), _text(t, row, 4)
 
 
+@pytest.mark.slow
 def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWindow],
                                       choose_file: Callable[..., None],
                                       tmp_path: Path) -> None:

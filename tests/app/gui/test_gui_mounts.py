@@ -129,6 +129,7 @@ def test_report_with_mounts(tmp_path: Path, qapp, capsys: pytest.CaptureFixture[
     assert err.count("\n") == 1 and "crank_axis" in err
 
 
+@pytest.mark.slow
 def test_run_file_mounts_are_loaded_with_the_run(qtbot, make_window, choose_file,
                                                  tmp_path: Path) -> None:
     """A run file that carries a mounts table brings it into the plan view and the results."""

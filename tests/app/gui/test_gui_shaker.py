@@ -8,6 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from app.acquire.events import RunState
 from app.gui.main_window import MainWindow
@@ -153,6 +154,7 @@ def test_shaker_output_off_on_stop_device_error_and_close(
     assert stored.state == "stopped" and len(stored.records) >= 2
 
 
+@pytest.mark.slow
 def test_two_shaker_plan_runs_on_the_mock_bench_counting_drives(
         qtbot, make_window: Callable[..., MainWindow], tmp_path: Path) -> None:
     """A plan that drives two shakers at once: the simulated bench gets its second shaker
