@@ -8,8 +8,10 @@ a new trigger is armed only after the record ends. Every hit gets a verdict:
 - *accepted*;
 - *double hit*: after the force has fallen below half the double-hit level, it rises
   again above ``double_hit_ratio`` times the peak within the record;
-- *overload* on a named channel: a peak at or above 99 % of its range, or a clipped
-  (flat-topped) waveform: ``clip_samples`` consecutive samples at the channel's peak;
+- *overload* on a named channel: a peak at or above 99 % of its range (when the ranges are
+  given), else the extreme level that other hits of the recording reach too
+  (:func:`common_clip`: a digitiser's last code), or a clipped (flat-topped) waveform:
+  ``clip_samples`` consecutive samples at the channel's peak;
 - *incomplete*: the record runs past the end (or start) of the data.
 
 Accepted hits are windowed (force window times exponential window on the force,
@@ -37,11 +39,13 @@ from processing.units import TimeUnits, UnitSpectra, record_units
 from processing.windows import exponential_window, force_window
 
 __all__ = [
+    "CLIP_MIN_CODES",
     "ExcitationGuess",
     "HitVerdict",
     "ImpactDefaults",
     "ImpactResult",
     "ImpactSettings",
+    "common_clip",
     "excitation_type",
     "exponential_for",
     "find_triggers",
@@ -217,6 +221,54 @@ def find_triggers(force: ArrayLike, settings: ImpactSettings) -> NDArray[np.int6
             out.append(c)
             next_ok = c + settings.record_length
     return np.asarray(out, dtype=np.int64)
+
+
+#: a channel reaches its input range only when it spans many of its converter's codes: the
+#: least number of distinct values in a channel's records for its common extreme to mean
+#: clipping (a quiet channel a few codes above its noise reaches the same code by chance)
+CLIP_MIN_CODES = 256
+
+
+def common_clip(rec: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """``(n_hit, n_ch)``: which records of one run reach their channel's clipping level.
+
+    A channel whose largest (or most negative) value over the run is reached by two hits or
+    more, where the samples next to it differ between those hits, is clipped at that level,
+    as a digitiser at the end of its range: the same extreme is the converter's last code,
+    not the structure's (a clip of one sample leaves no flat top to see in one hit).
+    Identical hits (a noise-free simulation) reach the same extreme with the same neighbours
+    (to 1e-6 of the level) and are not clipped; a record of fewer than
+    :data:`CLIP_MIN_CODES` distinct values on the channel neither.
+    """
+    n_hit, n_ch, _ = rec.shape
+    out = np.zeros((n_hit, n_ch), dtype=bool)
+    if n_hit < 2:
+        return out
+    rows = np.arange(n_hit)
+    for sign in (1.0, -1.0):
+        z = sign * rec
+        ext = z.max(axis=-1)  # (n_hit, n_ch)
+        top = ext.max(axis=0)  # the run's extreme of each channel
+        at = (ext >= top - 1e-9 * np.abs(top)) & (top > 0)
+        # the sample before each record's first sample at its extreme: differs between
+        # clipped hits (their signals differ), equal between identical ones
+        first = np.argmax(z >= ext[..., None], axis=-1)  # (n_hit, n_ch)
+        before = z[rows[:, None], np.arange(n_ch), np.maximum(first - 1, 0)]
+        spread = np.where(at, before, np.nan)
+        differ = (np.nanmax(spread, axis=0, initial=-np.inf)
+                  - np.nanmin(spread, axis=0, initial=np.inf)) > 1e-6 * np.abs(top)
+        out |= at & ((at.sum(axis=0) >= 2) & differ)[None, :]
+    return _many_codes(rec, out)
+
+
+def _many_codes(rec: NDArray[np.float64], flagged: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """``flagged`` (n_hit, n_ch) kept where the record's channel has at least
+    :data:`CLIP_MIN_CODES` distinct values: a channel a few codes above its noise reaches
+    its largest code on several samples and hits without being clipped."""
+    out = flagged.copy()
+    for k, c in zip(*np.nonzero(flagged), strict=True):  # the few records flagged
+        out[k, c] = np.unique(rec[k, c]).size >= CLIP_MIN_CODES
+    return out
 
 
 def _max_run_at_peak(x: NDArray[np.float64], k: int) -> NDArray[np.bool_]:
@@ -446,6 +498,7 @@ class _Hits:
     double: NDArray[np.bool_]
     clipped: NDArray[np.bool_]
     over: NDArray[np.bool_]
+    over_reason: str  # what ``over`` means: at the range, or at a level other hits reach
 
     @classmethod
     def find(cls, x: NDArray[Any], fs: float, settings: ImpactSettings, force_channel: int,
@@ -461,13 +514,15 @@ class _Hits:
         g = sign * rec[:, force_channel]
         peak_force = g.max(axis=-1) if rec.shape[0] else np.zeros(0)
         first_above, fall, rerise = _pulse_edges(g, settings.double_hit_ratio)
-        clipped = _max_run_at_peak(rec, settings.clip_samples)  # (n_hit, n_ch)
-        if full_scale is not None:
+        clipped = _many_codes(rec, _max_run_at_peak(rec, settings.clip_samples))
+        if full_scale is not None:  # the channels' input ranges decide
             over = np.abs(rec).max(axis=-1) >= 0.99 * full_scale
-        else:
-            over = np.zeros_like(clipped)
+            why = "peak at or above 99 % of its range"
+        else:  # the run's hits tell: a level several reach is the converter's end
+            over = common_clip(rec)
+            why = "clipped: it reaches the extreme other hits of the run stop at"
         return cls(triggers, starts, complete, rec, g, peak_force, first_above, fall, rerise,
-                   rerise < L, clipped, over)
+                   rerise < L, clipped, over, why)
 
 
 def _reasons(hits: _Hits, k: int, names: Sequence[str], fs: float) -> list[str]:
@@ -475,7 +530,7 @@ def _reasons(hits: _Hits, k: int, names: Sequence[str], fs: float) -> list[str]:
     reasons = []
     if hits.over[k].any():
         ch = names[int(np.argmax(hits.over[k]))]
-        reasons.append(f"overload on {ch} (peak at or above 99 % of its range)")
+        reasons.append(f"overload on {ch} ({hits.over_reason})")
     elif hits.clipped[k].any():
         ch = names[int(np.argmax(hits.clipped[k]))]
         reasons.append(f"overload on {ch} (clipped: flat top at its peak)")

@@ -181,3 +181,41 @@ def test_settings_are_checked():
         ImpactSettings(10.0, 100, slope="up")  # type: ignore[arg-type]
     with pytest.raises(InputError, match="NaN"):
         process_impacts(np.full((2, 100), np.nan), FS, ImpactSettings(10.0, 50))
+
+
+def test_a_channel_clipped_at_the_same_level_rejects_every_hit_reaching_it(engine):
+    """Every hit clips one response for one or two samples at the digitiser's last code
+    (no flat top to see in one hit): the common extreme gives it away, every hit reaching
+    it is rejected naming the channel; the same run unclipped, identical noise-free hits and
+    a quiet channel a few codes above its noise are accepted."""
+    *_, ir = engine
+    peaks = np.random.default_rng(41).uniform(196, 204, 5)  # an even hand
+    clean = _hammer(ir, peaks, seed=42)
+    s = ImpactSettings(20.0, L, PRE, exp_tau=TAU)
+    names = ["hammer", *(f"acc{i}" for i in range(12))]
+    assert all(v.accepted for v in process_impacts(clean, FS, s, channel_names=names).verdicts)
+
+    hit_peaks = np.array([np.abs(clean[7, int((1.0 + SPACING * k) * FS):
+                                       int((1.0 + SPACING * (k + 1)) * FS)]).max()
+                          for k in range(5)])
+    level = 0.995 * hit_peaks.min()  # below every hit's peak: a sample or two clipped each
+    clipped = clean.copy()
+    clipped[7] = np.clip(clipped[7], -level, level)
+    at_level = np.abs(clipped[7]) >= level
+    assert 5 <= at_level.sum() <= 10 and not (at_level[2:] & at_level[1:-1] & at_level[:-2]).any()
+    res = process_impacts(clipped, FS, s, channel_names=names)
+    assert not any(v.accepted for v in res.verdicts)
+    assert all(v.reason.startswith("overload on acc6 (clipped: it reaches the extreme")
+               for v in res.verdicts)
+    # the station's input ranges decide when given: this level is far below them
+    ranges = np.full(clipped.shape[0], 1e6)
+    assert all(v.accepted for v in process_impacts(clipped, FS, s, channel_names=names,
+                                                   ranges=ranges).verdicts)
+
+    # identical noise-free hits reach the same extremes: not clipping
+    same = _hammer(ir, [200.0] * 4, force_noise=0.0, resp_noise=0.0)
+    assert all(v.accepted for v in process_impacts(same, FS, s).verdicts)
+    # a quiet channel quantised to a few codes reaches its largest code on several hits
+    quiet = clean.copy()
+    quiet[5] = np.round(quiet[5] / np.abs(quiet[5]).max() * 4)
+    assert all(v.accepted for v in process_impacts(quiet, FS, s).verdicts)
