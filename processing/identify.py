@@ -49,6 +49,7 @@ from processing.stages import (
     assemble,
     check,
     choose_bands,
+    mass_line_among_modes,
     monte_carlo_model,
     refuse_implausible_mass,
     rigid_band_tops,
@@ -156,13 +157,21 @@ def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stage
                       coherence=frf.coherence, options=options, solver=solver,
                       exponential_tau=d.exponential_tau, coherence_floor=d.coherence_floor,
                       elastic_top=d.elastic_top)
-    bands = choose_bands(problem, *d.rigid_tops)
+    bands, weights, fitted = _fit_in_bands(problem, choose_bands(problem, *d.rigid_tops))
+    if (floor := mass_line_among_modes(problem, bands, fitted)) is not None:
+        # the lines put the mass line among the rigid-body modes the fit finds: above them
+        bands, weights, fitted = _fit_in_bands(
+            problem, choose_bands(problem, *d.rigid_tops, rigid_floor=floor))
+    refuse_implausible_mass(problem, bands, weights, fitted)
+    return Stages(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
+
+
+def _fit_in_bands(problem: Problem, bands: Bands) -> tuple[Bands, LineWeights, Fit]:
+    """The lines weighed, the mass line settled and the fit, in ``bands``."""
     weights = weigh_lines(problem, bands)
     ops = stiffness_operators(problem, bands)  # the settling keeps the stiffness band
     bands, weights = settle_mass_band(problem, bands, weights, ops)
-    fitted = solve(problem, bands, weights, ops)
-    refuse_implausible_mass(problem, bands, weights, fitted)
-    return Stages(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
+    return bands, weights, solve(problem, bands, weights, ops)
 
 
 @one_blas_thread

@@ -253,6 +253,7 @@ def choose_bands(
     elastic_margin: float = 0.7,
     line_weights: NDArray[np.float64] | None = None,
     stiffness_low: float | None = None,
+    rigid_floor: float | None = None,
 ) -> BandChoice:
     """Automatic mass-line and stiffness bands, with the reason.
 
@@ -271,14 +272,21 @@ def choose_bands(
     lines given may leave out noisy ones the stiffness fit weighs down itself) to 1.5
     times the highest rigid-body mode (not into the mass line). ``line_weights`` (n_f,)
     weigh the lines in the rigid-body mode estimate (:func:`quick_rigid_modes`).
+    ``rigid_floor`` (Hz): the highest rigid-body mode is taken at least there (the top mode
+    of a fit whose mass line the lines' estimate had put among the modes).
     """
     limits, top = _band_limits(freq, elastic, rigid_band_top, rigid_band_fallback,
                                elastic_margin)
     fr = _rigid_modes_for_bands(freq, X, T, limits[0][0], top, line_weights)
+    floor = rigid_floor is not None and rigid_floor > fr[-1]
+    if rigid_floor is not None and floor:
+        fr = np.append(fr[fr < rigid_floor], rigid_floor)[-fr.size:]
     f_rig = float(fr[-1])
     lo, f_hi, name, set_aside = _mass_line(freq, f_rig, limits, mass_low_factor)
     reason = (f"mass line {lo:.1f}-{f_hi:.1f} Hz: from {lo / f_rig:.2g}x the highest "
-              f"rigid-body mode ({f_rig:.1f} Hz) to {name}")
+              f"rigid-body mode ({f_rig:.1f} Hz"
+              + (", the fit's: the lines' estimate put the mass line among the modes"
+                 if floor else "") + f") to {name}")
     if set_aside:
         reason += ("; set aside, as it leaves no mass line above the rigid-body modes: "
                    + ", ".join(set_aside))

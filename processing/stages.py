@@ -83,6 +83,7 @@ __all__ = [
     "choose_bands",
     "iterate",
     "leakage_shapes",
+    "mass_line_among_modes",
     "mass_line_reading",
     "monte_carlo_model",
     "refuse_implausible_mass",
@@ -138,9 +139,11 @@ def _band_mask(freq: NDArray[np.float64], band: tuple[float, float], what: str) 
 
 
 def choose_bands(problem: Problem, rigid_band_top: float | None = None,
-                 rigid_band_fallback: float | None = None) -> Bands:
+                 rigid_band_fallback: float | None = None,
+                 rigid_floor: float | None = None) -> Bands:
     """The bands given in the options, or chosen from the data (``rigid_band_top``, Hz,
-    bounds an automatic mass line; ``rigid_band_fallback`` when it leaves none)."""
+    bounds an automatic mass line; ``rigid_band_fallback`` when it leaves none;
+    ``rigid_floor``, Hz, the least highest rigid-body mode, :func:`mass_line_among_modes`)."""
     opt, peaks, noise = problem.options, problem.peaks, problem.noise
     # Leakage terms are free per equation entry: on noisy data the regressors left after
     # eliminating them are dominated by noise and the fit is biased low (errors in
@@ -168,7 +171,8 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None,
                                         rigid_band_top=rigid_band_top,
                                         rigid_band_fallback=rigid_band_fallback,
                                         stiffness_low=float(problem.freq[heard][0])
-                                        if np.any(heard) else None)
+                                        if np.any(heard) else None,
+                                        rigid_floor=rigid_floor)
     mass_band = opt.mass_band or (choice.mass_band if choice else (0.0, 0.0))
     stiff_band = opt.stiffness_band or (choice.stiffness_band if choice else (0.0, 0.0))
     reason = "bands given" if choice is None else (
@@ -184,6 +188,31 @@ def choose_bands(problem: Problem, rigid_band_top: float | None = None,
         in_stiffness=_band_mask(problem.freq, stiff_band, "stiffness"),
         leakage=leak, choice=choice, warnings=tuple(warnings), reason=reason,
     )
+
+
+#: an automatic mass line starts at least this many times above the fitted rigid-body modes
+MODE_CLEARANCE = 1.3
+
+
+def mass_line_among_modes(problem: Problem, bands: Bands, fitted: Fit) -> float | None:
+    """The fit's highest rigid-body mode (Hz) when the automatic mass line starts under
+    :data:`MODE_CLEARANCE` times it, else None.
+
+    The rigid-body modes the bands are chosen by are read off the lines' apparent mass
+    (:func:`~processing.selection.quick_rigid_modes`); on noisy FRFs under a rigidity limit
+    set low by that noise, the estimate can fall far under the modes, and the mass line
+    starts among them: the fit then reads resonances as mass (one noisy hit a point: 92 kg
+    for 110). The modes of the fitted M and K say so.
+    """
+    if bands.choice is None or problem.options.mass_band is not None:
+        return None
+    M = mass_matrix(fitted.theta)
+    try:
+        w2 = scipy.linalg.eigh(fitted.K, M, eigvals_only=True)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    top = float(np.sqrt(max(float(w2[-1]), 0.0)) / (2 * np.pi))
+    return top if bands.mass_band[0] < MODE_CLEARANCE * top else None
 
 
 def _unmodelled_leakage(problem: Problem) -> str:
