@@ -69,7 +69,10 @@ __all__ = [
     "TestDesign",
     "box_inertia",
     "criterion_value",
+    "Information",
     "fisher_blocks",
+    "layout_value",
+    "linearised_std",
     "mount_stiffness",
     "plan_test",
     "predict",
@@ -83,6 +86,12 @@ CRITERION_LINES = 48
 #: a layout whose scaled E or T has a singular value under this fraction of its largest
 #: is rank-deficient
 RANK_TOL = 1e-6
+#: the least relative noise of an FRF value the search assumes (the fit's weights have a floor of
+#: 0.1 % of the FRFs' RMS, processing.problem.COHERENCE_NOISE_FLOOR)
+NOISE_FLOOR = 1e-3
+#: cond(T) (rotations scaled by the candidates' size) a chosen layout stays under: the fit
+#: drops the lines of a T over 20 (processing.geometry.DEFAULT_MAX_COND_T), with a margin
+MAX_COND_T = 18.0
 
 
 class PlanningError(InputError):
@@ -334,15 +343,41 @@ def _length(model: ApproximateModel) -> float:
     return float(max(np.sqrt(np.trace(model.inertia_cog) / (2 * model.mass)), 1e-3))
 
 
+@dataclass(frozen=True)
+class Information:
+    """What the search sums, per candidate sensor ``s`` and excitation DOF ``c`` (scaled
+    parameters, p of them):
+
+    - ``F`` (n_s, n_e, p, p): the information of the pair's FRFs about the parameters
+      (noise only);
+    - ``sensor`` (n_s, n_e, 12, p): the pair's share of the parameters' first-order shift per
+      standard deviation of each of the sensor's test errors (location x, y, z; the gain of
+      each channel; each channel's tilt about its two perpendicular axes), times F;
+    - ``point`` (n_s, n_e, 4, p): the same for the excitation's test errors (location x, y,
+      z; the force channel's gain).
+
+    For a layout, ``F = sum F[s, c]``; the shift of a sensor's error is the sum of its blocks
+    over the chosen excitations (of an excitation's, over the chosen sensors), and the
+    parameters' covariance is ``F^-1 (F + Q) F^-1`` with ``Q`` the sum of ``B^T B`` over
+    every test error's summed block ``B``.
+    """
+
+    F: NDArray[np.float64]
+    sensor: NDArray[np.float64]
+    point: NDArray[np.float64]
+    scales: NDArray[np.float64]
+
+
 def fisher_blocks(model: ApproximateModel, candidates: Candidates, conditions: TestConditions,
-                  *, with_stiffness: bool = False) -> NDArray[np.float64]:
-    """Information (n_s, n_e, n_par, n_par) of every candidate sensor (its three channels)
-    with every candidate excitation DOF, in scaled parameters (see the module's notes).
+                  *, with_stiffness: bool = False) -> Information:
+    """:class:`Information` of every candidate sensor (its three channels) with every
+    candidate excitation DOF (see the module's notes).
 
     Sums over the sub-sampled lines of the mass line (and the stiffness band with K) with
     their weights; the noise variance of an FRF value is ``noise^2 (rms^2 + |H|^2) / n`` with
-    ``rms`` the FRF's RMS over all lines, and the stated test errors add their first-order
-    variance times the band's line count (the same on every line, they do not average out).
+    ``rms`` the FRF's RMS over all lines (the noise at least :data:`NOISE_FLOOR`, the floor
+    the fit's weights have); the stated test errors enter to first order, the same on
+    every line.
     """
     lines = conditions.lines(model)
     f, wt = _bands(model, lines, with_stiffness)
@@ -350,82 +385,105 @@ def fisher_blocks(model: ApproximateModel, candidates: Candidates, conditions: T
     w = 2 * np.pi * f
     A = model.accelerance_at_origin(f)  # (L, 6, 6)
     eye = np.eye(3)
-    # channels: 3 per sensor, global axes
+    n_s = candidates.sensor_xyz.shape[0]
     r_xyz = np.repeat(candidates.sensor_xyz, 3, axis=0)
-    r_dir = np.tile(eye, (candidates.sensor_xyz.shape[0], 1))
+    r_dir = np.tile(eye, (n_s, 1))
     Ec = response_matrix(r_xyz, r_dir)  # (n_r, 6)
     Tc = excitation_matrix(candidates.exc_xyz, candidates.exc_dirs)  # (6, n_e)
     u = np.einsum("ra,lab->lrb", Ec, A)  # (L, n_r, 6): e^T A
-    v = np.einsum("lab,be->lea", A, Tc)  # (L, n_e, 6): A t
-    H = np.einsum("lrb,leb->rel", u, v)  # (n_r, n_e, L)
-    # noise: relative to the record's RMS over all the test's lines (accelerance of the
-    # model on the full span, approximated on a sub-sample)
+    v = np.einsum("lab,be->leb", A, Tc)  # (L, n_e, 6): A t
+    H = np.einsum("lrb,leb->lre", u, v)  # (L, n_r, n_e)
     fs = lines[np.unique(np.linspace(0, lines.size - 1, min(256, lines.size)).round()
                          .astype(int))]
-    As = model.accelerance_at_origin(fs)
-    Hs = np.einsum("ra,lab,be->rel", Ec, As, Tc)
+    Hs = np.einsum("ra,lab,be->rel", Ec, model.accelerance_at_origin(fs), Tc)
     rms2 = np.mean(np.abs(Hs) ** 2, axis=2)  # (n_r, n_e)
-    noise2 = conditions.noise**2 * (rms2[..., None] + np.abs(H) ** 2) / conditions.averages
+    noise = max(conditions.noise, NOISE_FLOOR)
+    var = noise**2 * (rms2[None] + np.abs(H) ** 2) / conditions.averages
+    iv = wt[:, None, None] / np.maximum(var, 1e-300)  # (L, n_r, n_e)
     st = conditions.stated
-    n_band = float(np.sum(wt))
-    sys2 = np.zeros(H.shape)
-    if st.gain > 0:
-        sys2 += st.gain**2 * np.abs(H) ** 2
-    if st.location > 0:  # sensor offset: (delta x d) . alpha ; point offset: (delta x e) . u_rot
-        s_loc = np.cross(r_dir[None, :, None, :], v[:, None, :, 3:])  # (L, n_r, n_e, 3)
-        p_loc = np.cross(candidates.exc_dirs[None, None, :, :], u[:, :, None, 3:])
-        sys2 += st.location**2 * np.transpose(
-            np.sum(np.abs(s_loc) ** 2, axis=-1) + np.sum(np.abs(p_loc) ** 2, axis=-1),
-            (1, 2, 0))
-    if st.angle > 0:  # the channel's direction tilted: the point's acceleration across it
-        acc = v[:, None, :, :3] + np.cross(v[:, None, :, 3:], r_xyz[None, :, None, :])
-        across = acc - np.einsum("lrek,rk->lre", acc, r_dir)[..., None] * r_dir[None, :, None]
-        sys2 += st.angle**2 * np.transpose(np.sum(np.abs(across) ** 2, axis=-1), (1, 2, 0))
-    var = noise2 + n_band * sys2
-    var = np.maximum(var, 1e-12 * np.max(var) if np.max(var) > 0 else 1e-300)
-    # sensitivities g = -u^T dA^-1... : dH/dp = -u^T B_p v (mass) and the same / w^2 (K)
-    Bv = np.einsum("pab,leb->lepa", mats, v)  # (L, n_e, n_par, 6)
-    div = np.where(is_k[None, :], 1.0 / (w**2)[:, None], 1.0)  # (L, n_par)
-    n_s, n_e, n_par = candidates.sensor_xyz.shape[0], Tc.shape[1], mats.shape[0]
-    out = np.zeros((n_s, n_e, n_par, n_par))
-    wl = wt[:, None, None]
-    chunk = max(1, 2_000_000 // (n_e * f.size * n_par * 3))
+    Bv = np.einsum("pab,leb->lepa", mats, v)  # (L, n_e, p, 6)
+    div = np.where(is_k[None, :], 1.0 / (w**2)[:, None], 1.0) * scales  # (L, p)
+    n_e, n_par = Tc.shape[1], mats.shape[0]
+    F = np.zeros((n_s, n_e, n_par, n_par))
+    sens = np.zeros((n_s, n_e, 12, n_par))
+    pnt = np.zeros((n_s, n_e, 4, n_par))
+    chunk = max(1, 1_500_000 // (n_e * f.size * n_par * 3))
     for s0 in range(0, n_s, chunk):  # chunks of sensors bound the memory
-        rows = slice(3 * s0, 3 * min(n_s, s0 + chunk))
-        g = -np.einsum("lra,lepa->lrep", u[:, rows], Bv) * (div * scales)[:, None, None, :]
-        iv = (wl / np.transpose(var[rows], (2, 0, 1)))[..., None]  # (L, n_r, n_e, 1)
-        G = np.einsum("lrep,lreq->reqp", np.conj(g), g * iv).real  # (n_r, n_e, p, p)
-        out[s0:s0 + (rows.stop - rows.start) // 3] = G.reshape(-1, 3, n_e, n_par, n_par
-                                                               ).sum(axis=1)
-    return out
+        s1 = min(n_s, s0 + chunk)
+        rows = slice(3 * s0, 3 * s1)
+        ns = s1 - s0
+        g = -np.einsum("lra,lepa->lrep", u[:, rows], Bv) * div[:, None, None, :]
+        giv = np.conj(g) * iv[:, rows, :, None]  # (L, r, e, p)
+        F[s0:s1] = np.einsum("lrep,lreq->reqp", giv, g).real.reshape(
+            ns, 3, n_e, n_par, n_par).sum(axis=1)
+
+        def shift(dH: NDArray[np.complex128], giv: NDArray[np.complex128] = giv,
+                  ) -> NDArray[np.float64]:
+            """sum over lines of Re(conj(g) iv dH): (r, e, k, p) for dH (L, r, e, k)."""
+            return np.einsum("lrep,lrek->rekp", giv, dH).real
+
+        d = r_dir[rows]
+        # sensor location: dH = delta . (d x alpha); point location: delta . (e x u_rot)
+        loc_s = shift(np.cross(d[None, :, None, :], v[:, None, :, 3:])) * st.location
+        sens[s0:s1, :, 0:3] = loc_s.reshape(ns, 3, n_e, 3, n_par).sum(axis=1)
+        gain = shift(H[:, rows, :, None])[:, :, 0] * st.gain  # (r, e, p)
+        sens[s0:s1, :, 3:6] = np.transpose(gain.reshape(ns, 3, n_e, n_par), (0, 2, 1, 3))
+        acc = v[:, None, :, :3] + np.cross(v[:, None, :, 3:], r_xyz[rows][None, :, None, :])
+        # a channel along axis k tilted about the other two axes reads those components
+        other = np.array([[1, 2], [0, 2], [0, 1]])[np.tile(np.arange(3), ns)]  # (r, 2)
+        tilt = np.take_along_axis(acc, other[None, :, None, :], axis=3)
+        ang = shift(tilt) * st.angle  # (r, e, 2, p)
+        sens[s0:s1, :, 6:12] = np.transpose(ang.reshape(ns, 3, n_e, 2, n_par),
+                                            (0, 2, 1, 3, 4)).reshape(ns, n_e, 6, n_par)
+        loc_p = shift(np.cross(candidates.exc_dirs[None, None, :, :],
+                               u[:, rows, None, 3:])) * st.location
+        pnt[s0:s1, :, 0:3] = loc_p.reshape(ns, 3, n_e, 3, n_par).sum(axis=1)
+        pnt[s0:s1, :, 3] = gain.reshape(ns, 3, n_e, n_par).sum(axis=1)
+    return Information(F, sens, pnt, scales)
 
 
 # --- the search ------------------------------------------------------------------------------
 
 
-def criterion_value(F: NDArray[np.float64], criterion: Criterion) -> NDArray[np.float64]:
-    """The criterion of information matrices ``F`` (..., p, p) to be *minimised*:
-    ``-log det F`` (D) or ``trace F^-1`` (A); +inf where F is singular."""
+def criterion_value(F: NDArray[np.float64], Q: NDArray[np.float64] | float,
+                    criterion: Criterion) -> NDArray[np.float64]:
+    """The criterion (to be *minimised*) of the covariance ``F^-1 (F + Q) F^-1`` of the
+    scaled parameters, for stacks ``F``, ``Q`` (..., p, p): its log-determinant (D) or trace
+    (A); +inf where F is singular."""
     F = 0.5 * (F + np.swapaxes(F, -1, -2))
+    Fq = F + Q
     if criterion == "D":
-        sign, logdet = np.linalg.slogdet(F)
-        return np.where(sign > 0, -logdet, np.inf)
-    ev = np.linalg.eigvalsh(F)
+        s1, l1 = np.linalg.slogdet(F)
+        s2, l2 = np.linalg.slogdet(0.5 * (Fq + np.swapaxes(Fq, -1, -2)))
+        return np.where((s1 > 0) & (s2 > 0), l2 - 2 * l1, np.inf)
+    ev, V = np.linalg.eigh(F)
     ok = ev[..., 0] > ev[..., -1] * 1e-13
-    return np.where(ok, np.sum(1.0 / np.where(ok[..., None], ev, 1.0), axis=-1), np.inf)
+    inv = np.einsum("...ik,...k,...jk->...ij", V, 1.0 / np.where(ok[..., None], ev, 1.0), V)
+    return np.where(ok, np.einsum("...ij,...jk,...ki->...", inv, Fq, inv), np.inf)
+
+
+def _rank(sets: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Rank of each (..., n, 6) matrix (relative tolerance :data:`RANK_TOL`)."""
+    s = np.linalg.svd(sets, compute_uv=False)
+    return np.sum(s > RANK_TOL * s[..., :1], axis=-1)
 
 
 def _rank_ok(sets: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Whether each (..., 6, n) or (..., n, 6) matrix has rank 6 (relative tolerance)."""
-    s = np.linalg.svd(sets, compute_uv=False)
-    return (s[..., 5] > RANK_TOL * s[..., 0]) if s.shape[-1] >= 6 else np.zeros(s.shape[:-1],
-                                                                                 bool)
+    """Whether each (..., n, 6) matrix has rank 6."""
+    return _rank(sets) >= 6
+
+
+def _gram(B: NDArray[np.float64]) -> NDArray[np.float64]:
+    """sum over the error axis (-2) and any axis before the last two of ``B^T B``, keeping
+    the leading stack axis: (n, ..., k, p) -> (n, p, p)."""
+    Bf = B.reshape(B.shape[0], -1, B.shape[-1])
+    return np.einsum("nkp,nkq->npq", Bf, Bf)
 
 
 @dataclass(frozen=True)
 class Layout:
     """Chosen candidate indices: ``sensors`` into the candidate sensors, ``excitations`` into
-    the candidate excitation DOFs; the criterion's value (minimised) and its path."""
+    the candidate excitation DOFs; the criterion's value (minimised) and the steps taken."""
 
     sensors: tuple[int, ...]
     excitations: tuple[int, ...]
@@ -433,9 +491,19 @@ class Layout:
     steps: int
 
 
-def search(blocks: NDArray[np.float64], candidates: Candidates, n_sensors: int, n_points: int,
+def layout_value(info: Information, sensors: list[int] | tuple[int, ...],
+                 excitations: list[int] | tuple[int, ...], criterion: Criterion) -> float:
+    """The criterion of one layout."""
+    S, P = list(sensors), list(excitations)
+    F = info.F[np.ix_(S, P)].sum(axis=(0, 1))
+    Q = (_gram(info.sensor[np.ix_(S, P)].sum(axis=1)[None])[0]
+         + _gram(info.point[np.ix_(S, P)].sum(axis=0)[None])[0])
+    return float(criterion_value(F, Q, criterion))
+
+
+def search(info: Information, candidates: Candidates, n_sensors: int, n_points: int,
            criterion: Criterion = "D", *, max_passes: int = 20) -> Layout:
-    """Greedy additions, then exchange passes, on the information ``blocks`` of
+    """Greedy additions, then exchange passes, on the :class:`Information` of
     :func:`fisher_blocks`: sensors first (with every excitation candidate), then the
     excitations (with those sensors), then one sensor or one excitation exchanged at a time
     for the best candidate until no exchange lowers the criterion. Only layouts whose E and
@@ -446,10 +514,10 @@ def search(blocks: NDArray[np.float64], candidates: Candidates, n_sensors: int, 
     PlanningError
         Too few candidates, or no rank-6 layout of that size among them.
     """
-    n_s, n_e = blocks.shape[:2]
-    if n_sensors < 2:
-        raise PlanningError(f"ask for at least 2 sensors (triaxial, not on one line), got "
-                            f"{n_sensors}")
+    n_s, n_e = info.F.shape[:2]
+    if n_sensors < 3:
+        raise PlanningError(f"ask for at least 3 sensors (triaxial, not on one line: two "
+                            f"leave the rotation about their line unseen), got {n_sensors}")
     if n_points < 6:
         raise PlanningError(f"ask for at least 6 excitation points (rank 6), got {n_points}")
     if n_sensors > n_s:
@@ -470,83 +538,94 @@ def search(blocks: NDArray[np.float64], candidates: Candidates, n_sensors: int, 
     if not _rank_ok(Te[None])[0]:
         raise PlanningError("the candidate excitations cannot span the six rigid-body motions "
                             "(rank < 6): add points or allowed directions")
-    n_par = blocks.shape[-1]
-    ridge = 1e-12 * max(float(np.trace(blocks.sum(axis=(0, 1)))) / n_par, 1e-300) * np.eye(n_par)
+    n_par = info.F.shape[-1]
+    ridge = 1e-9 * max(float(np.trace(info.F.sum(axis=(0, 1)))) / n_par, 1e-300) * np.eye(n_par)
     steps = 0
 
-    def pick(values: NDArray[np.float64], feasible: NDArray[np.bool_], what: str) -> int:
-        vals = np.where(feasible, values, np.inf)
-        if not np.any(np.isfinite(vals)) and not np.any(feasible):
+    def e_ok(rest: list[int], free: NDArray[np.int64], need: int = 6) -> NDArray[np.bool_]:
+        return _rank(np.concatenate([np.broadcast_to(Es[rest].reshape(-1, 6),
+                                                     (free.size, 3 * len(rest), 6)),
+                                     Es[free]], axis=1)) >= need
+
+    def t_ok(rest: list[int], free: NDArray[np.int64], need: int = 6, cond: bool = True
+             ) -> NDArray[np.bool_]:
+        """Rank ``need`` at least; with ``cond``, cond(T) under the fit's limit too (the fit
+        drops every line of a worse T)."""
+        sets = np.concatenate([np.broadcast_to(Te[rest], (free.size, len(rest), 6)),
+                               Te[free][:, None]], axis=1)
+        sv = np.linalg.svd(sets, compute_uv=False)
+        rank = np.sum(sv > RANK_TOL * sv[..., :1], axis=-1)
+        if need < 6 or not cond:
+            return rank >= need
+        return (rank >= 6) & (sv[..., 0] < MAX_COND_T * sv[..., -1])
+
+    def sensor_values(rest: list[int], P: list[int], free: NDArray[np.int64]
+                      ) -> NDArray[np.float64]:
+        """Criterion of ``rest`` + each free sensor, with excitations ``P``."""
+        F = ridge + info.F[np.ix_(rest, P)].sum(axis=(0, 1)) + info.F[np.ix_(free, P)].sum(1)
+        Q = _gram(info.sensor[np.ix_(free, P)].sum(axis=1))
+        if rest:
+            Q = Q + _gram(info.sensor[np.ix_(rest, P)].sum(axis=1)[None])[0]
+        Bp = info.point[np.ix_(rest, P)].sum(axis=0)[None] + info.point[np.ix_(free, P)]
+        return criterion_value(F, Q + _gram(Bp), criterion)
+
+    def point_values(S: list[int], rest: list[int], free: NDArray[np.int64]
+                     ) -> NDArray[np.float64]:
+        F = ridge + info.F[np.ix_(S, rest)].sum(axis=(0, 1)) + info.F[np.ix_(S, free)].sum(0)
+        Q = _gram(info.point[np.ix_(S, free)].sum(axis=0))
+        if rest:
+            Q = Q + _gram(info.point[np.ix_(S, rest)].sum(axis=0)[None])[0]
+        Bs = (info.sensor[np.ix_(S, rest)].sum(axis=1)[None]
+              + np.transpose(info.sensor[np.ix_(S, free)], (1, 0, 2, 3)))  # (free, S, 12, p)
+        return criterion_value(F, Q + _gram(Bs), criterion)
+
+    def best_of(vals: NDArray[np.float64], feas: NDArray[np.bool_], what: str) -> int:
+        if not np.any(feas):
             raise PlanningError(f"no layout of {n_sensors} sensors and {n_points} excitations "
                                 f"among the candidates has a rank-6 {what} matrix: add "
                                 "candidates or ask for more")
-        if not np.any(np.isfinite(vals)):
-            return int(np.flatnonzero(feasible)[0])
-        return int(np.nanargmin(vals))
+        vals = np.where(feas, vals, np.inf)
+        return int(np.argmin(vals)) if np.any(np.isfinite(vals)) else int(np.argmax(feas))
 
-    # 1. sensors, against every excitation candidate
-    per_sensor = blocks.sum(axis=1)  # (n_s, p, p)
     S: list[int] = []
-    F = ridge.copy()
-    for k in range(n_sensors):
+    every = list(range(n_e))
+    # greedy additions keep the rank growing to 6 (3, 5, 6 for triaxial sensors: two points
+    # leave the rotation about the line through them unseen)
+    for k in range(n_sensors):  # 1. sensors, against every excitation candidate
         free = np.setdiff1d(np.arange(n_s), S)
-        vals = criterion_value(F + per_sensor[free], criterion)
-        feas = np.ones(free.size, bool)
-        if k == n_sensors - 1:  # the last one must make E rank 6
-            feas = _rank_ok(np.concatenate([np.broadcast_to(Es[S].reshape(-1, 6),
-                                                            (free.size, 3 * len(S), 6)),
-                                            Es[free]], axis=1))
-        j = int(free[pick(vals, feas, "response")])
-        S.append(j)
-        F = F + per_sensor[j]
+        feas = e_ok(S, free, (3, 5, 6)[min(k, 2)])
+        S.append(int(free[best_of(sensor_values(S, every, free), feas, "response")]))
         steps += 1
-    # 2. excitations, with those sensors
-    per_exc = blocks[S].sum(axis=0)  # (n_e, p, p)
     P: list[int] = []
-    F = ridge.copy()
-    for k in range(n_points):
+    well = True
+    for k in range(n_points):  # 2. excitations, with those sensors
         free = np.setdiff1d(np.arange(n_e), P)
-        vals = criterion_value(F + per_exc[free], criterion)
-        feas = np.ones(free.size, bool)
+        feas = t_ok(P, free, min(k + 1, 6), cond=k == n_points - 1)
         if k == n_points - 1:
-            feas = _rank_ok(np.concatenate([np.broadcast_to(Te[P], (free.size, len(P), 6)),
-                                            Te[free][:, None]], axis=1))
-        j = int(free[pick(vals, feas, "excitation")])
-        P.append(j)
-        F = F + per_exc[j]
+            well = bool(np.any(feas))
+            if not well:  # none under the limit: rank 6 at least
+                feas = t_ok(P, free, cond=False)
+        P.append(int(free[best_of(point_values(S, P, free), feas, "excitation")]))
         steps += 1
-    if not (_rank_ok(Es[S].reshape(1, -1, 6))[0] and _rank_ok(Te[P][None])[0]):
-        raise PlanningError(f"no rank-6 layout of {n_sensors} sensors and {n_points} "
-                            "excitations found among the candidates: add candidates")
-    # 3. exchanges
-    best = float(criterion_value(ridge + blocks[np.ix_(S, P)].sum(axis=(0, 1)), criterion))
-    for _ in range(max_passes):
+    best = layout_value(info, S, P, criterion)
+    for _ in range(max_passes):  # 3. exchanges
         improved = False
         for slot in range(n_sensors):
             rest = S[:slot] + S[slot + 1:]
-            base = ridge + blocks[np.ix_(rest, P)].sum(axis=(0, 1))
             free = np.setdiff1d(np.arange(n_s), S)
             if free.size == 0:
                 break
-            vals = criterion_value(base + blocks[np.ix_(free, P)].sum(axis=1), criterion)
-            feas = _rank_ok(np.concatenate([np.broadcast_to(Es[rest].reshape(-1, 6),
-                                                            (free.size, 3 * len(rest), 6)),
-                                            Es[free]], axis=1))
-            vals = np.where(feas, vals, np.inf)
+            vals = np.where(e_ok(rest, free), sensor_values(rest, P, free), np.inf)
             k = int(np.argmin(vals))
             if vals[k] < best - 1e-9 * max(1.0, abs(best)):
                 S[slot], best, improved = int(free[k]), float(vals[k]), True
                 steps += 1
         for slot in range(n_points):
             rest = P[:slot] + P[slot + 1:]
-            base = ridge + blocks[np.ix_(S, rest)].sum(axis=(0, 1))
             free = np.setdiff1d(np.arange(n_e), P)
             if free.size == 0:
                 break
-            vals = criterion_value(base + blocks[np.ix_(S, free)].sum(axis=0), criterion)
-            feas = _rank_ok(np.concatenate([np.broadcast_to(Te[rest], (free.size, len(rest), 6)),
-                                            Te[free][:, None]], axis=1))
-            vals = np.where(feas, vals, np.inf)
+            vals = np.where(t_ok(rest, free, cond=well), point_values(S, rest, free), np.inf)
             k = int(np.argmin(vals))
             if vals[k] < best - 1e-9 * max(1.0, abs(best)):
                 P[slot], best, improved = int(free[k]), float(vals[k]), True
@@ -677,16 +756,19 @@ class TestDesign:
         return self.candidates.exc_dirs[list(self.layout.excitations)]
 
 
-def linearised_std(blocks: NDArray[np.float64], layout: Layout, model: ApproximateModel,
-                   with_stiffness: bool = False) -> NDArray[np.float64]:
-    """The search's first-order std of the ten parameters about O for ``layout`` (SI)."""
-    F = blocks[np.ix_(list(layout.sensors), list(layout.excitations))].sum(axis=(0, 1))
-    _, scales, _ = _param_basis(model, with_stiffness)
+def linearised_std(info: Information, layout: Layout) -> NDArray[np.float64]:
+    """The search's first-order std of the ten parameters about O for ``layout`` (SI):
+    the diagonal of ``F^-1 (F + Q) F^-1`` (see :class:`Information`)."""
+    S, P = list(layout.sensors), list(layout.excitations)
+    F = info.F[np.ix_(S, P)].sum(axis=(0, 1))
+    Q = (_gram(info.sensor[np.ix_(S, P)].sum(axis=1)[None])[0]
+         + _gram(info.point[np.ix_(S, P)].sum(axis=0)[None])[0])
     try:
-        cov = np.linalg.inv(0.5 * (F + F.T))
+        Fi = np.linalg.inv(0.5 * (F + F.T))
     except np.linalg.LinAlgError:
         return np.full(10, np.inf)
-    return np.sqrt(np.clip(np.diag(cov)[:10], 0, None)) * scales[:10]
+    cov = Fi @ (F + Q) @ Fi
+    return np.sqrt(np.clip(np.diag(cov)[:10], 0, None)) * info.scales[:10]
 
 
 def plan_test(model: ApproximateModel, candidates: Candidates, n_sensors: int, n_points: int,
@@ -703,13 +785,13 @@ def plan_test(model: ApproximateModel, candidates: Candidates, n_sensors: int, n
     """
     if criterion not in ("D", "A"):
         raise PlanningError(f"criterion must be 'D' or 'A', got {criterion!r}")
-    blocks = fisher_blocks(model, candidates, conditions, with_stiffness=with_stiffness)
-    layout = search(blocks, candidates, n_sensors, n_points, criterion)
+    info = fisher_blocks(model, candidates, conditions, with_stiffness=with_stiffness)
+    layout = search(info, candidates, n_sensors, n_points, criterion)
     pred = None
     if predicted:
         S, P = list(layout.sensors), list(layout.excitations)
         pred = predict(model, candidates.sensor_xyz[S], candidates.exc_xyz[P],
                        candidates.exc_dirs[P], conditions,
                        resp_nodes=candidates.sensor_nodes[S], exc_nodes=candidates.exc_nodes[P],
-                       linearised=linearised_std(blocks, layout, model, with_stiffness))
+                       linearised=linearised_std(info, layout))
     return TestDesign(layout, criterion, with_stiffness, candidates, pred)
