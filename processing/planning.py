@@ -90,8 +90,9 @@ RANK_TOL = 1e-6
 #: 0.1 % of the FRFs' RMS, processing.problem.COHERENCE_NOISE_FLOOR)
 NOISE_FLOOR = 1e-3
 #: cond(T) (rotations scaled by the candidates' size) a chosen layout stays under: the fit
-#: drops the lines of a T over 20 (processing.geometry.DEFAULT_MAX_COND_T), with a margin
-MAX_COND_T = 18.0
+#: drops the lines of a T over 20 (processing.geometry.DEFAULT_MAX_COND_T, rotations scaled by
+#: the layout's own size), with a margin for the difference of scale
+MAX_COND_T = 12.0
 
 
 class PlanningError(InputError):
@@ -717,7 +718,11 @@ def predict(model: ApproximateModel, resp_xyz: ArrayLike, exc_xyz: ArrayLike,
     for _ in range(conditions.realisations):
         H, coh = _h1(H0, conditions.noise, conditions.averages, rng)
         frf = FRFSet(lines, H, np.repeat(rn, 3), r_dir, en, ed, geometry, coherence=coh)
-        result = fit(Measurement(frf, source="plan"), options)
+        try:
+            result = fit(Measurement(frf, source="plan"), options)
+        except InputError as err:
+            raise PlanningError(f"the identification of the chosen layout's predicted FRFs "
+                                f"fails: {err}") from err
         unc = result.uncertainty
         if unc is None:
             raise PlanningError("the identification of the model's FRFs gave no uncertainty")
