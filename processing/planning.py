@@ -62,6 +62,7 @@ __all__ = [
     "ApproximateModel",
     "Candidates",
     "Criterion",
+    "Information",
     "Layout",
     "PlanningError",
     "Prediction",
@@ -69,7 +70,6 @@ __all__ = [
     "TestDesign",
     "box_inertia",
     "criterion_value",
-    "Information",
     "fisher_blocks",
     "layout_value",
     "linearised_std",
@@ -191,7 +191,8 @@ class ApproximateModel:
         w = 2 * np.pi * np.asarray(freq, dtype=float)
         Z = (self.K + 1j * self.D)[None] + 1j * w[:, None, None] * self.C[None] \
             - (w**2)[:, None, None] * self.M[None]
-        return -(w**2)[:, None, None] * np.linalg.inv(Z)
+        Zi: NDArray[np.complex128] = np.linalg.inv(Z.astype(np.complex128))
+        return Zi * -(w**2)[:, None, None]
 
 
 # --- candidates and conditions ---------------------------------------------------------------
@@ -327,7 +328,7 @@ def _param_basis(model: ApproximateModel, with_stiffness: bool
     L = _length(model)
     m = model.mass
     scales = [m, m * L, m * L, m * L, *([m * L * L] * 6)]
-    mats = [b for b in MASS_BASIS]
+    mats = list(MASS_BASIS)
     is_k = [False] * 10
     if with_stiffness:
         d = np.sqrt(np.abs(np.diag(model.K)))
@@ -474,6 +475,12 @@ def _rank_ok(sets: NDArray[np.float64]) -> NDArray[np.bool_]:
     return _rank(sets) >= 6
 
 
+def _ix(rows: ArrayLike, cols: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """``np.ix_`` of two index lists."""
+    r, c = np.ix_(np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64))
+    return r, c
+
+
 def _gram(B: NDArray[np.float64]) -> NDArray[np.float64]:
     """sum over the error axis (-2) and any axis before the last two of ``B^T B``, keeping
     the leading stack axis: (n, ..., k, p) -> (n, p, p)."""
@@ -496,9 +503,9 @@ def layout_value(info: Information, sensors: list[int] | tuple[int, ...],
                  excitations: list[int] | tuple[int, ...], criterion: Criterion) -> float:
     """The criterion of one layout."""
     S, P = list(sensors), list(excitations)
-    F = info.F[np.ix_(S, P)].sum(axis=(0, 1))
-    Q = (_gram(info.sensor[np.ix_(S, P)].sum(axis=1)[None])[0]
-         + _gram(info.point[np.ix_(S, P)].sum(axis=0)[None])[0])
+    F = info.F[_ix(S, P)].sum(axis=(0, 1))
+    Q = (_gram(info.sensor[_ix(S, P)].sum(axis=1)[None])[0]
+         + _gram(info.point[_ix(S, P)].sum(axis=0)[None])[0])
     return float(criterion_value(F, Q, criterion))
 
 
@@ -563,21 +570,21 @@ def search(info: Information, candidates: Candidates, n_sensors: int, n_points: 
     def sensor_values(rest: list[int], P: list[int], free: NDArray[np.int64]
                       ) -> NDArray[np.float64]:
         """Criterion of ``rest`` + each free sensor, with excitations ``P``."""
-        F = ridge + info.F[np.ix_(rest, P)].sum(axis=(0, 1)) + info.F[np.ix_(free, P)].sum(1)
-        Q = _gram(info.sensor[np.ix_(free, P)].sum(axis=1))
+        F = ridge + info.F[_ix(rest, P)].sum(axis=(0, 1)) + info.F[_ix(free, P)].sum(1)
+        Q = _gram(info.sensor[_ix(free, P)].sum(axis=1))
         if rest:
-            Q = Q + _gram(info.sensor[np.ix_(rest, P)].sum(axis=1)[None])[0]
-        Bp = info.point[np.ix_(rest, P)].sum(axis=0)[None] + info.point[np.ix_(free, P)]
+            Q = Q + _gram(info.sensor[_ix(rest, P)].sum(axis=1)[None])[0]
+        Bp = info.point[_ix(rest, P)].sum(axis=0)[None] + info.point[_ix(free, P)]
         return criterion_value(F, Q + _gram(Bp), criterion)
 
     def point_values(S: list[int], rest: list[int], free: NDArray[np.int64]
                      ) -> NDArray[np.float64]:
-        F = ridge + info.F[np.ix_(S, rest)].sum(axis=(0, 1)) + info.F[np.ix_(S, free)].sum(0)
-        Q = _gram(info.point[np.ix_(S, free)].sum(axis=0))
+        F = ridge + info.F[_ix(S, rest)].sum(axis=(0, 1)) + info.F[_ix(S, free)].sum(0)
+        Q = _gram(info.point[_ix(S, free)].sum(axis=0))
         if rest:
-            Q = Q + _gram(info.point[np.ix_(S, rest)].sum(axis=0)[None])[0]
-        Bs = (info.sensor[np.ix_(S, rest)].sum(axis=1)[None]
-              + np.transpose(info.sensor[np.ix_(S, free)], (1, 0, 2, 3)))  # (free, S, 12, p)
+            Q = Q + _gram(info.point[_ix(S, rest)].sum(axis=0)[None])[0]
+        Bs = (info.sensor[_ix(S, rest)].sum(axis=1)[None]
+              + np.transpose(info.sensor[_ix(S, free)], (1, 0, 2, 3)))  # (free, S, 12, p)
         return criterion_value(F, Q + _gram(Bs), criterion)
 
     def best_of(vals: NDArray[np.float64], feas: NDArray[np.bool_], what: str) -> int:
@@ -765,9 +772,9 @@ def linearised_std(info: Information, layout: Layout) -> NDArray[np.float64]:
     """The search's first-order std of the ten parameters about O for ``layout`` (SI):
     the diagonal of ``F^-1 (F + Q) F^-1`` (see :class:`Information`)."""
     S, P = list(layout.sensors), list(layout.excitations)
-    F = info.F[np.ix_(S, P)].sum(axis=(0, 1))
-    Q = (_gram(info.sensor[np.ix_(S, P)].sum(axis=1)[None])[0]
-         + _gram(info.point[np.ix_(S, P)].sum(axis=0)[None])[0])
+    F = info.F[_ix(S, P)].sum(axis=(0, 1))
+    Q = (_gram(info.sensor[_ix(S, P)].sum(axis=1)[None])[0]
+         + _gram(info.point[_ix(S, P)].sum(axis=0)[None])[0])
     try:
         Fi = np.linalg.inv(0.5 * (F + F.T))
     except np.linalg.LinAlgError:

@@ -200,7 +200,7 @@ def load_candidates(path: str | Path) -> tuple[Candidates, dict[str, Any]]:
         px.append(xyz)
         ep += [len(pn) - 1] * d.shape[0]
         ed += list(d)
-    template = {k: data[k] for k in ("plan", "record", "shaker") if k in data}
+    template: dict[str, Any] = {k: data[k] for k in ("plan", "record", "shaker") if k in data}
     template["sensor_channels"] = channels
     return Candidates(np.array(sn), np.array(sx), np.array(pn), np.array(px), np.array(ep),
                       np.array(ed)), template
