@@ -68,6 +68,7 @@ from processing.montecarlo import StatedUncertainty  # noqa: E402
 from processing.planning import (  # noqa: E402
     ApproximateModel,
     Candidates,
+    PlanningError,
     TestConditions,
     mount_stiffness,
     plan_test,
@@ -204,8 +205,13 @@ def evaluate(spec: ScenarioSpec, draws: int, randoms: int, criterion: str = "D"
                           stated=stated_for(spec), seed=spec.seed)
     row: dict[str, Any] = {"name": spec.name}
     t0 = time.perf_counter()
-    design = plan_test(model, cand, N_SENSORS, N_POINTS, cond,
-                       criterion="A" if criterion == "A" else "D")
+    try:
+        design = plan_test(model, cand, N_SENSORS, N_POINTS, cond,
+                           criterion="A" if criterion == "A" else "D")
+    except PlanningError as err:  # counted and named in the table
+        row["seconds"] = time.perf_counter() - t0
+        row["plan_refused"] = str(err)
+        return row
     row["seconds"] = time.perf_counter() - t0
     pred = design.prediction
     assert pred is not None
@@ -240,7 +246,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     cases: dict[str, list[float]] = {g: [] for g in GROUPS}
     gain: dict[str, list[float]] = {"cog": [], "inertia": []}
     refused = {"chosen": 0, "random": 0, "draws": 0}
-    for row in rows:
+    planned = [r for r in rows if "plan_refused" not in r]
+    for row in planned:
         ok = _ok(row["chosen"])
         refused["draws"] += len(row["chosen"])
         refused["chosen"] += len(row["chosen"]) - len(ok)
@@ -265,7 +272,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
                 gain[m].append(float(b / max(a, 1e-300)))
     secs = np.array([r["seconds"] for r in rows])
     return {"ratio": ratio, "cases": cases, "gain": gain, "refused": refused,
-            "seconds": secs, "cond_T": np.array([r["cond_T"] for r in rows])}
+            "seconds": secs, "cond_T": np.array([r["cond_T"] for r in planned]),
+            "plan_refused": [r["plan_refused"] for r in rows if "plan_refused" in r]}
 
 
 def tables(s: dict[str, Any]) -> list[str]:
@@ -298,6 +306,9 @@ def tables(s: dict[str, Any]) -> list[str]:
             f"every chosen layout has rank-6 E and T (the search takes no other). "
             f"Identifications refused (no usable mass): chosen layouts {rf['chosen']} of "
             f"{rf['draws']} draws, random layouts {rf['random']}."]
+    if s["plan_refused"]:
+        out += ["", f"Scenarios the planner refused ({len(s['plan_refused'])}): "
+                + "; ".join(f"`{m}`" for m in s["plan_refused"])]
     return out
 
 
@@ -319,7 +330,8 @@ def main(argv: list[str] | None = None) -> int:
             for row in ex.map(evaluate, specs, [args.draws] * len(specs),
                               [args.randoms] * len(specs), [args.criterion] * len(specs)):
                 rows.append(row)
-                console.print(f"{row['name']}: {row['seconds']:.2f} s")
+                console.print(f"{row['name']}: {row['seconds']:.2f} s "
+                              f"{row.get('plan_refused', '')}")
     else:
         for spec in specs:
             row = evaluate(spec, args.draws, args.randoms, args.criterion)
