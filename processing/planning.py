@@ -77,6 +77,7 @@ __all__ = [
     "plan_test",
     "predict",
     "search",
+    "test_error_cov",
 ]
 
 Criterion = Literal["D", "A"]
@@ -347,27 +348,87 @@ def _length(model: ApproximateModel) -> float:
 
 @dataclass(frozen=True)
 class Information:
-    """What the search sums, per candidate sensor ``s`` and excitation DOF ``c`` (scaled
-    parameters, p of them):
+    """What the search sums and projects (scaled parameters, p of them):
 
-    - ``F`` (n_s, n_e, p, p): the information of the pair's FRFs about the parameters
-      (noise only);
-    - ``sensor`` (n_s, n_e, 12, p): the pair's share of the parameters' first-order shift per
-      standard deviation of each of the sensor's test errors (location x, y, z; the gain of
-      each channel; each channel's tilt about its two perpendicular axes), times F;
-    - ``point`` (n_s, n_e, 4, p): the same for the excitation's test errors (location x, y,
-      z; the force channel's gain).
+    - ``F`` (n_s, n_e, p, p): the information of each candidate sensor's FRFs with each
+      candidate excitation about the parameters (noise only); a layout's is the sum;
+    - ``E`` (n_s, 3, 6), ``T`` (n_e, 6): each candidate's rows of E and column of T;
+      ``sensor_xyz`` (n_s, 3), ``exc_dirs`` (n_e, 3);
+    - ``M`` (6, 6): the model's mass matrix at O; ``proj`` (p, 36): the least-squares
+      projection of a symmetric change of M onto the scaled parameters;
+    - ``stated``: the test's location, angle and gain standard deviations.
 
-    For a layout, ``F = sum F[s, c]``; the shift of a sensor's error is the sum of its blocks
-    over the chosen excitations (of an excitation's, over the chosen sensors), and the
-    parameters' covariance is ``F^-1 (F + Q) F^-1`` with ``Q`` the sum of ``B^T B`` over
-    every test error's summed block ``B``.
+    A layout's covariance is ``F^-1 + C_test`` (:func:`test_error_cov`: every test error a
+    random effect through the fit's own projections ``E^+`` and ``T^+``).
     """
 
     F: NDArray[np.float64]
-    sensor: NDArray[np.float64]
-    point: NDArray[np.float64]
+    E: NDArray[np.float64]
+    T: NDArray[np.float64]
+    sensor_xyz: NDArray[np.float64]
+    exc_dirs: NDArray[np.float64]
+    M: NDArray[np.float64]
+    proj: NDArray[np.float64]
+    stated: StatedUncertainty
     scales: NDArray[np.float64]
+
+
+def test_error_cov(info: Information, S: NDArray[np.int64], P: NDArray[np.int64]
+                   ) -> NDArray[np.float64]:
+    """Covariance (b, p, p) of the scaled parameters from the stated test errors for
+    ``b`` layouts: sensors ``S`` (b, n) and excitations ``P`` (b, k), index arrays.
+
+    The fit projects the responses on the rigid-body motions, ``X = E^+ H``, and the forces
+    on them, ``A^-1 = T X^+`` (``X^+ = T^+ A^-1``), so on the mass line a change ``dE`` of
+    the response rows and ``dT`` of the excitation columns moves the identified mass matrix
+    by ``dM = -M E^+ dE + dT T^+ M``. Every error is an independent random effect of its
+    standard deviation: each channel's gain (``dE_r = g E_r``) and tilt about its two
+    perpendicular axes (``dE_r = a E_r'``, the rows of the sensor's other channels), each
+    sensor's location (``dE_r = [0, delta x d_r]`` on its three channels), each
+    excitation's location (``dT_c = [0, delta x e_c]``) and force gain (``dT_c = g T_c``).
+    Each ``dM`` (symmetrised) is projected on the parameters; the covariance is the sum of
+    the outer products. It grows with cond(E) and cond(T): clustered sensors or points
+    make ``E^+`` or ``T^+`` large."""
+    st = info.stated
+    S = np.asarray(S, dtype=np.int64)
+    P = np.asarray(P, dtype=np.int64)
+    b, n = S.shape
+    E = info.E[S].reshape(b, 3 * n, 6)
+    T = np.swapaxes(info.T[P], 1, 2)  # (b, 6, k)
+    Ep = np.linalg.pinv(E)  # (b, 6, 3n)
+    Tp = np.linalg.pinv(T)  # (b, k, 6)
+    M = info.M
+    MEp = np.einsum("ij,bjr->bir", M, Ep)  # (b, 6, 3n)
+    dirs = np.eye(3)
+    errs = []  # each (b, m, 6, 6): dM per unit error times its std
+    if st.gain > 0:
+        errs.append(-st.gain * np.einsum("bir,brj->brij", MEp, E))
+    if st.angle > 0:
+        other = np.array([[1, 2], [0, 2], [0, 1]])
+        rows = (3 * np.arange(n)[:, None, None] + other[None]).reshape(3 * n, 2)
+        Eo = E[:, rows]  # (b, 3n, 2, 6): the other two channels' rows of each sensor
+        errs.append(-st.angle * np.einsum("bir,brkj->brkij", MEp, Eo).reshape(b, -1, 6, 6))
+    if st.location > 0:
+        # row r's rotation part moves by delta x d_r for delta along each axis j
+        dr = np.zeros((3, 3, 6))  # (j, channel axis, 6)
+        dr[:, :, 3:] = np.cross(dirs[:, None, :], dirs[None, :, :])
+        MEs = MEp.reshape(b, 6, n, 3)
+        errs.append(-st.location * np.einsum("bisc,jck->bsjik", MEs, dr).reshape(b, -1, 6, 6))
+        ec = info.exc_dirs[P]  # (b, k, 3)
+        dT = np.zeros((b, P.shape[1], 3, 6))
+        dT[..., 3:] = np.cross(dirs[None, None], ec[:, :, None, :])
+        TpM = np.einsum("bkj,jl->bkl", Tp, M)
+        errs.append(st.location * np.einsum("bkji,bkl->bkjil", dT, TpM).reshape(b, -1, 6, 6))
+    if st.gain > 0:
+        TpM = np.einsum("bkj,jl->bkl", Tp, M)
+        errs.append(st.gain * np.einsum("bik,bkl->bkil", T, TpM))
+    p = info.proj.shape[0]
+    if not errs:
+        return np.zeros((b, p, p))
+    dM = np.concatenate(errs, axis=1)
+    dM = 0.5 * (dM + np.swapaxes(dM, -1, -2))
+    shift = np.einsum("pk,bmk->bmp", info.proj, dM.reshape(b, dM.shape[1], 36))
+    return np.einsum("bmp,bmq->bpq", shift, shift)
 
 
 def fisher_blocks(model: ApproximateModel, candidates: Candidates, conditions: TestConditions,
@@ -402,66 +463,44 @@ def fisher_blocks(model: ApproximateModel, candidates: Candidates, conditions: T
     noise = max(conditions.noise, NOISE_FLOOR)
     var = noise**2 * (rms2[None] + np.abs(H) ** 2) / conditions.averages
     iv = wt[:, None, None] / np.maximum(var, 1e-300)  # (L, n_r, n_e)
-    st = conditions.stated
     Bv = np.einsum("pab,leb->lepa", mats, v)  # (L, n_e, p, 6)
     div = np.where(is_k[None, :], 1.0 / (w**2)[:, None], 1.0) * scales  # (L, p)
     n_e, n_par = Tc.shape[1], mats.shape[0]
     F = np.zeros((n_s, n_e, n_par, n_par))
-    sens = np.zeros((n_s, n_e, 12, n_par))
-    pnt = np.zeros((n_s, n_e, 4, n_par))
     chunk = max(1, 1_500_000 // (n_e * f.size * n_par * 3))
     for s0 in range(0, n_s, chunk):  # chunks of sensors bound the memory
         s1 = min(n_s, s0 + chunk)
         rows = slice(3 * s0, 3 * s1)
-        ns = s1 - s0
         g = -np.einsum("lra,lepa->lrep", u[:, rows], Bv) * div[:, None, None, :]
         giv = np.conj(g) * iv[:, rows, :, None]  # (L, r, e, p)
         F[s0:s1] = np.einsum("lrep,lreq->reqp", giv, g).real.reshape(
-            ns, 3, n_e, n_par, n_par).sum(axis=1)
-
-        def shift(dH: NDArray[np.complex128], giv: NDArray[np.complex128] = giv,
-                  ) -> NDArray[np.float64]:
-            """sum over lines of Re(conj(g) iv dH): (r, e, k, p) for dH (L, r, e, k)."""
-            return np.einsum("lrep,lrek->rekp", giv, dH).real
-
-        d = r_dir[rows]
-        # sensor location: dH = delta . (d x alpha); point location: delta . (e x u_rot)
-        loc_s = shift(np.cross(d[None, :, None, :], v[:, None, :, 3:])) * st.location
-        sens[s0:s1, :, 0:3] = loc_s.reshape(ns, 3, n_e, 3, n_par).sum(axis=1)
-        gain = shift(H[:, rows, :, None])[:, :, 0] * st.gain  # (r, e, p)
-        sens[s0:s1, :, 3:6] = np.transpose(gain.reshape(ns, 3, n_e, n_par), (0, 2, 1, 3))
-        acc = v[:, None, :, :3] + np.cross(v[:, None, :, 3:], r_xyz[rows][None, :, None, :])
-        # a channel along axis k tilted about the other two axes reads those components
-        other = np.array([[1, 2], [0, 2], [0, 1]])[np.tile(np.arange(3), ns)]  # (r, 2)
-        tilt = np.take_along_axis(acc, other[None, :, None, :], axis=3)
-        ang = shift(tilt) * st.angle  # (r, e, 2, p)
-        sens[s0:s1, :, 6:12] = np.transpose(ang.reshape(ns, 3, n_e, 2, n_par),
-                                            (0, 2, 1, 3, 4)).reshape(ns, n_e, 6, n_par)
-        loc_p = shift(np.cross(candidates.exc_dirs[None, None, :, :],
-                               u[:, rows, None, 3:])) * st.location
-        pnt[s0:s1, :, 0:3] = loc_p.reshape(ns, 3, n_e, 3, n_par).sum(axis=1)
-        pnt[s0:s1, :, 3] = gain.reshape(ns, 3, n_e, n_par).sum(axis=1)
-    return Information(F, sens, pnt, scales)
+            s1 - s0, 3, n_e, n_par, n_par).sum(axis=1)
+    basis = (mats[:10] * scales[:10, None, None]).reshape(10, 36).T  # (36, 10)
+    proj = np.zeros((n_par, 36))
+    proj[:10] = np.linalg.pinv(basis)
+    return Information(F, Ec.reshape(n_s, 3, 6), Tc.T.copy(), candidates.sensor_xyz,
+                       candidates.exc_dirs, model.M, proj, conditions.stated, scales)
 
 
 # --- the search ------------------------------------------------------------------------------
 
 
-def criterion_value(F: NDArray[np.float64], Q: NDArray[np.float64] | float,
+def criterion_value(F: NDArray[np.float64], C: NDArray[np.float64] | float,
                     criterion: Criterion) -> NDArray[np.float64]:
-    """The criterion (to be *minimised*) of the covariance ``F^-1 (F + Q) F^-1`` of the
-    scaled parameters, for stacks ``F``, ``Q`` (..., p, p): its log-determinant (D) or trace
-    (A); +inf where F is singular."""
+    """The criterion (to be *minimised*) of the covariance ``F^-1 + C`` of the scaled
+    parameters (noise, and the test errors' ``C`` of :func:`test_error_cov`), for stacks
+    ``F``, ``C`` (..., p, p): its log-determinant (D) or trace (A); +inf where F is
+    singular."""
     F = 0.5 * (F + np.swapaxes(F, -1, -2))
-    Fq = F + Q
-    if criterion == "D":
-        s1, l1 = np.linalg.slogdet(F)
-        s2, l2 = np.linalg.slogdet(0.5 * (Fq + np.swapaxes(Fq, -1, -2)))
-        return np.where((s1 > 0) & (s2 > 0), l2 - 2 * l1, np.inf)
     ev, V = np.linalg.eigh(F)
     ok = ev[..., 0] > ev[..., -1] * 1e-13
     inv = np.einsum("...ik,...k,...jk->...ij", V, 1.0 / np.where(ok[..., None], ev, 1.0), V)
-    return np.where(ok, np.einsum("...ij,...jk,...ki->...", inv, Fq, inv), np.inf)
+    cov = inv + C
+    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    if criterion == "D":
+        sign, logdet = np.linalg.slogdet(cov)
+        return np.where(ok & (sign > 0), logdet, np.inf)
+    return np.where(ok, np.trace(cov, axis1=-2, axis2=-1), np.inf)
 
 
 def _rank(sets: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -481,13 +520,6 @@ def _ix(rows: ArrayLike, cols: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np
     return r, c
 
 
-def _gram(B: NDArray[np.float64]) -> NDArray[np.float64]:
-    """sum over the error axis (-2) and any axis before the last two of ``B^T B``, keeping
-    the leading stack axis: (n, ..., k, p) -> (n, p, p)."""
-    Bf = B.reshape(B.shape[0], -1, B.shape[-1])
-    return np.einsum("nkp,nkq->npq", Bf, Bf)
-
-
 @dataclass(frozen=True)
 class Layout:
     """Chosen candidate indices: ``sensors`` into the candidate sensors, ``excitations`` into
@@ -504,9 +536,8 @@ def layout_value(info: Information, sensors: list[int] | tuple[int, ...],
     """The criterion of one layout."""
     S, P = list(sensors), list(excitations)
     F = info.F[_ix(S, P)].sum(axis=(0, 1))
-    Q = (_gram(info.sensor[_ix(S, P)].sum(axis=1)[None])[0]
-         + _gram(info.point[_ix(S, P)].sum(axis=0)[None])[0])
-    return float(criterion_value(F, Q, criterion))
+    C = test_error_cov(info, np.array([S]), np.array([P]))[0]
+    return float(criterion_value(F, C, criterion))
 
 
 def search(info: Information, candidates: Candidates, n_sensors: int, n_points: int,
@@ -571,21 +602,18 @@ def search(info: Information, candidates: Candidates, n_sensors: int, n_points: 
                       ) -> NDArray[np.float64]:
         """Criterion of ``rest`` + each free sensor, with excitations ``P``."""
         F = ridge + info.F[_ix(rest, P)].sum(axis=(0, 1)) + info.F[_ix(free, P)].sum(1)
-        Q = _gram(info.sensor[_ix(free, P)].sum(axis=1))
-        if rest:
-            Q = Q + _gram(info.sensor[_ix(rest, P)].sum(axis=1)[None])[0]
-        Bp = info.point[_ix(rest, P)].sum(axis=0)[None] + info.point[_ix(free, P)]
-        return criterion_value(F, Q + _gram(Bp), criterion)
+        sets = np.concatenate([np.broadcast_to(np.array(rest, dtype=np.int64),
+                                               (free.size, len(rest))), free[:, None]], axis=1)
+        C = test_error_cov(info, sets, np.broadcast_to(np.array(P), (free.size, len(P))))
+        return criterion_value(F, C, criterion)
 
     def point_values(S: list[int], rest: list[int], free: NDArray[np.int64]
                      ) -> NDArray[np.float64]:
         F = ridge + info.F[_ix(S, rest)].sum(axis=(0, 1)) + info.F[_ix(S, free)].sum(0)
-        Q = _gram(info.point[_ix(S, free)].sum(axis=0))
-        if rest:
-            Q = Q + _gram(info.point[_ix(S, rest)].sum(axis=0)[None])[0]
-        Bs = (info.sensor[_ix(S, rest)].sum(axis=1)[None]
-              + np.transpose(info.sensor[_ix(S, free)], (1, 0, 2, 3)))  # (free, S, 12, p)
-        return criterion_value(F, Q + _gram(Bs), criterion)
+        sets = np.concatenate([np.broadcast_to(np.array(rest, dtype=np.int64),
+                                               (free.size, len(rest))), free[:, None]], axis=1)
+        C = test_error_cov(info, np.broadcast_to(np.array(S), (free.size, len(S))), sets)
+        return criterion_value(F, C, criterion)
 
     def best_of(vals: NDArray[np.float64], feas: NDArray[np.bool_], what: str) -> int:
         if not np.any(feas):
@@ -770,16 +798,15 @@ class TestDesign:
 
 def linearised_std(info: Information, layout: Layout) -> NDArray[np.float64]:
     """The search's first-order std of the ten parameters about O for ``layout`` (SI):
-    the diagonal of ``F^-1 (F + Q) F^-1`` (see :class:`Information`)."""
+    the diagonal of ``F^-1 + C_test`` (see :class:`Information`)."""
     S, P = list(layout.sensors), list(layout.excitations)
     F = info.F[_ix(S, P)].sum(axis=(0, 1))
-    Q = (_gram(info.sensor[_ix(S, P)].sum(axis=1)[None])[0]
-         + _gram(info.point[_ix(S, P)].sum(axis=0)[None])[0])
+    C = test_error_cov(info, np.array([S]), np.array([P]))[0]
     try:
         Fi = np.linalg.inv(0.5 * (F + F.T))
     except np.linalg.LinAlgError:
         return np.full(10, np.inf)
-    cov = Fi @ (F + Q) @ Fi
+    cov = Fi + C
     return np.sqrt(np.clip(np.diag(cov)[:10], 0, None)) * info.scales[:10]
 
 
