@@ -87,6 +87,7 @@ __all__ = [
     "load_plan",
     "parse_plan",
     "plan_differences",
+    "plan_toml",
 ]
 
 Method = Literal["hammer", "shaker"]
@@ -219,6 +220,10 @@ class TestPlan:
     responses: tuple[ResponsePoint, ...]
     shaker: ShakerSettings = field(default_factory=ShakerSettings)
     source: str = "plan.toml"
+    #: ``[prediction]``: what ``insitu plan`` predicted for this layout (criterion, the
+    #: test's stated noise and uncertainties, the std of mass, cog, inertia_cog, stiffness);
+    #: kept and shown beside the achieved uncertainty, never used to acquire
+    prediction: dict[str, Any] | None = None
 
     __test__ = False  # not a pytest test class
 
@@ -302,7 +307,9 @@ class TestPlan:
                                "exp_tau": self.record.exp_tau or 0.0,
                                "estimator": self.record.estimator}
         s = self.shaker
+        extra = {} if self.prediction is None else {"prediction": dict(self.prediction)}
         return {
+            **extra,
             "plan": {"name": self.name, "method": self.method, "hits": self.hits},
             "record": rec,
             "shaker": {"waveform": s.waveform, "level": s.level, "f_start": s.f_start,
@@ -380,7 +387,38 @@ class _Ctx:
         return v
 
 
-_TOP = {"plan", "record", "shaker", "excitation", "response"}
+_TOP = {"plan", "record", "shaker", "excitation", "response", "prediction"}
+
+#: ``[prediction]`` keys (numbers, or nested lists of numbers for the std arrays; texts for
+#: the criterion and what was propagated)
+_PREDICTION = {"criterion": str, "sources": list, "noise": float, "averages": int,
+               "location_uncertainty": float, "angle_uncertainty": float,
+               "gain_uncertainty": float, "cond_E": float, "cond_T": float, "mass": float,
+               "cog": list, "inertia_cog": list, "inertia_origin": list,
+               "principal_moments": list, "stiffness": list, "mass_band": list}
+
+
+def _prediction(c: _Ctx, data: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The optional ``[prediction]`` table written by ``insitu plan``."""
+    if "prediction" not in data:
+        return None
+    t = c.table(data, "prediction", set(_PREDICTION))
+    for key, kind in _PREDICTION.items():
+        if key not in t:
+            continue
+        v = t[key]
+        if kind is str:
+            ok = isinstance(v, str)
+        elif kind is list:
+            flat = np.asarray(v, dtype=object).ravel() if isinstance(v, list) else None
+            ok = flat is not None and all(
+                isinstance(x, str) if key == "sources" else
+                isinstance(x, int | float) and not isinstance(x, bool) for x in flat)
+        else:
+            ok = isinstance(v, int | float) and not isinstance(v, bool) and bool(np.isfinite(v))
+        if not ok:
+            raise c.fail(f"prediction.{key}", f"must be {kind.__name__}-valued, got {v!r}")
+    return dict(t)
 
 
 def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
@@ -399,7 +437,8 @@ def parse_plan(data: Mapping[str, Any], source: str = "plan.toml") -> TestPlan:
         raise c.fail("shaker.f_stop", f"{shaker.f_stop:g} Hz is above the Nyquist frequency "
                      f"of record.fs = {record.fs:g} Hz ({record.fs / 2:g} Hz): lower "
                      "shaker.f_stop or raise record.fs")
-    plan = TestPlan(name, method, hits, record, tuple(excs), tuple(resps), shaker, source)
+    plan = TestPlan(name, method, hits, record, tuple(excs), tuple(resps), shaker, source,
+                    _prediction(c, data))
     plan.geometry()  # nodes with two coordinates
     return plan
 
@@ -582,7 +621,8 @@ def plan_differences(old: TestPlan, new: TestPlan, old_name: str, new_name: str,
     found: list[str] = []
     for key, value in a.items():
         table = key.split("[")[0]
-        if (key == "plan.name" or key.startswith(unused) or value == b.get(key)
+        if (key == "plan.name" or key.startswith(unused) or key.startswith("prediction.")
+                or value == b.get(key)
                 or (table in counts and counts[table][0] != counts[table][1])):
             continue
         found.append(f"{key} {_worded(key, value)} in {old_name}, "
@@ -592,6 +632,35 @@ def plan_differences(old: TestPlan, new: TestPlan, old_name: str, new_name: str,
     if len(found) > most:
         found = [*found[:most], f"{len(found) - most} more"]
     return found
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"no TOML form for {type(v).__name__}")
+
+
+def plan_toml(data: Mapping[str, Any], header: str = "") -> str:
+    """``to_dict()``-like plan data as TOML text (tables, then arrays of tables), ``header``
+    as comment lines first; ``load_plan`` reads it back."""
+    lines = [f"# {h}" if h else "#" for h in header.splitlines()]
+    for name, t in data.items():
+        if isinstance(t, dict):
+            lines += ["", f"[{name}]", *(f"{k} = {_toml_value(v)}" for k, v in t.items())]
+    for name, t in data.items():
+        if isinstance(t, list):
+            for item in t:
+                lines += ["", f"[[{name}]]", *(f"{k} = {_toml_value(v)}"
+                                               for k, v in item.items())]
+    return "\n".join(lines).lstrip("\n") + "\n"
 
 
 def load_plan(path: str | Path) -> TestPlan:

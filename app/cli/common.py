@@ -25,6 +25,7 @@ VERB_HELP = {
     'gui': 'start the desktop application',
     'report': 'write the HTML report of a run, an FRF file or a UFF file',
     'batch': 'identify many files on a Dask cluster, one table',
+    'plan': 'choose sensors and hit points before a test, predict its uncertainty',
 }
 
 #: the command line's name of each pipeline setting (:class:`app.pipeline.Settings`,
