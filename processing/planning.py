@@ -565,110 +565,146 @@ def search(info: Information, candidates: Candidates, n_sensors: int, n_points: 
     if n_points > n_e:
         raise PlanningError(f"{n_points} excitation points asked for but only {n_e} candidate "
                             "excitation directions given")
-    L = characteristic_length(candidates.sensor_xyz, candidates.point_xyz)
-    scale = np.array([1.0, 1.0, 1.0, L, L, L])
-    eye = np.eye(3)
-    Es = np.stack([response_matrix(np.repeat(p[None], 3, 0), eye) for p in
-                   candidates.sensor_xyz]) / scale  # (n_s, 3, 6)
-    Te = (excitation_matrix(candidates.exc_xyz, candidates.exc_dirs) / scale[:, None]).T
-    if not _rank_ok(Es.reshape(1, -1, 6))[0]:
-        raise PlanningError("the candidate sensor positions cannot span the six rigid-body "
-                            "motions (rank < 6: are they on one line?): add positions off it")
-    if not _rank_ok(Te[None])[0]:
-        raise PlanningError("the candidate excitations cannot span the six rigid-body motions "
-                            "(rank < 6): add points or allowed directions")
-    n_par = info.F.shape[-1]
-    ridge = 1e-9 * max(float(np.trace(info.F.sum(axis=(0, 1)))) / n_par, 1e-300) * np.eye(n_par)
-    steps = 0
+    return _Search(info, candidates, n_sensors, n_points, criterion).run(max_passes)
 
-    def e_ok(rest: list[int], free: NDArray[np.int64], need: int = 6) -> NDArray[np.bool_]:
-        return _rank(np.concatenate([np.broadcast_to(Es[rest].reshape(-1, 6),
-                                                     (free.size, 3 * len(rest), 6)),
-                                     Es[free]], axis=1)) >= need
 
-    def t_ok(rest: list[int], free: NDArray[np.int64], need: int = 6, cond: bool = True
+class _Search:
+    """The state of :func:`search`: the candidates' E rows and T columns (rotations scaled),
+    and the criterion of a layout grown or changed by one candidate, for every candidate."""
+
+    def __init__(self, info: Information, candidates: Candidates, n_sensors: int,
+                 n_points: int, criterion: Criterion) -> None:
+        self.info, self.criterion = info, criterion
+        self.n_sensors, self.n_points = n_sensors, n_points
+        self.n_s, self.n_e = info.F.shape[:2]
+        L = characteristic_length(candidates.sensor_xyz, candidates.point_xyz)
+        scale = np.array([1.0, 1.0, 1.0, L, L, L])
+        eye = np.eye(3)
+        self.Es = np.stack([response_matrix(np.repeat(p[None], 3, 0), eye) for p in
+                            candidates.sensor_xyz]) / scale  # (n_s, 3, 6)
+        self.Te = (excitation_matrix(candidates.exc_xyz, candidates.exc_dirs)
+                   / scale[:, None]).T
+        if not _rank_ok(self.Es.reshape(1, -1, 6))[0]:
+            raise PlanningError("the candidate sensor positions cannot span the six "
+                                "rigid-body motions (rank < 6: are they on one line?): add "
+                                "positions off it")
+        if not _rank_ok(self.Te[None])[0]:
+            raise PlanningError("the candidate excitations cannot span the six rigid-body "
+                                "motions (rank < 6): add points or allowed directions")
+        n_par = info.F.shape[-1]
+        self.ridge = 1e-9 * max(float(np.trace(info.F.sum(axis=(0, 1)))) / n_par,
+                                1e-300) * np.eye(n_par)
+        self.steps = 0
+
+    def e_ok(self, rest: list[int], free: NDArray[np.int64], need: int = 6
              ) -> NDArray[np.bool_]:
+        """E of ``rest`` + each free sensor has rank ``need`` at least."""
+        return _rank(np.concatenate([np.broadcast_to(self.Es[rest].reshape(-1, 6),
+                                                     (free.size, 3 * len(rest), 6)),
+                                     self.Es[free]], axis=1)) >= need
+
+    def t_ok(self, rest: list[int], free: NDArray[np.int64], need: int = 6,
+             cond: bool = True) -> NDArray[np.bool_]:
         """Rank ``need`` at least; with ``cond``, cond(T) under the fit's limit too (the fit
         drops every line of a worse T)."""
-        sets = np.concatenate([np.broadcast_to(Te[rest], (free.size, len(rest), 6)),
-                               Te[free][:, None]], axis=1)
+        sets = np.concatenate([np.broadcast_to(self.Te[rest], (free.size, len(rest), 6)),
+                               self.Te[free][:, None]], axis=1)
         sv = np.linalg.svd(sets, compute_uv=False)
         rank = np.sum(sv > RANK_TOL * sv[..., :1], axis=-1)
         if need < 6 or not cond:
             return rank >= need
         return (rank >= 6) & (sv[..., 0] < MAX_COND_T * sv[..., -1])
 
-    def sensor_values(rest: list[int], P: list[int], free: NDArray[np.int64]
+    @staticmethod
+    def _grown(rest: list[int], free: NDArray[np.int64]) -> NDArray[np.int64]:
+        """(n_free, len(rest) + 1): ``rest`` with each free candidate."""
+        return np.concatenate([np.broadcast_to(np.array(rest, dtype=np.int64),
+                                               (free.size, len(rest))), free[:, None]], axis=1)
+
+    def sensor_values(self, rest: list[int], P: list[int], free: NDArray[np.int64]
                       ) -> NDArray[np.float64]:
         """Criterion of ``rest`` + each free sensor, with excitations ``P``."""
-        F = ridge + info.F[_ix(rest, P)].sum(axis=(0, 1)) + info.F[_ix(free, P)].sum(1)
-        sets = np.concatenate([np.broadcast_to(np.array(rest, dtype=np.int64),
-                                               (free.size, len(rest))), free[:, None]], axis=1)
-        C = test_error_cov(info, sets, np.broadcast_to(np.array(P), (free.size, len(P))))
-        return criterion_value(F, C, criterion)
+        info = self.info
+        F = self.ridge + info.F[_ix(rest, P)].sum(axis=(0, 1)) + info.F[_ix(free, P)].sum(1)
+        C = test_error_cov(info, self._grown(rest, free),
+                           np.broadcast_to(np.array(P), (free.size, len(P))))
+        return criterion_value(F, C, self.criterion)
 
-    def point_values(S: list[int], rest: list[int], free: NDArray[np.int64]
+    def point_values(self, S: list[int], rest: list[int], free: NDArray[np.int64]
                      ) -> NDArray[np.float64]:
-        F = ridge + info.F[_ix(S, rest)].sum(axis=(0, 1)) + info.F[_ix(S, free)].sum(0)
-        sets = np.concatenate([np.broadcast_to(np.array(rest, dtype=np.int64),
-                                               (free.size, len(rest))), free[:, None]], axis=1)
-        C = test_error_cov(info, np.broadcast_to(np.array(S), (free.size, len(S))), sets)
-        return criterion_value(F, C, criterion)
+        """Criterion of excitations ``rest`` + each free one, with sensors ``S``."""
+        info = self.info
+        F = self.ridge + info.F[_ix(S, rest)].sum(axis=(0, 1)) + info.F[_ix(S, free)].sum(0)
+        C = test_error_cov(info, np.broadcast_to(np.array(S), (free.size, len(S))),
+                           self._grown(rest, free))
+        return criterion_value(F, C, self.criterion)
 
-    def best_of(vals: NDArray[np.float64], feas: NDArray[np.bool_], what: str) -> int:
+    def best_of(self, vals: NDArray[np.float64], feas: NDArray[np.bool_], what: str) -> int:
         if not np.any(feas):
-            raise PlanningError(f"no layout of {n_sensors} sensors and {n_points} excitations "
-                                f"among the candidates has a rank-6 {what} matrix: add "
-                                "candidates or ask for more")
+            raise PlanningError(f"no layout of {self.n_sensors} sensors and {self.n_points} "
+                                f"excitations among the candidates has a rank-6 {what} "
+                                "matrix: add candidates or ask for more")
         vals = np.where(feas, vals, np.inf)
         return int(np.argmin(vals)) if np.any(np.isfinite(vals)) else int(np.argmax(feas))
 
-    S: list[int] = []
-    every = list(range(n_e))
-    # greedy additions keep the rank growing to 6 (3, 5, 6 for triaxial sensors: two points
-    # leave the rotation about the line through them unseen)
-    for k in range(n_sensors):  # 1. sensors, against every excitation candidate
-        free = np.setdiff1d(np.arange(n_s), S)
-        feas = e_ok(S, free, (3, 5, 6)[min(k, 2)])
-        S.append(int(free[best_of(sensor_values(S, every, free), feas, "response")]))
-        steps += 1
-    P: list[int] = []
-    well = True
-    for k in range(n_points):  # 2. excitations, with those sensors
-        free = np.setdiff1d(np.arange(n_e), P)
-        feas = t_ok(P, free, min(k + 1, 6), cond=k == n_points - 1)
-        if k == n_points - 1:
-            well = bool(np.any(feas))
-            if not well:  # none under the limit: rank 6 at least
-                feas = t_ok(P, free, cond=False)
-        P.append(int(free[best_of(point_values(S, P, free), feas, "excitation")]))
-        steps += 1
-    best = layout_value(info, S, P, criterion)
-    for _ in range(max_passes):  # 3. exchanges
-        improved = False
-        for slot in range(n_sensors):
-            rest = S[:slot] + S[slot + 1:]
-            free = np.setdiff1d(np.arange(n_s), S)
-            if free.size == 0:
+    def greedy(self) -> tuple[list[int], list[int], bool]:
+        """Sensors, then excitations, added one at a time keeping the rank growing to 6
+        (3, 5, 6 for triaxial sensors: two points leave the rotation about the line through
+        them unseen); and whether cond(T) could be kept under the limit."""
+        S: list[int] = []
+        every = list(range(self.n_e))
+        for k in range(self.n_sensors):  # 1. sensors, against every excitation candidate
+            free = np.setdiff1d(np.arange(self.n_s), S)
+            feas = self.e_ok(S, free, (3, 5, 6)[min(k, 2)])
+            S.append(int(free[self.best_of(self.sensor_values(S, every, free), feas,
+                                           "response")]))
+            self.steps += 1
+        P: list[int] = []
+        well = True
+        for k in range(self.n_points):  # 2. excitations, with those sensors
+            free = np.setdiff1d(np.arange(self.n_e), P)
+            last = k == self.n_points - 1
+            feas = self.t_ok(P, free, min(k + 1, 6), cond=last)
+            if last:
+                well = bool(np.any(feas))
+                if not well:  # none under the limit: rank 6 at least
+                    feas = self.t_ok(P, free, cond=False)
+            P.append(int(free[self.best_of(self.point_values(S, P, free), feas,
+                                           "excitation")]))
+            self.steps += 1
+        return S, P, well
+
+    def run(self, max_passes: int) -> Layout:
+        """The greedy layout, then exchanges of one sensor or one excitation at a time."""
+        S, P, well = self.greedy()
+        best = layout_value(self.info, S, P, self.criterion)
+        for _ in range(max_passes):  # 3. exchanges
+            improved = False
+            for slot in range(self.n_sensors):
+                rest = S[:slot] + S[slot + 1:]
+                free = np.setdiff1d(np.arange(self.n_s), S)
+                if free.size == 0:
+                    break
+                vals = np.where(self.e_ok(rest, free), self.sensor_values(rest, P, free),
+                                np.inf)
+                k = int(np.argmin(vals))
+                if vals[k] < best - 1e-9 * max(1.0, abs(best)):
+                    S[slot], best, improved = int(free[k]), float(vals[k]), True
+                    self.steps += 1
+            for slot in range(self.n_points):
+                rest = P[:slot] + P[slot + 1:]
+                free = np.setdiff1d(np.arange(self.n_e), P)
+                if free.size == 0:
+                    break
+                vals = np.where(self.t_ok(rest, free, cond=well),
+                                self.point_values(S, rest, free), np.inf)
+                k = int(np.argmin(vals))
+                if vals[k] < best - 1e-9 * max(1.0, abs(best)):
+                    P[slot], best, improved = int(free[k]), float(vals[k]), True
+                    self.steps += 1
+            if not improved:
                 break
-            vals = np.where(e_ok(rest, free), sensor_values(rest, P, free), np.inf)
-            k = int(np.argmin(vals))
-            if vals[k] < best - 1e-9 * max(1.0, abs(best)):
-                S[slot], best, improved = int(free[k]), float(vals[k]), True
-                steps += 1
-        for slot in range(n_points):
-            rest = P[:slot] + P[slot + 1:]
-            free = np.setdiff1d(np.arange(n_e), P)
-            if free.size == 0:
-                break
-            vals = np.where(t_ok(rest, free, cond=well), point_values(S, rest, free), np.inf)
-            k = int(np.argmin(vals))
-            if vals[k] < best - 1e-9 * max(1.0, abs(best)):
-                P[slot], best, improved = int(free[k]), float(vals[k]), True
-                steps += 1
-        if not improved:
-            break
-    return Layout(tuple(S), tuple(P), best, steps)
+        return Layout(tuple(S), tuple(P), best, self.steps)
 
 
 # --- the prediction --------------------------------------------------------------------------
