@@ -136,9 +136,6 @@ def test_noisy_sensors_with_the_articles_bands(noisy_run: tuple[Path, Any, Any],
     _within_noisy_tolerances(r["mass"], r["cog"], r["inertia_cog"], r["stiffness"], model)
 
 
-@pytest.mark.xfail(strict=False, reason="issue 12 part 3: the noisy run differs from run to run "
-                   "(hit timing); with the automatic bands some runs give mass -0.6 %, CoG "
-                   "1.3 mm, K 0.7 % (within the tolerances), others 91-93 kg for 110 kg")
 @pytest.mark.slow
 def test_noisy_sensors_default(noisy_run: tuple[Path, Any, Any]) -> None:
     _, result, model = noisy_run
