@@ -64,13 +64,13 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from drivers import nidaqmx_common
 from drivers.base import ChannelConfig, StreamHealth, StreamingFrontEnd, TimeBlock
 from drivers.errors import (
     DeviceError,
     DeviceInitializationError,
     DeviceTimeoutError,
 )
-from drivers import nidaqmx_common
 from drivers.nidaqmx_common import INSTALL, daq_error, first_line, new_task
 from drivers.station import DeviceConfig, NiDaqTransportConfig
 
