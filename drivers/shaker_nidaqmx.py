@@ -94,7 +94,7 @@ from numpy.typing import NDArray
 from drivers import nidaqmx_common
 from drivers.base import DeviceState, ExcitationDevice, Waveform
 from drivers.errors import DeviceError, DeviceInitializationError, DeviceTimeoutError
-from drivers.nidaqmx_common import daq_error, first_line, new_task
+from drivers.nidaqmx_common import DEVICE_GONE, daq_error, first_line, new_task
 from drivers.station import DeviceConfig, NiDaqTransportConfig
 
 __all__ = ["MAX_LEVEL", "OUTPUT_RANGE", "RATE", "NiDaqShaker"]
@@ -107,8 +107,8 @@ MAX_LEVEL = 2.0
 OUTPUT_RANGE = 10.0
 #: default output rate, Sa/s (ten samples a cycle at the top of a 1024 Hz plan's band)
 RATE = 10240.0
-#: a sine's buffer holds at most this many cycles
-SINE_CYCLES = 10000
+#: a sine's buffer is at most this long, s
+SINE_SECONDS = 10.0
 OPTIONS = ("api", "channel", "rate", "max_level", "output_range", "ramp", "random_period",
            "bursts", "seed", "timeout")
 _CHANNEL = re.compile(r"^ao\d+$")
@@ -299,14 +299,15 @@ class NiDaqShaker(ExcitationDevice):
 
     def _sine(self, frequency: float) -> NDArray[np.float64]:
         """Whole cycles of a unit sine in the shortest buffer that holds them exactly."""
-        cycles = np.arange(1, SINE_CYCLES + 1)
-        samples = cycles * self.rate / frequency if frequency > 0 else np.zeros(1)
+        cycles = np.arange(1, math.floor(SINE_SECONDS * frequency) + 1)
+        samples = cycles * self.rate / frequency if frequency > 0 else cycles * 0.0
         exact = np.flatnonzero((np.abs(samples - np.round(samples)) < 1e-6) & (samples >= 2))
         if exact.size == 0:
             raise ValueError(f"{self.name}: a sine of {frequency:g} Hz has no whole number of "
-                             f"cycles in a buffer at {self.rate:g} Sa/s (up to {SINE_CYCLES} "
-                             "cycles): choose a frequency that divides the rate times a whole "
-                             "number, e.g. a whole number of Hz")
+                             f"cycles in {SINE_SECONDS:g} s at {self.rate:g} Sa/s (the "
+                             "regenerated buffer must hold whole cycles): choose a frequency "
+                             "with a whole number of cycles in some whole number of samples, "
+                             "e.g. a whole number of Hz")
         n = round(float(samples[exact[0]]))
         return np.sin(2 * np.pi * frequency * np.arange(n) / self.rate)
 
@@ -355,6 +356,7 @@ class NiDaqShaker(ExcitationDevice):
             failure = self._fail(err, doing)
             if not self._halted.is_set():  # else cut short by an output off: it is off
                 self._emergency_off()
+                self._write_error = f"{failure}; output turned off"
             raise failure from err
 
     def _output_on_internal(self) -> None:
@@ -388,9 +390,8 @@ class NiDaqShaker(ExcitationDevice):
         failure turns the output off and is told by :meth:`output_problem`."""
         try:
             self._write_all(buffers, "ramping up")
-        except DeviceError as err:
-            if not self._halted.is_set():  # not cut short by an output off
-                self._write_error = f"{err}; output turned off"
+        except DeviceError as err:  # told by output_problem() unless cut short by an off
+            logger.debug("%s: ramp up ended: %s", self.name, err)
 
     def _join_ramp(self) -> None:
         """Wait for the ramp up's writes (each done within a period)."""
@@ -448,9 +449,12 @@ class NiDaqShaker(ExcitationDevice):
                                      self.name)
         if failed:
             err = failed[0]
-            if isinstance(err, self._ni.errors.DaqError):
+            if int(getattr(err, "error_code", 0)) in DEVICE_GONE:  # nothing left to turn off
+                logger.info("%s: output off: %s", self.name, first_line(err))
+            elif isinstance(err, self._ni.errors.DaqError):
                 raise self._fail(err, "turning the output off") from err
-            raise err
+            else:
+                raise err
 
     def _emergency_off(self) -> None:
         """Output off now (errors logged, never raised)."""
