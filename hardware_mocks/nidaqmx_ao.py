@@ -6,8 +6,8 @@ The output side of :class:`~hardware_mocks.nidaqmx_sim.SimulatedNiDaqmx`, with n
 ``stream_writers.AnalogSingleChannelWriter`` (``write_many_sample``,
 ``write_one_sample``). A buffered task regenerates what was written before its start on
 its own :class:`~hardware_mocks.physics.DeviceClock`; a write while it runs goes where the
-last one ended and waits until the generation has moved past that part of the buffer
-(NI-DAQmx's space available), then replaces it. A stopped task leaves the output at the
+last one ended, sample by sample as soon as the generation has played what was in that
+place of the buffer (NI-DAQmx's space available), and returns once all of it is in. A stopped task leaves the output at the
 last value generated; with on-demand timing a write sets the output at once. Each output
 is an :class:`OutputLine` whose voltage at any host instant is known (zero-order hold, as a
 DAC without a reconstruction filter); :class:`AmplifiedShaker` pushes on the bench with
@@ -135,9 +135,15 @@ class SimOutStream:
     """``task.out_stream`` and the generation it runs: the buffer, its clock, the writes.
 
     The buffer is what was written before the start (its length is the period of the
-    regeneration). Every write is kept as a segment ``(first sample, data)`` in the
-    generation's sample count; sample ``k`` plays the latest write that put a value in its
-    place of the buffer at or before ``k``.
+    regeneration); sample ``k`` of the generation plays place ``k % size`` of it. A write
+    fills the places after the last one's, each once the generation has played it, so a
+    sample not yet played is always the latest written for it.
+
+    Attributes
+    ----------
+    writes : list of (int, ndarray)
+        Every write since the start: the generation's sample its first value is for, and
+        the values.
     """
 
     def __init__(self, task: Any) -> None:
@@ -146,7 +152,8 @@ class SimOutStream:
         self._lock = threading.Lock()
         self._stopped = threading.Event()
         self._pending: list[NDArray[np.float64]] = []  # written before the start
-        self._segments: list[tuple[int, NDArray[np.float64]]] = []
+        self.writes: list[tuple[int, NDArray[np.float64]]] = []
+        self._buffer = np.zeros(0)
         self._size = 0
         self._written = 0
         self._clock: DeviceClock | None = None
@@ -177,7 +184,8 @@ class SimOutStream:
         clock = DeviceClock(task.timing.samp_clk_rate)
         with self._lock:
             self._size, self._written = buf.size, buf.size
-            self._segments = [(0, buf)]
+            self._buffer = buf.copy()
+            self.writes = [(0, buf)]
             self._stopped.clear()
             clock.start()
             self._clock = clock
@@ -192,7 +200,7 @@ class SimOutStream:
             if clock is None:
                 return
             self._generated = clock.due()
-            last = self._values(np.array([self._generated - 1]))[0]
+            last = self._buffer[(self._generated - 1) % self._size]
         for chan in self._task.ao_channels:
             chan.line.held = float(last)
             chan.line.generation = None
@@ -214,6 +222,9 @@ class SimOutStream:
             raise daq_error(f"The simulated modules take writes of at most the buffer's "
                             f"{self._size} samples while generating.", -200547, task.name)
         deadline = time.monotonic() + timeout
+        with self._lock:
+            self.writes.append((self._written, data))
+        done = 0
         while True:
             with self._lock:
                 clock = self._clock
@@ -221,9 +232,13 @@ class SimOutStream:
                     raise daq_error("Finite acquisition or generation has been stopped before "
                                     "the requested number of samples were acquired or "
                                     "generated.", -200010, task.name)
-                if self._written + data.size - self._size <= clock.due():
-                    self._segments.append((self._written, data))
-                    self._written += data.size
+                room = min(clock.due() + self._size - self._written, data.size - done)
+                if room > 0:
+                    places = (self._written + np.arange(room)) % self._size
+                    self._buffer[places] = data[done:done + room]
+                    self._written += room
+                    done += room
+                if done == data.size:
                     return int(data.size)
             task.check_modules()
             if time.monotonic() > deadline:
@@ -245,18 +260,8 @@ class SimOutStream:
             if clock is None:
                 return np.full_like(t, held)
             k = np.floor((t - clock.t_first) * clock.true_rate).astype(np.int64)
-            out = self._values(np.maximum(k, 0))
+            out = self._buffer[np.maximum(k, 0) % self._size]
         return np.where(k < 0, held, out)
-
-    def _values(self, k: NDArray[np.int64]) -> NDArray[np.float64]:
-        """Samples ``k`` of the generation (lock held)."""
-        out = np.zeros(k.shape)
-        for first, data in self._segments:
-            # the first place at or after this write's start that lands where k does
-            p = first + np.mod(k - first, self._size)
-            hit = (p < first + data.size) & (p <= k)
-            out[hit] = data[p[hit] - first]
-        return out
 
 
 class AnalogSingleChannelWriter:

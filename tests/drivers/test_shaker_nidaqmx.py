@@ -98,7 +98,7 @@ def test_chirp_buffer_is_the_synthesised_one_at_the_level(
     assert sh._task.timing.samp_quant_samp_mode == constants.AcquisitionType.CONTINUOUS
     assert stream.output_buf_size == 500  # one period
     want = 0.5 * periodic_chirp(1, 500, RATE, band=(2.0, 100.0))
-    assert_array_equal(stream._segments[0][1], want)
+    assert_array_equal(stream.writes[0][1], want)
     # regenerated: three periods played are the buffer three times, sample for sample
     assert_array_equal(_generated(sh, 0, 1500), np.tile(want, 3))
 
@@ -109,13 +109,13 @@ def test_random_and_burst_levels_are_rms(make: Callable[..., NiDaqShaker]) -> No
     sh.set_waveform("random", f_start=5.0, f_stop=200.0)
     sh.set_level(0.4)
     sh.start()
-    buf = sh._task.out_stream._segments[0][1]
+    buf = sh._task.out_stream.writes[0][1]
     assert_array_equal(buf, 0.4 * periodic_random(2000, RATE, band=(5.0, 200.0), seed=3))
     assert np.sqrt(np.mean(buf**2)) == pytest.approx(0.4, rel=1e-12)  # V RMS
     sh.stop()
     sh.set_waveform("burst-random", f_start=5.0, f_stop=200.0, period=0.25, burst=0.5)
     sh.start()
-    buf = sh._task.out_stream._segments[0][1]
+    buf = sh._task.out_stream.writes[0][1]
     assert_array_equal(buf, 0.4 * burst_random(2, 250, RATE, burst_fraction=0.5,
                                                band=(5.0, 200.0), seed=3)[0])
 
@@ -129,7 +129,7 @@ def test_sine_buffer_holds_whole_cycles(make: Callable[..., NiDaqShaker]) -> Non
     sh.set_waveform("sine", frequency=30.0)  # 100 samples hold 3 cycles at 1000 Sa/s
     sh.set_level(2.0)
     sh.start()
-    buf = sh._task.out_stream._segments[0][1]
+    buf = sh._task.out_stream.writes[0][1]
     assert_allclose(buf, 2.0 * np.sin(2 * np.pi * 30.0 * np.arange(100) / RATE), atol=1e-15)
 
 
@@ -143,16 +143,19 @@ def test_ramp_up_and_down_are_whole_buffers_under_a_linear_envelope(
     assert sh._ramp_writer is not None
     sh._ramp_writer.join()
     wave = periodic_chirp(1, 250, RATE, band=(2.0, 100.0))
-    assert [first for first, _ in sh._task.out_stream._segments] == [0, 250, 500]
-    t = np.arange(1000) / RATE
-    want = np.tile(wave, 4) * 0.8 * np.minimum(t / 0.3, 1.0)
-    assert_allclose(_generated(sh, 0, 1000), want, rtol=1e-12, atol=1e-15)
+    writes = sh._task.out_stream.writes
+    assert [first for first, _ in writes] == [0, 250, 500]  # each a period after the last
+    t = np.arange(750) / RATE
+    want = np.tile(wave, 3) * 0.8 * np.minimum(t / 0.3, 1.0)
+    assert_allclose(np.concatenate([buf for _, buf in writes]), want, rtol=1e-12, atol=1e-15)
+    # from then on the steady buffer plays, period after period
+    assert_allclose(_generated(sh, 1000, 500), 0.8 * np.tile(wave, 2), rtol=1e-12)
     line = ni.output_line("cDAQ1Mod5/ao0")
     done = threading.Event()
     threading.Thread(target=lambda: (sh.stop(), done.set()), daemon=True).start()
     assert done.wait(30)  # only guards against a hang
     # the fall starts at the next buffer boundary after the steady buffer, 0.3 s long
-    down = [(first, buf) for first, buf in sh._task.out_stream._segments if first >= 750]
+    down = [(first, buf) for first, buf in sh._task.out_stream.writes if first >= 750]
     assert [first for first, _ in down] == [750, 1000]
     fall = np.concatenate([buf for _, buf in down])
     env = 0.8 * np.clip(1.0 - np.arange(500) / RATE / 0.3, 0.0, 1.0)
@@ -169,7 +172,7 @@ def test_level_changed_while_on_ramps_to_it(make: Callable[..., NiDaqShaker]) ->
     sh.set_level(0.2)
     sh.start()
     sh.set_level(0.6)  # no ramp: the next buffer is at the new level
-    (f0, b0), (f1, b1) = sh._task.out_stream._segments
+    (f0, b0), (f1, b1) = sh._task.out_stream.writes
     assert (f0, f1) == (0, 250)
     assert_allclose(b1, 3.0 * b0, rtol=1e-12)
 
