@@ -7,8 +7,9 @@ The output side of :class:`~hardware_mocks.nidaqmx_sim.SimulatedNiDaqmx`, with n
 ``write_one_sample``). A buffered task regenerates what was written before its start on
 its own :class:`~hardware_mocks.physics.DeviceClock`; a write while it runs goes where the
 last one ended, sample by sample as soon as the generation has played what was in that
-place of the buffer (NI-DAQmx's space available), and returns once all of it is in. A stopped task leaves the output at the
-last value generated; with on-demand timing a write sets the output at once. Each output
+place of the buffer (NI-DAQmx's space available), and returns once all of it is in. A
+stopped task leaves the output at the last value generated; with on-demand timing a write
+sets the output at once. Each output
 is an :class:`OutputLine` whose voltage at any host instant is known (zero-order hold, as a
 DAC without a reconstruction filter); :class:`AmplifiedShaker` pushes on the bench with
 ``force_per_volt`` times it (a :class:`~hardware_mocks.bench_drive.BenchDrive`).

@@ -164,23 +164,26 @@ def _schedule_removal(sim: SimulatedStation) -> None:
     remove = sim.table.get("remove_module")
     if remove is None:
         return
+    bad = sim.fail("remove_module", "must be { module = NAME, hit = N >= 1 (or point = N "
+                                     f">= 1), seconds = S }}, got {remove!r}")
+    if not isinstance(remove, Mapping):
+        raise bad
+    given = [k for k in ("hit", "point") if k in remove]
+    n = remove[given[0]] if len(given) == 1 else None
+    seconds = remove.get("seconds", 0.0)
+    if (not isinstance(remove.get("module"), str) or isinstance(n, bool)
+            or not isinstance(n, int) or n < 1
+            or set(remove) - {"module", "hit", "point", "seconds"}
+            or isinstance(seconds, bool) or not isinstance(seconds, int | float)):
+        raise bad
     api = sim.nidaqmx
-    counts = {k: remove.get(k) for k in ("hit", "point")} if isinstance(remove, Mapping) else {}
-    given = [k for k, v in counts.items() if v is not None]
-    if (not isinstance(remove, Mapping) or not isinstance(remove.get("module"), str)
-            or len(given) != 1 or not isinstance(counts[given[0]], int)
-            or counts[given[0]] < 1 or set(remove) - {"module", "hit", "point", "seconds"}
-            or not isinstance(remove.get("seconds", 0.0), int | float)):
-        raise sim.fail("remove_module", "must be { module = NAME, hit = N >= 1 (or point = N "
-                                        f">= 1), seconds = S }}, got {remove!r}")
     if api is None or remove["module"] not in api.modules:
         have = ", ".join(api.modules) if api is not None else "no NI-DAQmx device"
         raise sim.fail("remove_module", f"no module {remove['module']!r} in {have}")
-    n, seconds = int(counts[given[0]]), float(remove.get("seconds", 0.0))
     if given[0] == "hit":
         def when() -> float | None:
             made = sim.physics.hits()
-            return made[n - 1].t0 + seconds if len(made) >= n else None
+            return made[n - 1].t0 + float(seconds) if len(made) >= n else None
     else:
         if sim.shaker_operator is None:
             raise sim.fail("remove_module", "point = N needs a simulated shaker in the station")
@@ -188,7 +191,7 @@ def _schedule_removal(sim: SimulatedStation) -> None:
 
         def when() -> float | None:
             at = shaker.attached_at
-            return at[n - 1] + seconds if len(at) >= n else None
+            return at[n - 1] + float(seconds) if len(at) >= n else None
     api.remove_when = (remove["module"], when)
 
 

@@ -23,8 +23,8 @@ from drivers.registry import get_backend
 from drivers.shaker_nidaqmx import NiDaqShaker
 from drivers.station import parse_station
 from hardware_mocks.benches import get_bench
-from hardware_mocks.nidaqmx_api import constants
 from hardware_mocks.nidaqmx_ao import OutputLine
+from hardware_mocks.nidaqmx_api import constants
 from hardware_mocks.nidaqmx_sim import SimModule, SimulatedNiDaqmx
 from hardware_mocks.physics import BenchPhysics
 from processing.excitation import burst_random, periodic_chirp, periodic_random
