@@ -489,6 +489,12 @@ class ExcitationDevice(Device):
         self.level = float(level)
         logger.info("%s: level %g", self.name, level)
 
+    def output_problem(self) -> str:
+        """``""`` while the output is on, else why it is not; a backend that can ask its
+        device whether it still drives (its error queue, its task) does so, turning the
+        output off when it finds an error."""
+        return "" if self._state is DeviceState.RUNNING else f"{self.name}: output is off"
+
     def shutdown(self) -> None:
         """Turn the output off (always, even if not started) and release the device."""
         with self._state_lock:

@@ -57,7 +57,6 @@ Example
 
 from __future__ import annotations
 
-import importlib
 import logging
 import time
 from collections.abc import Iterable, Sequence
@@ -65,14 +64,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from drivers import nidaqmx_common
 from drivers.base import ChannelConfig, StreamHealth, StreamingFrontEnd, TimeBlock
 from drivers.errors import (
     DeviceError,
     DeviceInitializationError,
-    DeviceNotAvailableError,
     DeviceTimeoutError,
-    one_line,
 )
+from drivers.nidaqmx_common import INSTALL, daq_error, first_line, new_task
 from drivers.station import DeviceConfig, NiDaqTransportConfig
 
 __all__ = ["INSTALL", "OVERLOAD_FRACTION", "STANDARD_GRAVITY", "NiDaqFrontEnd",
@@ -84,11 +83,7 @@ logger = logging.getLogger(__name__)
 STANDARD_GRAVITY = 9.80665
 #: a sample at or beyond this fraction of the range is an overload (the last 8 codes of 24 bits)
 OVERLOAD_FRACTION = 1.0 - 8.0 / 2**23
-#: what installs the nidaqmx package
-INSTALL = "pip install 'insitu[ni]'"
-#: NI-DAQmx error codes the driver names (nidaqmx.error_codes.DAQmxErrors)
-INVALID_DEVICE_ID = (-200220, -200207)
-DEVICE_GONE = (-201003, -200045)
+#: NI-DAQmx's error for samples overwritten before they were read
 SAMPLES_OVERWRITTEN = -200279
 
 OPTIONS = ("api", "channels_per_module", "coupling", "excitation_current", "teds",
@@ -107,15 +102,8 @@ def accel_sensitivity_mv_per_g(mv_per_si: float) -> float:
 def import_nidaqmx(device: str) -> Any:
     """The ``nidaqmx`` package with the modules the driver uses; one line naming the
     install when it is missing."""
-    try:
-        api = importlib.import_module("nidaqmx")
-        for sub in ("constants", "errors", "stream_readers", "system"):
-            importlib.import_module(f"nidaqmx.{sub}")
-    except ImportError as err:
-        raise DeviceNotAvailableError(
-            f"{device}: backend frontend-nidaqmx needs the nidaqmx package, which is not "
-            f"installed: {INSTALL}", device) from err
-    return api
+    return nidaqmx_common.import_nidaqmx(device, "frontend-nidaqmx",
+                   ("constants", "errors", "stream_readers", "system"))
 
 
 def _member(enum: Any, *names: str) -> Any:
@@ -124,11 +112,6 @@ def _member(enum: Any, *names: str) -> Any:
         if hasattr(enum, name):
             return getattr(enum, name)
     raise AttributeError(f"{enum.__name__} has none of {', '.join(names)}")
-
-
-def _first_line(err: BaseException) -> str:
-    lines = [s.strip() for s in str(err).splitlines() if s.strip()]
-    return one_line(lines[0]) if lines else type(err).__name__
 
 
 class NiDaqFrontEnd(StreamingFrontEnd):
@@ -242,39 +225,18 @@ class NiDaqFrontEnd(StreamingFrontEnd):
     def _daq_error(self, err: BaseException, doing: str) -> DeviceError:
         """One line for an NI-DAQmx error raised while ``doing``."""
         code = int(getattr(err, "error_code", 0))
-        text = _first_line(err).rstrip(".")
-        devs = ", ".join(self.devices)
-        if code in INVALID_DEVICE_ID:
-            return DeviceNotAvailableError(
-                f"{self.name}: {doing}: NI-DAQmx has no such device ({text}, error {code}): "
-                f"check the module names NI MAX shows against transport nidaqmx = [{devs}]",
-                self.name)
-        if code in DEVICE_GONE:
-            return DeviceNotAvailableError(
-                f"{self.name}: {doing}: {text} (NI-DAQmx error {code}): a module of {devs} was "
-                "removed, or the chassis lost power or its connection: check it, then resume",
-                self.name)
         if code == SAMPLES_OVERWRITTEN:
             return DeviceError(
                 f"{self.name}: {doing}: samples lost, NI-DAQmx overwrote its buffer before "
                 f"they were read (error {code}): the host read too slowly; raise "
                 "buffer_seconds", self.name)
-        return DeviceInitializationError(
-            f"{self.name}: {doing}: {text} (NI-DAQmx error {code})", self.name)
+        return daq_error(self.name, self.devices, err, doing)
 
     # -- life cycle -------------------------------------------------------------------------------
     def _open_internal(self) -> None:
         ni = self._api if self._api is not None else import_nidaqmx(self.name)
         self._ni = ni
-        try:
-            task = ni.Task()
-        except ni.errors.DaqNotFoundError as err:
-            raise DeviceNotAvailableError(
-                f"{self.name}: the NI-DAQmx driver is not installed (nidaqmx found no "
-                "NI-DAQmx library): install NI-DAQmx from ni.com (Linux: python -m nidaqmx "
-                "installdriver)", self.name) from err
-        except ni.errors.DaqError as err:
-            raise self._daq_error(err, "creating the task") from err
+        task = new_task(ni, self.name, self.devices)
         self._task = task
         try:
             self._configure(ni, task)
@@ -390,7 +352,7 @@ class NiDaqFrontEnd(StreamingFrontEnd):
         try:
             task.close()
         except self._ni.errors.DaqError as err:
-            logger.warning("%s: closing the task: %s", self.name, _first_line(err))
+            logger.warning("%s: closing the task: %s", self.name, first_line(err))
 
     # -- streaming --------------------------------------------------------------------------------
     def _on_samples(self, task_handle: Any, event_type: int, n_samples: int,

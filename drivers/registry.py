@@ -37,6 +37,7 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "frontend-nidaqmx": ("drivers.frontend_nidaqmx", "NiDaqFrontEnd"),
     "generator-visa": ("drivers.generator_visa", "VisaGenerator"),
     "hammer-serial": ("drivers.hammer_serial", "SerialHammer"),
+    "shaker-nidaqmx": ("drivers.shaker_nidaqmx", "NiDaqShaker"),
     "shaker-scpi": ("drivers.shaker_scpi", "ScpiShaker"),
 }
 

@@ -11,6 +11,8 @@ command set and its own ``force(t)``.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -45,6 +47,8 @@ class BenchDrive:
         self.force_per_volt = force_per_volt
         self.sensor = sensor
         self._exc: int | None = None
+        #: host times (``time.monotonic()``) it was attached at, one a point
+        self.attached_at: list[float] = []
         self._seed = seed
         self._multisine: tuple[tuple[float, float], NDArray[np.float64],
                                NDArray[np.float64]] | None = None
@@ -63,6 +67,7 @@ class BenchDrive:
             if not 0 <= exc < n:
                 raise ValueError(f"excitation index {exc} out of range 0..{n - 1}")
             self.physics.add_source(self)
+            self.attached_at.append(time.monotonic())
         self._exc = exc
 
     def detach_from_bench(self) -> None:

@@ -67,6 +67,11 @@ def _stand_in_constants() -> Any:
                                     TRANSFERRED_FROM_BUFFER=2),
         TerminalConfiguration=enum("TerminalConfiguration", RSE=10083, NRSE=10078, DIFF=10106,
                                    PSEUDO_DIFF=12529, DEFAULT=-1),
+        VoltageUnits=enum("VoltageUnits", VOLTS=10348, FROM_CUSTOM_SCALE=10065),
+        RegenerationMode=enum("RegenerationMode", ALLOW_REGENERATION=10097,
+                              DONT_ALLOW_REGENERATION=10158),
+        SampleTimingType=enum("SampleTimingType", SAMPLE_CLOCK=10388, HANDSHAKE=10389,
+                              IMPLICIT=10451, ON_DEMAND=10390, CHANGE_DETECTION=12504),
     )
     return ns
 

@@ -1,7 +1,8 @@
 """A simulated NI-DAQmx system: the nidaqmx surface insitu's NI front end calls, on a bench.
 
 :class:`SimulatedNiDaqmx` stands where the ``nidaqmx`` package does: it has ``Task``,
-``constants``, ``errors``, ``stream_readers`` (``AnalogMultiChannelReader``) and ``system``
+``constants``, ``errors``, ``stream_readers`` (``AnalogMultiChannelReader``),
+``stream_writers`` (``AnalogSingleChannelWriter``) and ``system``
 (``PhysicalChannel``), with nidaqmx 1.7's names, argument order and defaults, and the real
 package's constants and exceptions where it is installed (:mod:`hardware_mocks.nidaqmx_api`).
 Its modules (:class:`SimModule`, NI 9234 class: 4 IEPE inputs, +/- 5 V) are wired to a
@@ -12,14 +13,16 @@ own :class:`~hardware_mocks.physics.DeviceClock` in a thread
 (:class:`~hardware_mocks.input_signals.InputSignals`), turns the physical values into
 volts by the sensors, clips them at the module's range, scales them back as NI-DAQmx does
 from the channel's configured sensitivity and units, buffers them (``samps_per_chan``
-samples, as NI-DAQmx's circular buffer) and calls the every-N-samples callback.
+samples, as NI-DAQmx's circular buffer) and calls the every-N-samples callback. Modules with
+outputs (NI 9263 class, ``n_outputs``) generate voltages (:mod:`hardware_mocks.nidaqmx_ao`:
+a task's regenerated buffer on its own clock, an amplified shaker on the bench).
 
 Faults, as NI-DAQmx reports them: no driver (``Task()`` raises ``DaqNotFoundError``), an
 unknown device (-200220 "Device identifier is invalid"), a channel the module lacks
 (-200170), a range or excitation the module cannot do (-200077), no TEDS sensor (-200709),
 a module removed (:meth:`SimulatedNiDaqmx.remove`, or scheduled after a hit with
-:attr:`SimulatedNiDaqmx.remove_after`: reads and ``is_task_done`` raise -201003, no more
-events), unread samples overwritten (-200279).
+:attr:`SimulatedNiDaqmx.remove_when`: reads, writes and ``is_task_done`` raise -201003, no
+more events, its outputs drop to 0 V), unread samples overwritten (-200279).
 
 Example
 -------
@@ -43,6 +46,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hardware_mocks.input_signals import InputSignals
+from hardware_mocks.nidaqmx_ao import (
+    AnalogSingleChannelWriter,
+    OutputLine,
+    SimAOChannelCollection,
+    SimOutStream,
+)
 from hardware_mocks.nidaqmx_api import constants, errors
 from hardware_mocks.physics import BenchPhysics, DeviceClock
 
@@ -51,7 +60,7 @@ __all__ = ["NI9234_RATES", "SimModule", "SimulatedNiDaqmx"]
 G0 = 9.80665  # m/s^2 per g (NI-DAQmx's)
 #: NI 9234 sample rates: 51.2 kHz / n, n = 1..31, Hz
 NI9234_RATES = tuple(51200.0 / n for n in range(31, 0, -1))
-_PHYS = re.compile(r"^(?P<dev>[^/]+)/ai(?P<ai>\d+)$")
+_PHYS = re.compile(r"^(?P<dev>[^/]+)/(?P<kind>ai|ao)(?P<ai>\d+)$")
 _task_ids = itertools.count(1)
 
 
@@ -72,6 +81,10 @@ class SimModule:
     n_inputs : int
     range_v : float
         Input range, +/- V (the converter clips there).
+    n_outputs : int
+        Analogue outputs (NI 9263: 4; an input module: 0).
+    output_range : float
+        Output range, +/- V.
     rates : tuple of float, optional
         The rates the module runs, Hz (a request is coerced to the next one up); None: any
         rate (the simulated bench's modules).
@@ -85,6 +98,8 @@ class SimModule:
     product_type: str = "NI 9234"
     n_inputs: int = 4
     range_v: float = 5.0
+    n_outputs: int = 0
+    output_range: float = 10.0
     rates: tuple[float, ...] | None = None
     excitation_currents: tuple[float, ...] = (0.002,)
     teds: Mapping[int, float] = field(default_factory=dict)
@@ -253,14 +268,29 @@ class SimTiming:
         self.samp_clk_rate = 0.0
         self.samp_quant_samp_mode: Any = None
         self.samp_quant_samp_per_chan = 0
+        self._timing_type: Any = constants.SampleTimingType.ON_DEMAND
+
+    @property
+    def samp_timing_type(self) -> Any:
+        return self._timing_type
+
+    @samp_timing_type.setter
+    def samp_timing_type(self, value: Any) -> None:
+        if self._task.running:
+            raise _error("Specified operation cannot be performed while the task is running.",
+                         -200479, self._task.name)
+        self._timing_type = value
 
     def cfg_samp_clk_timing(self, rate: float, source: str = "",
                             active_edge: Any = constants.Edge.RISING,
                             sample_mode: Any = constants.AcquisitionType.FINITE,
                             samps_per_chan: int = 1000) -> None:
         task = self._task
-        if not len(task.ai_channels):
+        if not (len(task.ai_channels) or len(task.ao_channels)):
             raise _error("Task contains no channels.", -200478, task.name)
+        if task.running:
+            raise _error("Specified operation cannot be performed while the task is running.",
+                         -200479, task.name)
         coerced = float(rate)
         for module in task.modules():
             if module.rates is not None:
@@ -274,6 +304,7 @@ class SimTiming:
         self.samp_clk_rate = coerced
         self.samp_quant_samp_mode = sample_mode
         self.samp_quant_samp_per_chan = int(samps_per_chan)
+        self._timing_type = constants.SampleTimingType.SAMPLE_CLOCK
 
 
 class SimInStream:
@@ -345,6 +376,8 @@ class SimTask:
         self.ai_channels = SimAIChannelCollection(self)
         self.timing = SimTiming(self)
         self.in_stream = SimInStream(self)
+        self.ao_channels = SimAOChannelCollection(self)
+        self.out_stream = SimOutStream(self)
         self.running = False
         self.closed = False
         self.acquired = 0
@@ -368,7 +401,8 @@ class SimTask:
 
     def modules(self) -> list[SimModule]:
         """The modules of the task's channels, in channel order, once each."""
-        mods = [self.system.resolve(c.physical_channel, self.name)[0] for c in self.ai_channels]
+        mods = [self.system.resolve(c.physical_channel, self.name)[0]
+                for c in [*self.ai_channels, *self.ao_channels]]
         return list({id(m): m for m in mods}.values())
 
     def register_every_n_samples_acquired_into_buffer_event(
@@ -394,6 +428,10 @@ class SimTask:
             if module.removed:
                 raise _error(f"Device cannot be accessed. Device: {module.name}", -201003,
                              self.name)
+        if len(self.ao_channels):
+            self.out_stream.start()
+            self.running = True
+            return
         chans = list(self.ai_channels)
         sys_ = self.system
         wiring = [sys_.wiring.get(c.physical_channel) for c in chans]
@@ -421,19 +459,32 @@ class SimTask:
         self._thread.start()
 
     def stop(self) -> None:
+        self._halt()
+        if len(self.ao_channels):  # stopping an output on a module that is gone fails
+            self.check_modules()
+
+    def _halt(self) -> None:
         self.running = False
         self._stop.set()
+        self.out_stream.stop()
         thread, self._thread = self._thread, None
         if thread is not None and thread is not threading.current_thread():
             thread.join(2.0)
 
+    def check_modules(self) -> None:
+        """NI-DAQmx's -201003 when a module of the task has been removed."""
+        self.system.check_removal()
+        self.modules()
+
     def close(self) -> None:
-        self.stop()
+        self._halt()
         self.closed = True
         if self in self.system.tasks:
             self.system.tasks.remove(self)
 
     def is_task_done(self) -> bool:
+        if len(self.ao_channels):
+            self.check_modules()
         with self._cond:
             if self._error is not None:
                 raise self._error
@@ -534,8 +585,9 @@ class SimulatedNiDaqmx:
 
     Attributes
     ----------
-    remove_after : tuple (module name, hits, seconds), optional
-        Remove that module ``seconds`` after the ``hits``-th hit on the bench starts.
+    remove_when : tuple (module name, when), optional
+        Remove that module once ``when()`` gives a host time (``time.monotonic()``) that
+        has passed; ``when()`` gives None until it knows the time.
     """
 
     def __init__(self, physics: BenchPhysics, modules: Sequence[SimModule], *,
@@ -553,12 +605,15 @@ class SimulatedNiDaqmx:
         self.accel_noise, self.force_noise, self.tail = accel_noise, force_noise, tail
         self.driver_installed = driver_installed
         self.seed = seed
-        self.remove_after: tuple[str, int, float] | None = None
+        self.remove_when: tuple[str, Callable[[], float | None]] | None = None
+        self.lines: dict[str, OutputLine] = {}
         self.tasks: list[SimTask] = []
         self.constants = constants
         self.errors = errors
         self.stream_readers = types.SimpleNamespace(
             AnalogMultiChannelReader=AnalogMultiChannelReader)
+        self.stream_writers = types.SimpleNamespace(
+            AnalogSingleChannelWriter=AnalogSingleChannelWriter)
         self.system = types.SimpleNamespace(
             PhysicalChannel=lambda name, *, grpc_options=None: SimPhysicalChannel(self, name))
 
@@ -576,10 +631,13 @@ class SimulatedNiDaqmx:
                          task)
         if module.removed:
             raise _error(f"Device cannot be accessed. Device: {dev}", -201003, task)
-        if m is None or int(m.group("ai")) >= module.n_inputs:
+        kind = m.group("kind") if m else "ai"
+        count = module.n_outputs if kind == "ao" else module.n_inputs
+        if m is None or int(m.group("ai")) >= count:
+            valid = f"{dev}/{kind}0:{count - 1}" if count else "none"
             raise _error(f"Physical channel specified does not exist on this device. Physical "
-                         f"Channel Name: {physical_channel} Valid Physical Channels: "
-                         f"{dev}/ai0:{module.n_inputs - 1}", -200170, task)
+                         f"Channel Name: {physical_channel} Valid Physical Channels: {valid}",
+                         -200170, task)
         return module, int(m.group("ai"))
 
     def teds_of(self, physical_channel: str, task: str) -> float:
@@ -598,16 +656,36 @@ class SimulatedNiDaqmx:
         mv = self.sensors[physical_channel]
         return mv / 1000.0 / G0 if code >= 0 else mv / 1000.0
 
+    def add(self, modules: Sequence[SimModule], *, wiring: Mapping[str, int],
+            sensors: Mapping[str, float]) -> None:
+        """Plug in more modules (another device's) with their inputs' wiring and sensors."""
+        for phys in wiring:
+            if phys not in sensors:
+                raise ValueError(f"{phys} is wired but has no sensor sensitivity")
+        self.modules.update({m.name: m for m in modules})
+        self.wiring.update(wiring)
+        self.sensors.update(sensors)
+
+    def output_line(self, physical_channel: str) -> OutputLine:
+        """The output ``"Dev/aoK"`` (what an amplifier wired to it sees)."""
+        module, _ = self.resolve(physical_channel, "")
+        line = self.lines.setdefault(physical_channel, OutputLine(physical_channel))
+        line.removed = module.removed
+        return line
+
     def remove(self, module: str) -> None:
-        """Pull ``module`` out of the chassis now."""
+        """Pull ``module`` out of the chassis now (its outputs drop to 0 V)."""
         self.modules[module].removed = True
+        for phys, line in self.lines.items():
+            if phys.split("/")[0] == module:
+                line.removed = True
 
     def check_removal(self) -> None:
-        """Carry out :attr:`remove_after` once its time has come (on the host clock)."""
-        if self.remove_after is None:
+        """Carry out :attr:`remove_when` once its time has come (on the host clock)."""
+        if self.remove_when is None:
             return
-        module, hits, seconds = self.remove_after
-        made = self.physics.hits()
-        if len(made) >= hits and time.monotonic() >= made[hits - 1].t0 + seconds:
+        module, when = self.remove_when
+        t = when()
+        if t is not None and time.monotonic() >= t:
             self.remove(module)
-            self.remove_after = None
+            self.remove_when = None

@@ -32,8 +32,8 @@ from numpy.typing import NDArray
 from processing.decay import CARRY_MIN, CARRY_STRETCH, free_decay, noise_sigma
 
 __all__ = ["ShakerSignal", "burst_onsets", "burst_random", "burst_records", "burst_ringing",
-           "continuous_random", "periodic_chirp", "settled_records", "shaker_signal",
-           "steady_periods"]
+           "continuous_random", "periodic_chirp", "periodic_random", "settled_records",
+           "shaker_signal", "steady_periods"]
 
 
 def _check(fs: float, band: tuple[float, float] | None) -> None:
@@ -87,6 +87,37 @@ def continuous_random(
     _check(fs, band)
     x = _white(np.random.default_rng(seed), (n_channels, n), fs, band)
     return rms * x / np.sqrt(np.mean(x**2, axis=-1, keepdims=True))
+
+
+def periodic_random(
+    n: int,
+    fs: float,
+    *,
+    rms: float = 1.0,
+    band: tuple[float, float] | None = None,
+    seed: int | None = None,
+) -> NDArray[np.float64]:
+    """Gaussian random noise (n,) that repeats every ``n`` samples: a buffer played over and
+    over (a generator's regenerated output) joins itself without a step.
+
+    White noise with its discrete Fourier coefficients outside ``band`` (Hz; default up to
+    ``fs / 2``) set to zero, scaled to ``rms``: flat over the band, zero outside it, no
+    filter transient. The lines are ``fs / n`` Hz apart.
+
+    >>> x = periodic_random(1000, 1000.0, band=(10.0, 100.0), seed=1)
+    >>> round(float(np.sqrt(np.mean(x**2))), 12)
+    1.0
+    """
+    _check(fs, band)
+    spec = np.fft.rfft(np.random.default_rng(seed).standard_normal(n))
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    lo, hi = (0.0, fs / 2) if band is None else band
+    spec[(f < lo) | (f > hi)] = 0.0
+    x = np.fft.irfft(spec, n)
+    power = float(np.mean(x**2))
+    if power == 0.0:
+        raise ValueError(f"band {band} holds no frequency line at {fs / n:g} Hz spacing")
+    return rms * x / np.sqrt(power)
 
 
 def burst_random(

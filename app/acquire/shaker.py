@@ -222,6 +222,11 @@ class ShakerProcedure(RecordingProcedure):
             opts = dict(self.device_options.get(name, {}))
             if cfg.backend == "shaker-scpi":  # the worker feeds the watchdog (module doc)
                 opts = {"ramp": self.plan.shaker.ramp, "heartbeat": 0.0, **opts}
+            else:
+                backend = get_backend(cfg.backend)
+                if issubclass(backend, ExcitationDevice) and "ramp" in \
+                        backend.setting_limits(cfg):  # a device that ramps: for how long
+                    opts = {"ramp": self.plan.shaker.ramp, **opts}
             dev = create_device(cfg, **opts)
             if not isinstance(dev, ExcitationDevice):
                 raise PlanError(f"{self.station.source}: {name!r} is not a shaker")

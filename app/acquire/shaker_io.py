@@ -20,9 +20,8 @@ from numpy.typing import NDArray
 from app.acquire.plan import TestPlan
 from app.acquire.procedure import StopRequestedError
 from app.acquire.streams import READ_TIMEOUT
-from drivers.base import AcquisitionFrontEnd, DeviceState, ExcitationDevice
+from drivers.base import AcquisitionFrontEnd, ExcitationDevice
 from drivers.errors import DeviceError, DeviceTimeoutError
-from drivers.generator_visa import VisaGenerator
 from drivers.shaker_scpi import ScpiShaker, ShakerError
 
 __all__ = ["BURST_PRE", "BlockStream", "ShakerDrive", "ShakerDrives", "burst_onset"]
@@ -141,9 +140,7 @@ class ShakerDrive:
             errs = dev.errors()
             why = "; ".join(f"{c} {t}" for c, t in errs) or "no error reported"
             return f"{dev.name}: output went off during the block ({why})"
-        if isinstance(dev, VisaGenerator):  # no watchdog, no ramp: its queue and output asked
-            return dev.output_problem()
-        return "" if dev.state is DeviceState.RUNNING else f"{dev.name}: output is off"
+        return dev.output_problem()  # a generator's queue and output, an NI-DAQmx task
 
     def off(self, stream: BlockStream) -> None:
         """Ramp the output down and turn it off, streaming until it is at 0."""

@@ -7,7 +7,9 @@ one fake API per device, handed to the driver at its boundary as keyword overrid
 ``from_config`` (the procedures' ``device_options``), and the simulated operator who hits
 where the run asks (:class:`~hardware_mocks.operator.MockOperator` on the physics), or who
 moves the simulated shaker (a ``generator-visa`` device: a simulated Keysight 33500 and its
-amplifier) to each point a shaker plan names.
+amplifier; a ``shaker-nidaqmx`` device: an amplifier on a simulated NI 9263 output) to each
+point a shaker plan names. Every NI-DAQmx device of a station is in one simulated NI-DAQmx
+system, as the modules of one chassis are.
 
 The ``[simulation]`` table (besides ``bench``; every key optional):
 
@@ -22,7 +24,8 @@ nidaqmx_driver         false: the NI-DAQmx driver is missing (``Task()`` raises
 nidaqmx_modules        the module names NI-DAQmx sees (default: the station's)
 nidaqmx_rates          ``"NI 9234"``: the modules run 51.2 kHz / n only (default: any rate)
 remove_module          ``{ module = "cDAQ1Mod2", hit = 2, seconds = 1.0 }``: that module is
-                       pulled out ``seconds`` after the ``hit``-th hit
+                       pulled out ``seconds`` after the ``hit``-th hit; ``point = 2`` in
+                       place of ``hit``: after the shaker is attached at its 2nd point
 =====================  =================================================================
 
 Example
@@ -44,6 +47,7 @@ from drivers.station import DeviceConfig, NiDaqTransportConfig, StationConfig
 from hardware_mocks.benches import BENCHES, get_bench
 from hardware_mocks.generator_33500 import Generator33500
 from hardware_mocks.input_signals import FORCE
+from hardware_mocks.nidaqmx_ao import AmplifiedShaker
 from hardware_mocks.nidaqmx_sim import NI9234_RATES, SimModule, SimulatedNiDaqmx
 from hardware_mocks.operator import MockOperator, MockShakerOperator
 from hardware_mocks.physics import REPLY_TIMEOUT, STALL_TIMEOUT, BenchPhysics
@@ -110,25 +114,85 @@ def simulated_nidaqmx(sim: SimulatedStation, dev: DeviceConfig) -> dict[str, Any
             teds_by_module[dev.transport.devices[module]][ai] = native
     modules = [SimModule(n, n_inputs=per, rates=NI9234_RATES if rates else None,
                          teds=teds_by_module[n]) for n in names]
-    driver = table.get("nidaqmx_driver", True)
-    if not isinstance(driver, bool):
-        raise sim.fail("nidaqmx_driver", f"must be true or false, got {driver!r}")
-    api = SimulatedNiDaqmx(sim.physics, modules, wiring=wiring, sensors=sensors,
-                           accel_noise=sim.accel_noise, force_noise=sim.force_noise,
-                           tail=4.0, driver_installed=driver)
-    remove = table.get("remove_module")
-    if remove is not None:
-        if (not isinstance(remove, Mapping) or not isinstance(remove.get("module"), str)
-                or not isinstance(remove.get("hit"), int) or remove["hit"] < 1
-                or not isinstance(remove.get("seconds", 0.0), int | float)):
-            raise sim.fail("remove_module", "must be { module = NAME, hit = N >= 1, "
-                                            f"seconds = S }}, got {remove!r}")
-        if remove["module"] not in api.modules:
-            raise sim.fail("remove_module", f"no module {remove['module']!r} in "
-                                            f"{', '.join(api.modules)}")
-        api.remove_after = (remove["module"], remove["hit"], float(remove.get("seconds", 0)))
-    sim.apis.append(api)
+    api = nidaqmx_system(sim)
+    api.add(modules, wiring=wiring, sensors=sensors)
     return {"api": api, "stall_timeout": STALL_TIMEOUT}
+
+
+def nidaqmx_system(sim: SimulatedStation) -> SimulatedNiDaqmx:
+    """The station's simulated NI-DAQmx (one for all its NI-DAQmx devices, as one chassis),
+    made by the first device that needs it; each device adds its modules."""
+    if sim.nidaqmx is None:
+        driver = sim.table.get("nidaqmx_driver", True)
+        if not isinstance(driver, bool):
+            raise sim.fail("nidaqmx_driver", f"must be true or false, got {driver!r}")
+        sim.nidaqmx = SimulatedNiDaqmx(sim.physics, [], wiring={}, sensors={},
+                                       accel_noise=sim.accel_noise,
+                                       force_noise=sim.force_noise, tail=4.0,
+                                       driver_installed=driver)
+        sim.apis.append(sim.nidaqmx)
+    return sim.nidaqmx
+
+
+def simulated_ao_shaker(sim: SimulatedStation, dev: DeviceConfig) -> dict[str, Any]:
+    """The simulated output module of a ``shaker-nidaqmx`` device (an NI 9263 in the
+    station's simulated NI-DAQmx) and the shaker its output drives through an amplifier
+    (its force on the front end's force input)."""
+    if sim.shaker_operator is not None:
+        raise sim.fail("bench", f"devices.{dev.name}: one simulated shaker per station")
+    if not (isinstance(dev.transport, NiDaqTransportConfig)
+            and len(dev.transport.devices) == 1):
+        return {}  # the driver refuses the station in one line
+    api = nidaqmx_system(sim)
+    module = dev.transport.devices[0]
+    api.add([SimModule(module, "NI 9263", n_inputs=0, n_outputs=4, output_range=10.0)],
+            wiring={}, sensors={})
+    channel = dev.options.get("channel", "ao0")
+    try:
+        line = api.output_line(f"{module}/{channel}")
+    except api.errors.DaqError:
+        return {"api": api}  # a channel the module lacks: the driver says so in one line
+    shaker = AmplifiedShaker(sim.physics, line, force_per_volt=SHAKER_FORCE_PER_VOLT)
+    sim.closers.append(_Closing(shaker))
+    sim.shaker_operator = MockShakerOperator(shaker)
+    return {"api": api}
+
+
+def _schedule_removal(sim: SimulatedStation) -> None:
+    """``remove_module``: a module of the simulated NI-DAQmx pulled out after a hit or once
+    the shaker is at a point."""
+    remove = sim.table.get("remove_module")
+    if remove is None:
+        return
+    bad = sim.fail("remove_module", "must be { module = NAME, hit = N >= 1 (or point = N "
+                                     f">= 1), seconds = S }}, got {remove!r}")
+    if not isinstance(remove, Mapping):
+        raise bad
+    given = [k for k in ("hit", "point") if k in remove]
+    n = remove[given[0]] if len(given) == 1 else None
+    seconds = remove.get("seconds", 0.0)
+    if (not isinstance(remove.get("module"), str) or isinstance(n, bool)
+            or not isinstance(n, int) or n < 1
+            or set(remove) - {"module", "hit", "point", "seconds"}
+            or isinstance(seconds, bool) or not isinstance(seconds, int | float)):
+        raise bad
+    api = sim.nidaqmx
+    if api is None or remove["module"] not in api.modules:
+        have = ", ".join(api.modules) if api is not None else "no NI-DAQmx device"
+        raise sim.fail("remove_module", f"no module {remove['module']!r} in {have}")
+    if given[0] == "hit":
+        def when() -> float | None:
+            made = sim.physics.hits()
+            return made[n - 1].t0 + float(seconds) if len(made) >= n else None
+    else:
+        if sim.shaker_operator is None:
+            raise sim.fail("remove_module", "point = N needs a simulated shaker in the station")
+        shaker = sim.shaker_operator.shaker
+
+        def when() -> float | None:
+            at = shaker.attached_at
+            return at[n - 1] + float(seconds) if len(at) >= n else None
+    api.remove_when = (remove["module"], when)
 
 
 def simulated_generator(sim: SimulatedStation, dev: DeviceConfig) -> dict[str, Any]:
@@ -147,7 +211,7 @@ def simulated_generator(sim: SimulatedStation, dev: DeviceConfig) -> dict[str, A
 class _Closing:
     """``close()`` of a mock whose own word for it is ``shutdown()``."""
 
-    def __init__(self, mock: Generator33500) -> None:
+    def __init__(self, mock: Generator33500 | AmplifiedShaker) -> None:
         self.mock = mock
 
     def close(self) -> None:
@@ -170,6 +234,7 @@ class _Closing:
 SIMULATED_BACKENDS: dict[str, Callable[[SimulatedStation, DeviceConfig], dict[str, Any]]] = {
     "frontend-nidaqmx": simulated_nidaqmx,
     "generator-visa": simulated_generator,
+    "shaker-nidaqmx": simulated_ao_shaker,
 }
 
 
@@ -209,6 +274,8 @@ class SimulatedStation:
         self.force_noise = self._number("force_noise")
         self.physics = BenchPhysics(get_bench(str(name)))
         self.apis: list[SimulatedNiDaqmx] = []
+        #: the station's simulated NI-DAQmx, once a device needs it
+        self.nidaqmx: SimulatedNiDaqmx | None = None
         self.closers: list[Any] = []
         self.shaker_operator: Any = None
         self.device_options: dict[str, dict[str, Any]] = {}
@@ -220,6 +287,7 @@ class SimulatedStation:
                     f"simulated API (simulated: {', '.join(sorted(SIMULATED_BACKENDS))}): "
                     "remove [simulation] to use the real device")
             self.device_options[dev.name] = factory(self, dev)
+        _schedule_removal(self)
         self.operator = MockOperator(self.physics, bench=self.physics.bench,
                                      **{"settle": self._number("settle"), **(operator or {})})
 

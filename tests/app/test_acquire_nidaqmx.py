@@ -93,6 +93,54 @@ def test_documented_shaker_plan_through_the_simulated_generator(tmp_path: Path) 
     assert_identifies(json.loads(json.dumps(run.result)), get_bench("engine-rigid").model)
 
 
+def _short_shaker_plan(tmp_path: Path) -> Path:
+    """docs/ni_shaker_plan.toml with one block a point and 0.5 s settling."""
+    text = (DOCS / "ni_shaker_plan.toml").read_text()
+    assert "\naverages = 3\n" in text and "\nsettle = 1.0\n" in text
+    plan = tmp_path / "plan.toml"
+    plan.write_text(text.replace("\naverages = 3\n", "\naverages = 1\n")
+                    .replace("\nsettle = 1.0\n", "\nsettle = 0.5\n"))
+    return plan
+
+
+def test_documented_shaker_plan_through_the_ao_module(tmp_path: Path) -> None:
+    """docs/ni_shaker_plan.toml (one block a point, shorter settling) on
+    docs/ni_ao_station.toml: an NI 9263 output of the simulated chassis (shaker-nidaqmx)
+    drives the shaker's amplifier, the cDAQ's inputs read its force and the responses; the
+    bench is identified."""
+    out = tmp_path / "run.h5"
+    assert main(["acquire", "--station", str(DOCS / "ni_ao_station.toml"), "--plan",
+                 str(_short_shaker_plan(tmp_path)), "--out", str(out)]) == 0
+    run = read_run(out, with_data=False)
+    assert run.method == "shaker" and run.state == "finished" and len(run.records) == 9
+    assert run.records.accepted.all()
+    assert run.station_data["devices"]["shaker"]["backend"] == "shaker-nidaqmx"
+    assert_identifies(json.loads(json.dumps(run.result)), get_bench("engine-rigid").model)
+
+
+def test_ao_module_removed_mid_run_keeps_the_blocks(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    # pulled out 0.3 s after the shaker is at the third point: the block in progress then
+    # is kept (NaN-padded), not used; the two before are in
+    text = (DOCS / "ni_ao_station.toml").read_text()
+    assert SIMULATION in text
+    station = tmp_path / "station.toml"
+    station.write_text(text.replace(SIMULATION, SIMULATION + 'remove_module = { module = '
+                                    '"cDAQ1Mod5", point = 3, seconds = 0.3 }\n'))
+    out = tmp_path / "run.h5"
+    assert main(["acquire", "--station", str(station), "--plan",
+                 str(_short_shaker_plan(tmp_path)), "--out", str(out)]) == 2
+    line = one_error_line(capsys)
+    # found by the ramp's last write (0.3 s is within its first period) or by the check
+    assert "Device cannot be accessed. Device: cDAQ1Mod5 (NI-DAQmx error -201003): a " \
+           "module of cDAQ1Mod5 was removed" in line
+    assert "output turned off" in line and f"records are in {out}" in line
+    run = read_run(out)
+    assert run.state == "stopped" and len(run.records) == 3
+    assert run.records.accepted.tolist() == [True, True, False]
+    assert np.isfinite(run.records.data[:2]).all()
+
+
 def test_without_the_nidaqmx_package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                      capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setitem(sys.modules, "nidaqmx", None)

@@ -11,6 +11,7 @@ from processing.excitation import (
     burst_random,
     continuous_random,
     periodic_chirp,
+    periodic_random,
     settled_records,
     shaker_signal,
     steady_periods,
@@ -29,6 +30,19 @@ def test_continuous_random_is_seeded_and_scaled():
     assert spec[(f > 110) & (f < 190)].mean() > 1e3 * spec[f > 300].mean()
     with pytest.raises(ValueError, match="band"):
         continuous_random(10, 1000.0, band=(100.0, 600.0))
+
+
+def test_periodic_random_repeats_and_stays_in_band():
+    x = periodic_random(4096, 1024.0, rms=0.5, band=(20.0, 100.0), seed=3)
+    assert_array_equal(x, periodic_random(4096, 1024.0, rms=0.5, band=(20.0, 100.0), seed=3))
+    assert np.sqrt(np.mean(x**2)) == pytest.approx(0.5, rel=1e-12)
+    # played twice, one period analysed across the seam has the same lines as the first
+    spec = np.abs(np.fft.rfft(np.tile(x, 2)[1000:5096]))
+    assert_allclose(spec, np.abs(np.fft.rfft(x)), atol=1e-9)
+    f = np.fft.rfftfreq(4096, 1 / 1024.0)
+    assert spec[(f < 20.0) | (f > 100.0)].max() < 1e-9 * spec.max()
+    with pytest.raises(ValueError, match="no frequency line"):
+        periodic_random(8, 1000.0, band=(10.0, 20.0))
 
 
 def test_burst_random_is_silent_after_the_burst():
