@@ -32,12 +32,13 @@ from app.cli.common import (
     write_output,
 )
 from app.cli.frf import add_processing_arguments, load_and_show, settings_from
-from app.cli.summary import print_mount_system, print_result
+from app.cli.summary import print_comparison, print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
 from app.io.runfile import run_mounts
 from app.pipeline import RUN_FILE, TIME_FORMATS, detect_format
 from app.pipeline.settings import MAX_FMAX, TestUncertaintySettings
 from app.report.mount_system import mount_system
+from app.report.sources import plan_prediction
 from processing.data import FRFSet
 from processing.identify import IdentificationResult, IdentifyOptions, fit
 from processing.montecarlo import StatedUncertainty
@@ -215,19 +216,22 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")
         check_mounts(stored.mounts)
         mounts = dataclasses.replace(mounts, table=stored)
+    prediction = plan_prediction(args.file, fmt)  # the run's plan's, by insitu plan
     with fit_progress() as progress:
         result = fit(m, options, progress=progress)
-    _report(args.file, args.out, m.frf, result, mounts)
+    _report(args.file, args.out, m.frf, result, mounts, prediction)
     return 2 if m.provenance.skipped else 0
 
 
 def _report(path: Path, out: Path | None, frf: FRFSet, result: IdentificationResult,
-            mounts: _Mounts) -> None:
+            mounts: _Mounts, prediction: dict[str, Any] | None = None) -> None:
     console = Console()
     console.print(f"[bold]{path}[/bold]: {frf.H.shape[0]} response DOFs x "
                   f"{frf.H.shape[1]} excitations, {frf.freq.size} lines "
                   f"{frf.freq[0]:g}-{frf.freq[-1]:g} Hz")
     print_result(result, console)
+    if prediction is not None:
+        print_comparison(prediction, result.uncertainty, console)
     ms = mount_system(result, mounts.table, mounts.excitation_hz, mounts.loss_factor_hz)
     print_mount_system(ms, console, spreads=result.uncertainty is None)
     if out:

@@ -14,8 +14,6 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from app.cli.common import VERB_HELP, UserError, check_output, check_range, write_output
 
 
@@ -47,17 +45,12 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.acquire.design import conditions, load_inputs, plan_data, plan_layout
     from app.acquire.plan import PlanError, parse_plan, plan_toml
-    from app.io.planning import (
-        PlanInputError,
-        candidates_from_uff,
-        load_candidates,
-        load_model,
-        model_from_result,
-    )
+    from app.io.planning import PlanInputError
     from app.pipeline.settings import RELATIVE_UNITS, TestUncertaintySettings, parse_quantity
     from processing.montecarlo import StatedUncertainty
-    from processing.planning import PlanningError, TestConditions, plan_test
+    from processing.planning import PlanningError
 
     check_range("--sensors", args.sensors, 3, 1000, "")
     check_range("--points", args.points, 6, 10000, "")
@@ -69,42 +62,17 @@ def run(args: argparse.Namespace) -> int:
     unc = TestUncertaintySettings(args.location_uncertainty, args.angle_uncertainty,
                                   args.gain_uncertainty)
     stated = StatedUncertainty(location=unc.location, angle=unc.angle, gain=unc.gain)
+    criterion = args.criterion + (" with K" if args.with_stiffness else "")
     try:
-        model = (load_model(args.model) if args.model is not None
-                 else model_from_result(args.result))
-        if args.first_elastic is not None:
-            import dataclasses
-
-            model = dataclasses.replace(model, first_elastic_hz=args.first_elastic)
-        if args.candidates is not None:
-            cand, template = load_candidates(args.candidates)
-        else:
-            cand, template = candidates_from_uff(args.geometry), {}
-        plan0 = parse_plan(_plan_data(template, cand), str(args.candidates or args.geometry))
-        averages = args.averages or (plan0.shaker.averages if plan0.method == "shaker"
-                                     else plan0.hits)
-        conditions = TestConditions(_lines(plan0), noise=noise, averages=averages,
-                                    stated=stated)
-        design = plan_test(model, cand, args.sensors, args.points, conditions,
-                           criterion=args.criterion, with_stiffness=args.with_stiffness)
-    except (PlanInputError, PlanningError, PlanError) as err:
-        raise UserError(str(err)) from err
-    pred = design.prediction
-    assert pred is not None
-    S, P = list(design.layout.sensors), list(design.layout.excitations)
-    data = _plan_data(template, cand, S, P)
-    data["prediction"] = {
-        "criterion": args.criterion + (" with K" if args.with_stiffness else ""),
-        "noise": noise, "averages": averages, "location_uncertainty": stated.location,
-        "angle_uncertainty": stated.angle, "gain_uncertainty": stated.gain,
-        "cond_E": pred.geometry.cond_E, "cond_T": pred.geometry.cond_T,
-        "mass_band": list(pred.mass_band),
-        **{k: np.asarray(v).tolist() for k, v in pred.std.items()
-           if k in ("mass", "cog", "inertia_cog", "inertia_origin", "principal_moments",
-                    "stiffness")}}
-    try:
+        inputs = load_inputs(args.model, args.candidates, result=args.result,
+                             geometry=args.geometry, first_elastic=args.first_elastic)
+        cond = conditions(inputs, noise, args.averages, stated)
+        design = plan_layout(inputs, args.sensors, args.points, cond, args.criterion,
+                             args.with_stiffness)
+        data = plan_data(inputs, design.layout.sensors, design.layout.excitations,
+                         design.prediction, cond, criterion)
         parse_plan(data, str(args.out))
-    except PlanError as err:
+    except (PlanInputError, PlanningError, PlanError) as err:
         raise UserError(str(err)) from err
     header = (f"written by insitu plan ({args.criterion}-optimal; {args.sensors} sensors, "
               f"{args.points} excitations);\n[prediction] holds the predicted standard "
@@ -114,44 +82,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _lines(plan: Any) -> np.ndarray:
-    """The analyser's lines of a plan: 1/length to fs/2.56 (hammer), the shaker's band."""
-    if plan.method == "shaker":
-        df = plan.record.fs / plan.shaker.nperseg
-        lo, hi = plan.shaker.f_start, plan.shaker.f_stop
-    else:
-        df = 1.0 / plan.record.length
-        lo, hi = df, plan.record.fs / 2.56
-    f = df * np.arange(1, int(hi / df) + 1)
-    return f[f >= lo]
-
-
-def _plan_data(template: dict[str, Any], cand: Any, sensors: list[int] | None = None,
-               points: list[int] | None = None) -> dict[str, Any]:
-    """Plan data: the template's [plan], [record], [shaker] (defaults: a hammer test at
-    1024 Hz, 2 s records, 3 hits), and the chosen (or every candidate's) points."""
-    S = range(cand.sensor_nodes.size) if sensors is None else sensors
-    P = range(cand.exc_point.size) if points is None else points
-    names = template.get("sensor_channels", {})
-    out: dict[str, Any] = {
-        "plan": {"name": "planned test", "method": "hammer", "hits": 3,
-                 **template.get("plan", {})},
-        "record": {"fs": 1024.0, "length": 2.0, **template.get("record", {})},
-    }
-    if "shaker" in template:
-        out["shaker"] = dict(template["shaker"])
-    out["excitation"] = [{"node": int(cand.exc_nodes[i]), "xyz": cand.exc_xyz[i].tolist(),
-                          "direction": cand.exc_dirs[i].tolist()} for i in P]
-    out["response"] = [{"node": int(cand.sensor_nodes[i]), "xyz": cand.sensor_xyz[i].tolist(),
-                        "channels": names.get(int(cand.sensor_nodes[i]),
-                                              [f"a{k + 1}{ax}" for ax in "xyz"])}
-                       for k, i in enumerate(S)]
-    return out
-
-
 def _print(design: Any, data: dict[str, Any], args: argparse.Namespace) -> None:
     from rich.console import Console
     from rich.table import Table
+
+    from app.report.tables import predicted_rows
 
     pred = design.prediction
     con = Console()
@@ -172,19 +107,10 @@ def _print(design: Any, data: dict[str, Any], args: argparse.Namespace) -> None:
         t.add_row("excitation", str(e["node"]), _vec(e["xyz"]), _vec(e["direction"]))
     con.print(t)
     u = Table(title="predicted standard deviation (the identification's own uncertainty)")
-    u.add_column("number")
-    u.add_column("std", justify="right")
-    s = pred.std
-    u.add_row("mass", f"{float(s['mass']):.3g} kg")
-    for k, ax in enumerate("xyz"):
-        u.add_row(f"CoG {ax}", f"{s['cog'][k] * 1000:.3g} mm")
-    J = s["inertia_cog"]
-    for (i, j), name in zip(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)),
-                            ("Jxx", "Jyy", "Jzz", "Jxy", "Jxz", "Jyz"), strict=True):
-        u.add_row(f"{name} about the CoG", f"{J[i, j]:.3g} kg m^2")
-    K = s["stiffness"]
-    for k, name in enumerate(("x", "y", "z", "rx", "ry", "rz")):
-        u.add_row(f"K {name}{name}", f"{K[k, k]:.3g}")
+    for h in ("number", "unit", "std", "95 %"):
+        u.add_column(h, justify="left" if h in ("number", "unit") else "right")
+    for row in predicted_rows(pred.std):
+        u.add_row(*row)
     con.print(u)
     con.print("sources: " + "; ".join(pred.sources))
 

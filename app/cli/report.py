@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from app.pipeline import OpenError
     from app.pipeline.settings import MAX_FMAX
     from app.report.analysis import analyse
-    from app.report.sources import open_source
+    from app.report.sources import open_source, plan_prediction
     from processing.identify import IdentifyOptions
 
     check_range("--excitation-hz", args.excitation_hz, 0, MAX_FMAX, "Hz", above=True)
@@ -62,10 +62,11 @@ def run(args: argparse.Namespace) -> int:
     if mounts is not None:
         check_mounts(mounts.mounts)
     try:
-        m, _ = open_source(args.file, args.channels)
+        m, fmt = open_source(args.file, args.channels)
     except OpenError as err:
         show_reports(args, err.reports)
         raise
+    prediction = plan_prediction(args.file, fmt)
     show_reports(args, m.provenance.reports)
     with fit_progress() as progress:
         a = analyse(m, IdentifyOptions(physical=args.physical), args.file.name, progress)
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
 
     _qt_app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(["insitu-report"])
     html = build_report(a, f"In situ identification report: {args.file.name}", mounts,
-                        args.excitation_hz)
+                        args.excitation_hz, prediction)
     write_output(out, html)
     if a.result is None:  # the report still shows the FRFs and checks
         raise UserError(f"{args.file.name}: identification failed: {a.error}; the report of "

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 from rich.console import Console
@@ -9,7 +12,9 @@ from rich.table import Table
 
 from app.report.mount_system import MountSystem
 from app.report.tables import (
+    COMPARISON,
     SPREADS,
+    comparison_rows,
     contribution_lines,
     half_width,
     modes_text,
@@ -201,6 +206,17 @@ def print_uncertainty(u: Uncertainty, console: Console | None = None, top: int =
         con.print("Largest contributions to the variance:")
         for line in lines:
             con.print(f"  {line}", markup=False)
+
+
+def print_comparison(prediction: Mapping[str, Any], u: Uncertainty | None,
+                     console: Console | None = None) -> None:
+    """The plan's predicted std beside the identification's own (as the HTML report)."""
+    con = console or Console()
+    con.print(_rich_table("Predicted and achieved uncertainty (standard deviations)",
+                          ["parameter", "unit", "predicted std", "achieved std",
+                           "achieved / predicted"],
+                          [list(r) for r in comparison_rows(prediction, u)], left=2))
+    con.print(COMPARISON, markup=False)
 
 
 def _rich_table(title: str, head: list[str], rows: list[list[str]], left: int = 1) -> Table:

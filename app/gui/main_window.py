@@ -48,7 +48,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.messages = MessageBar()
         self.tabs = QtWidgets.QTabWidget()
         self.tabs.setDocumentMode(True)
-        self.plan_view = PlanView()
+        self.plan_view = PlanView(self.runner)
         self.checks_view = ChecksView()
         self.results_view = ResultsView(self.session)
         self.export_view = ExportView(self.session)

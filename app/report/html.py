@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import base64
 import html
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from datetime import datetime
+from typing import Any
 
 import pyqtgraph as pg
 
@@ -19,8 +20,10 @@ from app.report import figures
 from app.report.analysis import Analysis
 from app.report.mount_system import mount_system
 from app.report.tables import (
+    COMPARISON,
     SPREADS,
     check_rows,
+    comparison_rows,
     contribution_lines,
     format_matrix,
     inertia_rows,
@@ -28,6 +31,7 @@ from app.report.tables import (
     principal_rows,
     sources_line,
 )
+from processing.identify import IdentificationResult
 from processing.results import Uncertainty
 
 __all__ = ["build_report"]
@@ -113,8 +117,40 @@ def _mount_system(a: Analysis, mounts: MountsFile | None, excitation_hz: float |
     return "".join(parts)
 
 
+def _comparison(prediction: Mapping[str, Any] | None, u: Uncertainty | None) -> str:
+    """The plan's predicted std beside the achieved ones; empty without a prediction."""
+    if prediction is None:
+        return ""
+    return (f"<h2>Predicted and achieved uncertainty</h2><p>{html.escape(COMPARISON)}.</p>"
+            + _table(("parameter", "unit", "predicted std", "achieved std",
+                      "achieved / predicted"), comparison_rows(prediction, u), left=2))
+
+
+def _matrices(r: IdentificationResult, u: Uncertainty | None) -> list[str]:
+    """The K, C and D tables at O."""
+    return [
+        "<h2>Stiffness K at O</h2><p>N/m, N/rad, N m/m, N m/rad; DOF order x, y, z, rx, "
+        "ry, rz.</p>",
+        _table(("", *figures.DOF_LABELS),
+               [(d, *row) for d, row in zip(figures.DOF_LABELS,
+                                            format_matrix(r.K, u, "stiffness"),
+                                            strict=True)]),
+        "<h2>Damping C at O</h2><p>N s/m, N s/rad, N m s/m, N m s/rad.</p>",
+        _table(("", *figures.DOF_LABELS),
+               [(d, *row) for d, row in zip(figures.DOF_LABELS,
+                                            format_matrix(r.C, u, "damping"),
+                                            strict=True)]),
+        "<h2>Structural damping D at O</h2><p>K* = K + jωC + jD; N/m, N/rad, N m/m, "
+        f"N m/rad. {html.escape(r.damping_note)}.</p>",
+        _table(("", *figures.DOF_LABELS),
+               [(d, *row) for d, row in zip(figures.DOF_LABELS, format_matrix(r.D),
+                                            strict=True)]),
+    ]
+
+
 def build_report(a: Analysis, title: str = "In situ identification report",
-                 mounts: MountsFile | None = None, excitation_hz: float | None = None) -> str:
+                 mounts: MountsFile | None = None, excitation_hz: float | None = None,
+                 prediction: Mapping[str, Any] | None = None) -> str:
     """The HTML page of one analysis.
 
     Parameters
@@ -123,6 +159,8 @@ def build_report(a: Analysis, title: str = "In situ identification report",
     title : page heading
     mounts : the mounts file, for the mount rates and the torque roll axis (optional)
     excitation_hz : excitation frequency for the isolation margins, Hz (optional)
+    prediction : the run's plan's ``[prediction]`` table (``insitu plan``), shown beside
+        the achieved uncertainty (optional)
 
     Returns
     -------
@@ -159,22 +197,8 @@ def build_report(a: Analysis, title: str = "In situ identification report",
                    inertia_rows(p, u), left=2),
             "<p>Principal moments about the CoG (axes as unit vectors in the global frame):</p>",
             _table(("", "moment (kg m²)", "axis x", "axis y", "axis z"), principal_rows(p, u)),
-            "<h2>Stiffness K at O</h2><p>N/m, N/rad, N m/m, N m/rad; DOF order x, y, z, rx, "
-            "ry, rz.</p>",
-            _table(("", *figures.DOF_LABELS),
-                   [(d, *row) for d, row in zip(figures.DOF_LABELS,
-                                                format_matrix(r.K, u, "stiffness"),
-                                                strict=True)]),
-            "<h2>Damping C at O</h2><p>N s/m, N s/rad, N m s/m, N m s/rad.</p>",
-            _table(("", *figures.DOF_LABELS),
-                   [(d, *row) for d, row in zip(figures.DOF_LABELS,
-                                                format_matrix(r.C, u, "damping"),
-                                                strict=True)]),
-            "<h2>Structural damping D at O</h2><p>K* = K + jωC + jD; N/m, N/rad, N m/m, "
-            f"N m/rad. {html.escape(r.damping_note)}.</p>",
-            _table(("", *figures.DOF_LABELS),
-                   [(d, *row) for d, row in zip(figures.DOF_LABELS, format_matrix(r.D),
-                                                strict=True)]),
+            _comparison(prediction, u),
+            *_matrices(r, u),
         ]
         parts.append(_mount_system(a, mounts, excitation_hz))
         if r.warnings:

@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
-from app.pipeline import SUFFIXES, Settings, detect_format, load
+from app.acquire.plan import parse_plan
+from app.io.runfile import read_run
+from app.pipeline import RUN_FILE, SUFFIXES, Settings, detect_format, load
 from processing.data import FRFSet, InputError
 from processing.measurement import Measurement
 
-__all__ = ["SETTINGS", "SUFFIXES", "load_frfs", "open_source"]
+__all__ = ["SETTINGS", "SUFFIXES", "load_frfs", "open_source", "plan_prediction"]
 
 #: how the views open a file: as ``insitu identify`` does, with its default settings
 SETTINGS = Settings()
@@ -46,3 +49,14 @@ def open_source(path: str | Path, channel_map: Path | None = None) -> tuple[Meas
 def load_frfs(path: str | Path) -> FRFSet:
     """The FRF set of ``path`` (see :func:`open_source`)."""
     return open_source(path)[0].frf
+
+
+def plan_prediction(path: str | Path, fmt: str | None = None) -> dict[str, Any] | None:
+    """The ``[prediction]`` table of a run file's plan (``insitu plan``'s predicted std,
+    docs/planning.md), or None: no prediction, or ``path`` is no run file (``fmt``: its
+    format when known). Raises the run file's or the plan's one-line error when damaged."""
+    p = Path(path)
+    if (fmt or detect_format(p)) != RUN_FILE:
+        return None
+    run = read_run(p, with_data=False)
+    return parse_plan(run.plan_data, f"{p}:/plan").prediction

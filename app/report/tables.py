@@ -6,7 +6,9 @@ inertia with the article's sign (``Jxy = integral of x y dm``).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,9 +19,9 @@ from processing.identify import coherence_unchecked
 from processing.inertia import InertiaProperties
 from processing.results import Uncertainty
 
-__all__ = ["SPREADS", "CheckRow", "check_rows", "contribution_lines", "format_matrix", "half_width",
-           "inertia_rows", "modes_text", "principal_rows", "quantity_label", "sources_line",
-           "spread"]
+__all__ = ["COMPARISON", "PLANNED", "SPREADS", "CheckRow", "check_rows", "comparison_rows",
+           "contribution_lines", "format_matrix", "half_width", "inertia_rows", "modes_text",
+           "predicted_rows", "principal_rows", "quantity_label", "sources_line", "spread"]
 
 #: half-width of a 95 % interval in standard deviations (normal distribution)
 Z95 = 1.96
@@ -219,3 +221,64 @@ def check_rows(a: Analysis) -> list[CheckRow]:
         f"{float(np.max(r.synthesis.per_frf)):.2%}, {r.synthesis.band[0]:.1f}-"
         f"{r.synthesis.band[1]:.1f} Hz (limit 10 %)"))
     return rows
+
+
+_K_UNITS = ("N/m", "N/m", "N/m", "N m/rad", "N m/rad", "N m/rad")
+
+#: the numbers a plan predicts and the report compares with the achieved ones: (parameter,
+#: unit, key of the std, index, display scale); products of inertia have the same std in
+#: either sign convention
+PLANNED: tuple[tuple[str, str, str, tuple[int, ...], float], ...] = (
+    ("mass m", "kg", "mass", (), 1.0),
+    *((f"CoG {a}_c", "mm", "cog", (k,), 1e3) for k, a in enumerate("xyz")),
+    *((f"{name} about the CoG", "kg m²", "inertia_cog", (i, j), 1.0)
+      for name, i, j, _ in _PAIRS),
+    *((f"K {d}", u, "stiffness", (k, k), 1.0)
+      for k, (d, u) in enumerate(zip(("xx", "yy", "zz", "rx rx", "ry ry", "rz rz"), _K_UNITS,
+                                     strict=True))),
+)
+
+
+def _std(std: Mapping[str, Any], key: str, index: tuple[int, ...], scale: float
+         ) -> float | None:
+    """One std in display units, or None when ``std`` lacks it."""
+    if key not in std:
+        return None
+    a = np.asarray(std[key], dtype=float)
+    try:
+        return float(a[index]) * abs(scale)
+    except IndexError:
+        return None
+
+
+def predicted_rows(std: Mapping[str, Any]) -> list[tuple[str, str, str, str]]:
+    """(parameter, unit, predicted std, 95 % half-width) of :data:`PLANNED` for the std of a
+    plan's prediction (SI; :attr:`processing.planning.Prediction.std` or a ``[prediction]``
+    table); the half-width ``± 1.96 std`` as every view shows spreads."""
+    rows = []
+    for name, unit, key, index, scale in PLANNED:
+        s = _std(std, key, index, scale)
+        rows.append((name, unit, "—" if s is None else f"{s:.3g}",
+                     "—" if s is None else "± " + half_width(Z95 * s)))
+    return rows
+
+
+def comparison_rows(prediction: Mapping[str, Any], u: Uncertainty | None
+                    ) -> list[tuple[str, str, str, str, str]]:
+    """(parameter, unit, predicted std, achieved std, achieved / predicted) of :data:`PLANNED`:
+    the plan's ``[prediction]`` table beside the identification's own uncertainty
+    (``u``, the result's; "—" where either is unknown)."""
+    achieved: Mapping[str, Any] = {} if u is None else u.std
+    rows = []
+    for name, unit, key, index, scale in PLANNED:
+        p, a = _std(prediction, key, index, scale), _std(achieved, key, index, scale)
+        ratio = f"{a / p:.2f}" if p is not None and a is not None and p > 0 else "—"
+        rows.append((name, unit, "—" if p is None else f"{p:.3g}",
+                     "—" if a is None else f"{a:.3g}", ratio))
+    return rows
+
+
+#: the comparison's heading, as the report and ``insitu identify`` print it
+COMPARISON = ("Predicted beside achieved: the standard deviations insitu plan predicted for "
+              "this layout (the plan's [prediction]) and the identification's own; a ratio "
+              "over 1 means the test knows the number less well than planned")

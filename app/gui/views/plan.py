@@ -18,8 +18,10 @@ from app.gui.plan_rows import (
     rows_from_plan,
     write_csv_rows,
 )
+from app.gui.views.planner import PlannerPanel
 from app.gui.views.projections import ProjectionsWidget
 from app.gui.widgets import fill_table, set_verdict
+from app.gui.worker import TaskRunner
 from app.io.mounts import MountsFile, MountsFileError, load_mounts
 from app.io.uff import read_frf_uff
 from app.report.analysis import message_of
@@ -33,7 +35,8 @@ _MOUNT_COLUMNS = ("mount", "x (m)", "y (m)", "z (m)", "u axis", "v axis", "w axi
 
 
 class PlanView(QtWidgets.QWidget):
-    """Edit and check the plan.
+    """Edit and check the plan ("Rows"), or plan it from candidates ("Planner",
+    :class:`~app.gui.views.planner.PlannerPanel`, its jobs on ``runner``).
 
     Signals
     -------
@@ -52,7 +55,7 @@ class PlanView(QtWidgets.QWidget):
     mounts_loaded = QtCore.Signal(object)
     message = QtCore.Signal(str, str)
 
-    def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
+    def __init__(self, runner: TaskRunner, parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__(parent)
         self.station: StationConfig | None = None
         self.plan: TestPlan | None = None
@@ -104,10 +107,21 @@ class PlanView(QtWidgets.QWidget):
         ll.addWidget(self.geometry_details)
         ll.addWidget(self.mounts_label)
         ll.addWidget(self.mounts_table, 1)
+        self.planner = PlannerPanel(runner)
+        self.planner.message.connect(self.message)
+        self.planner.planned.connect(self._planned)
+        self.planner.saved.connect(self._plan_saved)
+        self.planner.candidates_changed.connect(self.projections.set_candidates)
+        self.sides = QtWidgets.QTabWidget()
+        self.sides.addTab(left, "Rows")
+        self.sides.addTab(self.planner, "Planner")
+        self.sides.currentChanged.connect(
+            lambda i: self.projections.show_candidates(self.sides.widget(i) is self.planner))
+        self.projections.show_candidates(False)
         split = QtWidgets.QSplitter(QtCore.Qt.Orientation.Horizontal)
-        split.addWidget(left)
+        split.addWidget(self.sides)
         split.addWidget(self.projections)
-        split.setSizes([520, 700])
+        split.setSizes([620, 700])
         lay = QtWidgets.QVBoxLayout(self)
         lay.addWidget(split)
         self._rows: list[PlanRow] = []
@@ -227,6 +241,17 @@ class PlanView(QtWidgets.QWidget):
         self.message.emit("info", f"plan {plan.name!r} imported from {path.name}: "
                           f"{len(plan.excitations)} excitation points")
         return True
+
+    def _planned(self, plan: TestPlan) -> None:
+        """The planner's layout becomes the acquisition plan, as an imported plan does."""
+        self.plan, self.plan_path = plan, None
+        self.set_rows(rows_from_plan(plan, self.station))
+        self.plan_loaded.emit(plan)
+
+    def _plan_saved(self, path: Path) -> None:
+        if self.plan is self.planner.plan:
+            self.plan_path = path
+            self.plan_loaded.emit(self.plan)
 
     def _load_mounts(self) -> None:
         path = self._ask_open("Load mounts file", "Mounts (*.toml);;All files (*)")

@@ -50,6 +50,7 @@ class ProjectionsWidget(QtWidgets.QWidget):
         self._labels: list[list[pg.TextItem]] = []
         self._mounts: list[pg.ScatterPlotItem] = []
         self._mount_axes: list[pg.PlotDataItem] = []
+        self._cand: list[tuple[pg.ScatterPlotItem, pg.ScatterPlotItem]] = []
         for k, (title, i, j) in enumerate(VIEWS):
             w = projection_plot(title, i, j)
             p = w.getPlotItem()
@@ -59,6 +60,13 @@ class ProjectionsWidget(QtWidgets.QWidget):
             nxt = pg.ScatterPlotItem(symbol="star", size=22, brush="#F0E442", pen=pg.mkPen("k"))
             mnt = pg.ScatterPlotItem(symbol="s", size=12, brush=COLORS[2], pen=None)
             mnt_axes = p.plot([], [], pen=pg.mkPen(COLORS[2], width=2), connect="pairs")
+            cand = (pg.ScatterPlotItem(symbol="o", size=13, brush=None,
+                                       pen=pg.mkPen("#999999", width=1.2)),
+                    pg.ScatterPlotItem(symbol="t", size=14, brush=None,
+                                       pen=pg.mkPen("#999999", width=1.2)))
+            for c in cand:
+                p.addItem(c)
+            self._cand.append(cand)
             self._mounts.append(mnt)
             self._mount_axes.append(mnt_axes)
             for item in (resp, exc, nxt, mnt):
@@ -78,7 +86,8 @@ class ProjectionsWidget(QtWidgets.QWidget):
             "direction, from the point<br><span style='color:#C8B400; font-size:14pt'>★</span>"
             " next point to excite<br>"
             f"<span style='color:{COLORS[2]}; font-size:14pt'>■</span> mount, with its u, v, w "
-            "axes<br>numbers: node ids. Drag to pan, wheel to zoom.")
+            "axes<br><span style='color:#999999; font-size:14pt'>○</span> candidate sensor "
+            "or point (planner); filled: chosen<br>numbers: node ids. Drag to pan, wheel to zoom.")
         self.help.setWordWrap(True)
         lay.addWidget(self.help, 1, 1)
 
@@ -121,6 +130,22 @@ class ProjectionsWidget(QtWidgets.QWidget):
             self._mounts[k].setData(P[:, i], P[:, j])
             self._mount_axes[k].setData(seg[:, i], seg[:, j])
             self.plots[k].getPlotItem().vb.enableAutoRange(x=True, y=True)
+
+    def set_candidates(self, sensors: np.ndarray, points: np.ndarray) -> None:
+        """Draw candidate sensor positions (n, 3) and candidate points (m, 3), metres, as
+        grey outlines under the plan's own (chosen) points."""
+        S = np.asarray(sensors, dtype=float).reshape(-1, 3)
+        P = np.asarray(points, dtype=float).reshape(-1, 3)
+        for k, (_, i, j) in enumerate(VIEWS):
+            self._cand[k][0].setData(S[:, i], S[:, j])
+            self._cand[k][1].setData(P[:, i], P[:, j])
+            self.plots[k].getPlotItem().vb.enableAutoRange(x=True, y=True)
+
+    def show_candidates(self, visible: bool) -> None:
+        """Show or hide the candidates (drawn by :meth:`set_candidates`)."""
+        for pair in self._cand:
+            for c in pair:
+                c.setVisible(visible)
 
     def highlight(self, xyz: Sequence[float] | None) -> None:
         """Mark the next point to excite (None clears the mark)."""
