@@ -29,13 +29,20 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
-    """``-n auto``: two workers per core free now, at most two per core and at least one.
+    """``-n auto``: two workers per core free, at most two per core and at least one.
 
     Most of the long tests wait on real-time mock benches, so two workers share a core
     well on a quiet machine; on a busy one fewer workers keep the benches' streams in time.
     Free cores as :func:`processing.spectral.free_cores` counts them (the runnable threads
-    of ``/proc/loadavg``)."""
+    of ``/proc/loadavg``), the most of ten readings over half a second: a process that runs
+    for a moment (the lint just finished, a compiler) does not take a core away."""
+    import time
+
     from processing.spectral import free_cores
 
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
-    return max(1, min(2 * cores, 2 * free_cores()))
+    free = 0
+    for _ in range(10):
+        free = max(free, free_cores())
+        time.sleep(0.05)
+    return max(1, min(2 * cores, 2 * free))
