@@ -11,7 +11,6 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from app.acquire.plan import parse_plan
 from app.io.runfile import read_run
 from app.pipeline import RUN_FILE, SUFFIXES, Settings, detect_format, load
 from processing.data import FRFSet, InputError
@@ -58,5 +57,7 @@ def plan_prediction(path: str | Path, fmt: str | None = None) -> dict[str, Any] 
     p = Path(path)
     if (fmt or detect_format(p)) != RUN_FILE:
         return None
+    from app.acquire.plan import parse_plan  # a run file's: not for an FRF file (start-up)
+
     run = read_run(p, with_data=False)
     return parse_plan(run.plan_data, f"{p}:/plan").prediction
