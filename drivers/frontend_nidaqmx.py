@@ -71,7 +71,7 @@ from drivers.errors import (
     DeviceInitializationError,
     DeviceTimeoutError,
 )
-from drivers.nidaqmx_common import INSTALL, daq_error, first_line, new_task
+from drivers.nidaqmx_common import INSTALL, close_task, daq_error, new_task
 from drivers.station import DeviceConfig, NiDaqTransportConfig
 
 __all__ = ["INSTALL", "OVERLOAD_FRACTION", "STANDARD_GRAVITY", "NiDaqFrontEnd",
@@ -347,12 +347,7 @@ class NiDaqFrontEnd(StreamingFrontEnd):
 
     def _close_task(self) -> None:
         task, self._task = self._task, None
-        if task is None:
-            return
-        try:
-            task.close()
-        except self._ni.errors.DaqError as err:
-            logger.warning("%s: closing the task: %s", self.name, first_line(err))
+        close_task(task, self._ni, self.name)
 
     # -- streaming --------------------------------------------------------------------------------
     def _on_samples(self, task_handle: Any, event_type: int, n_samples: int,

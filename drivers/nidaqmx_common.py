@@ -16,6 +16,7 @@ Example
 from __future__ import annotations
 
 import importlib
+import logging
 from collections.abc import Sequence
 from typing import Any
 
@@ -26,7 +27,7 @@ from drivers.errors import (
     one_line,
 )
 
-__all__ = ["DEVICE_GONE", "INSTALL", "INVALID_DEVICE_ID", "daq_error", "first_line",
+__all__ = ["DEVICE_GONE", "INSTALL", "INVALID_DEVICE_ID", "close_task", "daq_error", "first_line",
            "import_nidaqmx", "new_task"]
 
 #: what installs the nidaqmx package
@@ -34,6 +35,9 @@ INSTALL = "pip install 'insitu[ni]'"
 #: NI-DAQmx error codes the drivers name (nidaqmx.error_codes.DAQmxErrors)
 INVALID_DEVICE_ID = (-200220, -200207)
 DEVICE_GONE = (-201003, -200045)
+
+
+logger = logging.getLogger(__name__)
 
 
 def import_nidaqmx(device: str, backend: str, submodules: Sequence[str]) -> Any:
@@ -98,3 +102,14 @@ def new_task(ni: Any, device: str, modules: Sequence[str]) -> Any:
             "installdriver)", device) from err
     except ni.errors.DaqError as err:
         raise daq_error(device, modules, err, "creating the task") from err
+
+
+def close_task(task: Any, ni: Any, device: str) -> None:
+    """Close an NI-DAQmx task (None: nothing to close); a failure is logged, not raised: a
+    task is closed on the way out, where the error that led there is the one to report."""
+    if task is None:
+        return
+    try:
+        task.close()
+    except ni.errors.DaqError as err:
+        logger.warning("%s: closing the task: %s", device, first_line(err))

@@ -94,7 +94,7 @@ from numpy.typing import NDArray
 from drivers import nidaqmx_common
 from drivers.base import DeviceState, ExcitationDevice, Waveform
 from drivers.errors import DeviceError, DeviceInitializationError, DeviceTimeoutError
-from drivers.nidaqmx_common import DEVICE_GONE, daq_error, first_line, new_task
+from drivers.nidaqmx_common import DEVICE_GONE, close_task, daq_error, first_line, new_task
 from drivers.station import DeviceConfig, NiDaqTransportConfig
 
 __all__ = ["MAX_LEVEL", "OUTPUT_RANGE", "RATE", "NiDaqShaker"]
@@ -254,12 +254,7 @@ class NiDaqShaker(ExcitationDevice):
 
     def _close_task(self) -> None:
         task, self._task = self._task, None
-        if task is None:
-            return
-        try:
-            task.close()
-        except self._ni.errors.DaqError as err:
-            logger.warning("%s: closing the task: %s", self.name, first_line(err))
+        close_task(task, self._ni, self.name)
 
     # -- waveform and level -----------------------------------------------------------------------
     def _set_waveform_internal(self, waveform: Waveform, params: dict[str, float]) -> None:

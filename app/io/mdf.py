@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from app.io._optional import optional_package
-from app.io.time_channels import RawSignal, snapped_rate
+from app.io.time_channels import GroupedFile, RawSignal, snapped_rate
 from app.io.uff_time import TimeRun
 from processing.data import InputError
 
@@ -47,7 +47,7 @@ def _unreadable(path: Path, err: BaseException) -> InputError:
                       "damaged; copy or export the file again")
 
 
-class MdfRaw:
+class MdfRaw(GroupedFile):
     """An MDF file's channel groups and channels (:class:`app.io.time_channels.RawFile`)."""
 
     def __init__(self, path: Path) -> None:
@@ -59,22 +59,14 @@ class MdfRaw:
             raise InputError(f"{path.name} is not an MDF file (it does not start with "
                              "'MDF     '): give an MDF file (.mf4) written by a logger or "
                              "insitu export")
-        self._path = path
+        super().__init__(path)
         opened = _Opened(asammdf(), path)
         self._mdf = opened.__enter__()
         weakref.finalize(self, opened.__exit__)
-        self._groups: list[tuple[str, tuple[str, ...]]] = []
         for i, g in enumerate(self._mdf.groups):
             cg = g.channel_group
             name = (getattr(cg, "acq_name", "") or getattr(cg, "comment", "") or str(i))
             self._groups.append((str(name), tuple(ch.name for ch in g.channels)))
-
-    @property
-    def path(self) -> Path:
-        return self._path
-
-    def index(self) -> list[tuple[str, tuple[str, ...]]]:
-        return list(self._groups)
 
     def read(self, group: int, names: Sequence[str]) -> list[RawSignal]:
         where = f"{self._path.name}: group {self._groups[group][0]!r}"

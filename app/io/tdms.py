@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from app.io._optional import optional_package
-from app.io.time_channels import RawSignal, snapped_rate
+from app.io.time_channels import GroupedFile, RawSignal, snapped_rate
 from app.io.uff_time import TimeRun
 from processing.data import InputError
 
@@ -73,13 +73,13 @@ def check_tdms(path: Path) -> None:
                          + ": copy or export the file again")
 
 
-class TdmsRaw:
+class TdmsRaw(GroupedFile):
     """A TDMS file's groups and channels (:class:`app.io.time_channels.RawFile`), the file
     held open (its metadata read once, the samples when asked for) until the object goes."""
 
     def __init__(self, path: Path) -> None:
         check_tdms(path)
-        self._path = path
+        super().__init__(path)
         lib = nptdms()
         try:
             self._file = lib.TdmsFile.open(str(path))
@@ -89,13 +89,6 @@ class TdmsRaw:
         weakref.finalize(self, self._file.close)
         self._groups = [(g.name, tuple(c.name for c in g.channels()))
                         for g in self._file.groups()]
-
-    @property
-    def path(self) -> Path:
-        return self._path
-
-    def index(self) -> list[tuple[str, tuple[str, ...]]]:
-        return list(self._groups)
 
     def read(self, group: int, names: Sequence[str]) -> list[RawSignal]:
         gname = self._groups[group][0]

@@ -23,7 +23,7 @@ from app.io.channel_map import ChannelMap, ExcitationSpec
 from app.io.uff_time import TimeRun
 from processing.data import Geometry, InputError
 
-__all__ = ["MappedTimeFile", "RawFile", "RawSignal", "snapped_rate"]
+__all__ = ["GroupedFile", "MappedTimeFile", "RawFile", "RawSignal", "snapped_rate"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,6 +49,23 @@ class RawFile(Protocol):
     def read(self, group: int, names: Sequence[str]) -> list[RawSignal]:
         """The channels ``names`` of group number ``group`` (from 0, :meth:`index`'s order)."""
         ...
+
+
+class GroupedFile:
+    """What a :class:`RawFile` reader keeps of its file once opened: its path and each
+    group's name with its channels' names (``_groups``, filled by the reader)."""
+
+    def __init__(self, path: Path) -> None:
+        self._path = path
+        self._groups: list[tuple[str, tuple[str, ...]]] = []
+
+    @property
+    def path(self) -> Path:
+        return self._path
+
+    def index(self) -> list[tuple[str, tuple[str, ...]]]:
+        """Each group's name and its channels' names, in the file's order."""
+        return list(self._groups)
 
 
 def snapped_rate(fs: float) -> float:
