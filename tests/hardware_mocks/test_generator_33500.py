@@ -69,7 +69,11 @@ def test_an_uploaded_arbitrary_waveform_is_the_force_played_over_and_over(
     f = gen.force(t)
     # a 10 Hz sine (100 samples at 1000 Sa/s) of 2 V peak, 40 N/V: 80 N peak, period 0.1 s
     assert np.abs(f).max() == pytest.approx(80.0, rel=1e-3)
-    assert_allclose(gen.force(t + 0.1), f, atol=1e-9)
+    # the same samples a period later, to the host clock's resolution: the times are
+    # seconds since boot, whose last bit (np.spacing) times the sine's steepest slope
+    # (80 N x 2 pi x 10 Hz) bounds what t + 0.1 may round to
+    slope = 80.0 * 2 * np.pi * 10.0
+    assert_allclose(gen.force(t + 0.1), f, rtol=0, atol=8 * slope * np.spacing(t.max() + 0.1))
     assert gen.physics is not None and gen.physics.source_forces(t)[0][0] == 3
 
 
