@@ -39,7 +39,7 @@ def test_sigterm_and_sighup_stop_the_run_keeping_its_records(
     out = tmp_path / "run.h5"
     proc = subprocess.Popen(
         [sys.executable, "-m", "app.cli.main", "acquire", "--mock", "--bench", "engine-rigid",
-         "--points", "0,1,3,4,6,8", "--length", "0.5", "--hits", "100000", "--out", str(out)],
+         "--points", "0,1,3,4,6,8", "--length", "0.5", "--hits", "500", "--out", str(out)],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=ENV)
     try:
         deadline = time.monotonic() + 120.0  # only guards against a hang

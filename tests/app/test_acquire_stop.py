@@ -70,7 +70,7 @@ def plan(tmp_path: Path) -> Path:
     """The mock-bench plan with records of 0.5 s and hits enough never to finish."""
     text = (ROOT / "docs" / "mock_bench_plan.toml").read_text()
     out = tmp_path / "plan.toml"
-    out.write_text(text.replace("hits = 3", "hits = 100000").replace("length = 1.5",
+    out.write_text(text.replace("hits = 3", "hits = 500").replace("length = 1.5",
                                                                       "length = 0.5"))
     return out
 
