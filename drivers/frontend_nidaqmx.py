@@ -71,7 +71,7 @@ from drivers.errors import (
     DeviceInitializationError,
     DeviceTimeoutError,
 )
-from drivers.nidaqmx_common import INSTALL, close_task, daq_error, new_task
+from drivers.nidaqmx_common import INSTALL, close_task, daq_error, device_options, new_task
 from drivers.station import DeviceConfig, NiDaqTransportConfig
 
 __all__ = ["INSTALL", "OVERLOAD_FRACTION", "STANDARD_GRAVITY", "NiDaqFrontEnd",
@@ -209,10 +209,7 @@ class NiDaqFrontEnd(StreamingFrontEnd):
         if config.fs is None:
             raise ValueError(f"device {config.name!r}: give fs (Hz), a rate the modules run "
                              "exactly (NI 9234: 51200 / n)")
-        opts = {**config.options, **overrides}
-        if unknown := sorted(set(opts) - set(OPTIONS)):
-            raise ValueError(f"device {config.name!r}: unknown option {unknown[0]!r}; allowed: "
-                             f"{', '.join(o for o in OPTIONS if o != 'api')}")
+        opts = device_options(config, overrides, OPTIONS)
         return cls(config.name, config.channels, config.fs, devices=config.transport.devices,
                    **opts)
 

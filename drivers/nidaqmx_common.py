@@ -27,8 +27,8 @@ from drivers.errors import (
     one_line,
 )
 
-__all__ = ["DEVICE_GONE", "INSTALL", "INVALID_DEVICE_ID", "close_task", "daq_error", "first_line",
-           "import_nidaqmx", "new_task"]
+__all__ = ["DEVICE_GONE", "INSTALL", "INVALID_DEVICE_ID", "close_task", "daq_error",
+           "device_options", "first_line", "import_nidaqmx", "new_task"]
 
 #: what installs the nidaqmx package
 INSTALL = "pip install 'insitu[ni]'"
@@ -113,3 +113,14 @@ def close_task(task: Any, ni: Any, device: str) -> None:
         task.close()
     except ni.errors.DaqError as err:
         logger.warning("%s: closing the task: %s", device, first_line(err))
+
+
+def device_options(config: Any, overrides: dict[str, Any], allowed: Sequence[str]
+                   ) -> dict[str, Any]:
+    """A station device's options with the caller's overrides; ValueError naming the first
+    option not in ``allowed`` (the injected ``api`` is not listed to the operator)."""
+    opts = {**config.options, **overrides}
+    if unknown := sorted(set(opts) - set(allowed)):
+        raise ValueError(f"device {config.name!r}: unknown option {unknown[0]!r}; allowed: "
+                         f"{', '.join(o for o in allowed if o != 'api')}")
+    return opts

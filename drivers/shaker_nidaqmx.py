@@ -94,7 +94,14 @@ from numpy.typing import NDArray
 from drivers import nidaqmx_common
 from drivers.base import DeviceState, ExcitationDevice, Waveform
 from drivers.errors import DeviceError, DeviceInitializationError, DeviceTimeoutError
-from drivers.nidaqmx_common import DEVICE_GONE, close_task, daq_error, first_line, new_task
+from drivers.nidaqmx_common import (
+    DEVICE_GONE,
+    close_task,
+    daq_error,
+    device_options,
+    first_line,
+    new_task,
+)
 from drivers.station import DeviceConfig, NiDaqTransportConfig
 
 __all__ = ["MAX_LEVEL", "OUTPUT_RANGE", "RATE", "NiDaqShaker"]
@@ -185,10 +192,7 @@ class NiDaqShaker(ExcitationDevice):
                 and len(config.transport.devices) == 1):
             raise ValueError(f"device {config.name!r}: shaker-nidaqmx needs its output module, "
                              "transport = { nidaqmx = \"cDAQ1Mod5\" }")
-        opts = {**config.options, **overrides}
-        if unknown := sorted(set(opts) - set(OPTIONS)):
-            raise ValueError(f"device {config.name!r}: unknown option {unknown[0]!r}; allowed: "
-                             f"{', '.join(o for o in OPTIONS if o != 'api')}")
+        opts = device_options(config, overrides, OPTIONS)
         return cls(config.name, config.transport.devices[0], **opts)
 
     @classmethod
