@@ -59,6 +59,9 @@ def open_client(scheduler: str | None = None, workers: int | None = None,
         return
     cluster = LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker,
                            processes=True, dashboard_address=None,
+                           # the scheduler's HTTP server (health, metrics) on any free port:
+                           # a fixed 8787 collides with a second batch on the same machine
+                           scheduler_kwargs={"dashboard_address": ":0"},
                            silence_logs=logging.ERROR)
     try:
         client = Client(cluster)

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -89,12 +90,26 @@ def test_batch_local_cluster(files: list[Path], reference: dict[int, Identificat
                              tmp_path: Path,
                              capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
-    assert main(["batch", *map(str, files), "--out", str(out), "--workers", "2"]) == 2
+    # Dask's usual HTTP port taken (a second batch, another test, a notebook): no collision
+    with _holding_port(8787):
+        assert main(["batch", *map(str, files), "--out", str(out), "--workers", "2"]) == 2
     text = capsys.readouterr().out
     assert "3 files on a local cluster: 2 workers, 2 threads" in text
     assert re.search(r"3 files: 2 identified, 1 failed, in [\d.]+ s on 2 workers", text)
     assert f"error {files[1]}: " in text
     _check_tables(out, files, reference)
+
+
+@contextmanager
+def _holding_port(port: int) -> Iterator[None]:
+    """Listen on ``port`` for the block (already taken by another process: the same)."""
+    with socket.socket() as s:
+        try:
+            s.bind(("0.0.0.0", port))
+            s.listen()
+        except OSError:
+            pass
+        yield
 
 
 def _free_port() -> int:
