@@ -7,6 +7,11 @@ the global frame ``k = A^T diag(...) A`` with ``A = axes``. As viscous dampers i
 (:meth:`Mount.damping_3`), ``c_i = eta_i k_i / w_ref``: the same loss at ``f_ref``. A rigid
 motion ``q`` at O moves the mount's body end by ``G(p) q`` (``G`` of :mod:`.kinematics`), hence
 its 6 x 6 stiffness at O is ``G(p)^T k G(p)``.
+
+Elastomer mounts stiffen with frequency: with a rise of ``s`` per decade
+(:func:`stiffening_factor`) every rate (and, loss factors being constant, every loss part)
+is ``k(f) = k (f / f_ref)^alpha`` with ``alpha = log10(1 + s)``, ``k`` the rate at the
+stated frequency ``f_ref``, and constant below ``f_ref / 100`` (the rubbery plateau).
 """
 
 from __future__ import annotations
@@ -14,11 +19,25 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from hardware_mocks.reference.kinematics import rigid_map
 
-__all__ = ["Mount", "damping_at_origin", "mounts_at_origin", "mounts_toml"]
+__all__ = ["Mount", "damping_at_origin", "mounts_at_origin", "mounts_toml", "stiffening_factor"]
+
+
+#: below this fraction of the stated frequency the rates no longer fall (rubbery plateau)
+PLATEAU = 0.01
+
+
+def stiffening_factor(freq_hz: ArrayLike, per_decade: float, reference_hz: float) -> (
+    NDArray[np.float64]
+):
+    """``k(f) / k(f_ref)`` of a mount whose rates rise by ``per_decade`` (0.25: +25 %) per
+    decade of frequency: ``(f / f_ref)^log10(1 + per_decade)``, constant below
+    ``PLATEAU f_ref``; 1 everywhere when ``per_decade`` is 0."""
+    f = np.maximum(np.asarray(freq_hz, dtype=float), PLATEAU * reference_hz)
+    return np.asarray((f / reference_hz) ** np.log10(1.0 + per_decade), dtype=np.float64)
 
 
 @dataclass(frozen=True)

@@ -65,6 +65,7 @@ class ScenarioSpec:
     band_ratio: float = 1.5
     n_lines: int = 1600
     damping: Literal["hysteretic", "viscous"] = "hysteretic"
+    stiffening: float = 0.0
 
     @property
     def family(self) -> str:
@@ -201,6 +202,10 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     body = body.moved(-centre + rng.uniform(-0.15, 0.15, 3))
     mounts = _mounts(body.xyz, body.mass, spec.n_mounts, rng)
     rigid_sys = ReferenceSystem(body, mounts, rigid=True, damping=spec.damping)
+    if spec.stiffening:
+        f_k = float(np.exp(np.mean(np.log(rigid_sys.truth.rigid_modes()[0]))))
+        rigid_sys = ReferenceSystem(body, mounts, rigid=True, damping=spec.damping,
+                                    stiffening=spec.stiffening, stiffness_hz=f_k)
     f_rigid = float(rigid_sys.truth.rigid_modes()[0][-1])
     if spec.elastic_ratio is None:
         system = rigid_sys
@@ -210,7 +215,8 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
         f_free = float(body.free_modes_hz(7)[6])
         f_elastic = spec.elastic_ratio * f_rigid
         system = ReferenceSystem(body.scaled((f_elastic / f_free) ** 2), mounts,
-                                 damping=spec.damping)
+                                 damping=spec.damping, stiffening=rigid_sys.stiffening,
+                                 stiffness_hz=rigid_sys.stiffness_hz)
         want = max(spec.band_ratio * f_elastic, 3 * f_rigid)
         span = min((s for s in SPANS if s >= want), default=SPANS[-1])
     df = span / spec.n_lines

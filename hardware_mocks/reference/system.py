@@ -20,6 +20,14 @@ with ``s = j w``. The decomposition is checked to reproduce ``A`` to 1e-9 relati
 cross-check. A ``rigid=True`` system has an infinitely stiff body: its FRFs are the 6-DOF
 rigid-body FRFs of its own truth (:meth:`Truth.accelerance`), exact by construction.
 
+Mounts that stiffen with frequency (``stiffening`` > 0, :func:`.mounts.stiffening_factor`):
+the mounts' stiffness at line ``w`` is ``g(w) K_m``, so the system is the one above plus a
+change of rank ``3 n_mounts``, ``(g(w) - 1) U K_m U^T``; its receptance follows from the
+decomposition's by the Woodbury identity at every line (a ``3 n_mounts`` square solve per
+line), exact as well; the dense solve per line is again the tests' cross-check. The
+system's natural frequencies, decay rates and mode shapes are those of the mounts at the
+stated frequency.
+
 The truth (:class:`Truth`) comes from the node masses and the mounts alone (point-mass sums,
 spring kinematics), never from the identification code.
 """
@@ -41,7 +49,12 @@ from hardware_mocks.reference.kinematics import (
     rigid_map,
     theta_from_masses,
 )
-from hardware_mocks.reference.mounts import Mount, damping_at_origin, mounts_at_origin
+from hardware_mocks.reference.mounts import (
+    Mount,
+    damping_at_origin,
+    mounts_at_origin,
+    stiffening_factor,
+)
 
 __all__ = ["ReferenceSystem", "Truth"]
 
@@ -61,6 +74,9 @@ class Truth:
     K_loss : (6, 6) imaginary part of the mounts' hysteretic stiffness at O (same units;
         zero for viscous mounts)
     C : (6, 6) viscous damping of the mounts at O (N s/m, ...; zero for hysteretic mounts)
+    stiffening : the mounts' rise of stiffness per decade of frequency (0.25: +25 %); K and
+        K_loss are then the values at ``stiffness_hz``
+    stiffness_hz : Hz, the frequency K and K_loss hold at (mounts that stiffen)
     """
 
     mass: float
@@ -72,6 +88,13 @@ class Truth:
     K: NDArray[np.float64]
     K_loss: NDArray[np.float64]
     C: NDArray[np.float64]
+    stiffening: float = 0.0
+    stiffness_hz: float = 10.0
+
+    def stiffness_at(self, freq_hz: ArrayLike) -> NDArray[np.float64]:
+        """Real K at O at each frequency (n_f, 6, 6): ``K`` times the mounts' stiffening."""
+        g = stiffening_factor(np.ravel(freq_hz), self.stiffening, self.stiffness_hz)
+        return np.asarray(g[:, None, None] * self.K[None], dtype=np.float64)
 
     @property
     def principal_moments(self) -> NDArray[np.float64]:
@@ -100,8 +123,9 @@ class Truth:
                       rigid_map(np.asarray(resp_xyz, float).reshape(-1, 3)))
         T = np.einsum("nji,nj->in", rigid_map(np.asarray(exc_xyz, float).reshape(-1, 3)),
                       np.asarray(exc_vectors, float).reshape(-1, 3))
-        Z = ((self.K + 1j * self.K_loss)[None] + 1j * w[:, None, None] * self.C[None]
-             - (w**2)[:, None, None] * self.M[None])
+        g = stiffening_factor(w / (2 * np.pi), self.stiffening, self.stiffness_hz)
+        Z = (g[:, None, None] * (self.K + 1j * self.K_loss)[None]
+             + 1j * w[:, None, None] * self.C[None] - (w**2)[:, None, None] * self.M[None])
         Q = np.linalg.solve(Z, np.broadcast_to(T.astype(complex), (w.size, 6, T.shape[1])))
         return np.moveaxis(-(w**2)[:, None, None] * (R @ Q), 0, -1)
 
@@ -117,6 +141,8 @@ class ReferenceSystem:
     rigid : the body is infinitely stiff (FRFs from the 6-DOF truth)
     damping : "hysteretic" mounts (loss factors) or "viscous" ones (``eta k / w_ref``)
     reference_hz : ``f_ref`` of viscous mounts, Hz
+    stiffening : the mounts' rise of stiffness per decade of frequency (0: constant rates)
+    stiffness_hz : the frequency the mounts' rates hold at when they stiffen, Hz
     """
 
     body: LatticeBody
@@ -124,6 +150,8 @@ class ReferenceSystem:
     rigid: bool = False
     damping: Literal["hysteretic", "viscous"] = "hysteretic"
     reference_hz: float = 10.0
+    stiffening: float = 0.0
+    stiffness_hz: float = 10.0
     _cache: dict[str, object] = field(default_factory=dict, compare=False, repr=False)
 
     @cached_property
@@ -139,17 +167,30 @@ class ReferenceSystem:
                      M=mass_matrix_6(m, r), K=Kc.real.copy(),
                      K_loss=np.zeros((6, 6)) if viscous else Kc.imag.copy(),
                      C=(damping_at_origin(self.mounts, self.reference_hz) if viscous
-                        else np.zeros((6, 6))))
+                        else np.zeros((6, 6))),
+                     stiffening=self.stiffening, stiffness_hz=self.stiffness_hz)
 
-    def dynamic_stiffness(self) -> NDArray[np.complex128]:
+    def dynamic_stiffness(self, factor: float = 1.0) -> NDArray[np.complex128]:
         """Complex stiffness of the assembled nodes (3n x 3n): body with loss + mounts
-        (their real rates only when viscous)."""
+        (their real rates only when viscous), the mounts' times ``factor``."""
         K = self.body.stiffness() * (1 + 1j * self.body.eta)
         for mt in self.mounts:
             i = slice(3 * mt.node, 3 * mt.node + 3)
             k3 = mt.stiffness_3()
-            K[i, i] += k3.real if self.damping == "viscous" else k3
+            K[i, i] += factor * (k3.real if self.damping == "viscous" else k3)
         return np.asarray(K, dtype=np.complex128)
+
+    def _mount_block(self) -> tuple[NDArray[np.float64], NDArray[np.complex128]]:
+        """U (3n, 3 n_mounts) selecting the mounts' node DOFs and their stiffness block
+        (3 n_mounts square; real rates only when viscous)."""
+        k = len(self.mounts)
+        U = np.zeros((3 * self.body.n_nodes, 3 * k))
+        Km = np.zeros((3 * k, 3 * k), dtype=complex)
+        for j, mt in enumerate(self.mounts):
+            U[3 * mt.node:3 * mt.node + 3, 3 * j:3 * j + 3] = np.eye(3)
+            k3 = mt.stiffness_3()
+            Km[3 * j:3 * j + 3, 3 * j:3 * j + 3] = k3.real if self.damping == "viscous" else k3
+        return U, Km
 
     def viscous_damping(self) -> NDArray[np.float64]:
         """Viscous damping of the assembled nodes (3n x 3n), N s/m (zero if hysteretic)."""
@@ -231,7 +272,8 @@ class ReferenceSystem:
         mounts = tuple(Mount(m.node, m.position, m.axes, m.rates, m.loss_factors * factor)
                        for m in self.mounts)
         return ReferenceSystem(self.body, mounts, rigid=self.rigid, damping=self.damping,
-                               reference_hz=self.reference_hz)
+                               reference_hz=self.reference_hz, stiffening=self.stiffening,
+                               stiffness_hz=self.stiffness_hz)
 
     def first_elastic_hz(self) -> float:
         """The seventh natural frequency (the first above the six mount modes); inf if rigid."""
@@ -272,13 +314,27 @@ class ReferenceSystem:
             g = -w2[None, :] / (lam[:, None] - w2[None, :])  # (N, n_f)
         AB = (L[:, None, :] * R.T[None, :, :]).reshape(-1, lam.size)  # (n_r n_e, N)
         out: NDArray[np.complex128] = (AB @ g).reshape(L.shape[0], R.shape[1], w2.size)
+        if not self.stiffening:
+            return out
+        # mounts at g K_m: Woodbury on the receptance, R = R0 - R0 U D (I + U^T R0 U D)^-1 U^T R0
+        U, Km = self._mount_block()
+        # receptance factors, R0 = left diag(d) right (0 at 0 Hz, where the accelerance is)
+        d = np.divide(g, -w2[None, :], out=np.zeros_like(g), where=w2[None, :] > 0)
+        Lu, Ru = U.T @ left, right @ U  # (3k, N), (N, 3k)
+        A_su = np.einsum("rn,nf,nu->fru", L, d, Ru)
+        A_uu = np.einsum("un,nf,nv->fuv", Lu, d, Ru)
+        A_uf = np.einsum("un,nf,ne->fue", Lu, d, R)
+        D = (stiffening_factor(np.sqrt(w2) / (2 * np.pi), self.stiffening, self.stiffness_hz)
+             - 1.0)[:, None, None] * Km[None]
+        eye = np.eye(Km.shape[0])[None]
+        corr = A_su @ D @ np.linalg.solve(eye + A_uu @ D, A_uf)  # (n_f, n_r, n_e) receptance
+        out = out + (w2[:, None, None] * corr).transpose(1, 2, 0)
         return out
 
     def accelerance_direct(self, freq: ArrayLike, resp_nodes: ArrayLike, resp_vectors: ArrayLike,
                            exc_nodes: ArrayLike, exc_vectors: ArrayLike,
                            ) -> NDArray[np.complex128]:
         """The same accelerance by one dense solve of the full system per line (slow; tests)."""
-        Kd = self.dynamic_stiffness()
         Cd = self.viscous_damping()
         m3 = np.repeat(self.body.masses, 3)
         Sr = self._dof_vectors(resp_nodes, resp_vectors)
@@ -286,6 +342,7 @@ class ReferenceSystem:
         out = []
         for f in np.asarray(freq, dtype=float).ravel():
             w = 2 * np.pi * f
-            Z = Kd + 1j * w * Cd - w**2 * np.diag(m3)
+            g = float(stiffening_factor(f, self.stiffening, self.stiffness_hz))
+            Z = self.dynamic_stiffness(g) + 1j * w * Cd - w**2 * np.diag(m3)
             out.append(-(w**2) * (Sr @ np.linalg.solve(Z, Fe)))
         return np.moveaxis(np.array(out), 0, -1)

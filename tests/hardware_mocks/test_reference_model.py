@@ -12,6 +12,7 @@ from hardware_mocks.reference.body import SHAPES, make_body
 from hardware_mocks.reference.kinematics import (
     inertia_tensor,
     mass_matrix_6,
+    rigid_map,
     rotation,
     theta_from_masses,
 )
@@ -212,3 +213,56 @@ def test_h1_noise_free_is_exact_and_noise_scales():
     # response noise 2 % of RMS over 20 averages of unit-variance force: ~0.02 / sqrt(20)
     assert 0.002 < np.median(rel) < 0.008
     assert np.all(coh <= 1 + 1e-12) and np.median(coh) > 0.99
+
+
+@pytest.mark.parametrize("damping", ["hysteretic", "viscous"])
+def test_stiffening_mounts_frfs_equal_the_direct_solve(engine, damping):
+    """Mounts 25 % stiffer a decade: the Woodbury update of the modal FRFs equals a dense
+    solve with each line's mount stiffness, and differs from the constant mounts' FRFs."""
+    sys = ReferenceSystem(engine.system.body, engine.mounts, damping=damping,
+                          stiffening=0.25, stiffness_hz=7.0)
+    s, f = engine.sensors, engine.forces
+    lines = np.concatenate([[0.0], engine.freq[::37]])  # 0 Hz: no accelerance
+    H = sys.accelerance(lines, s.nodes, s.vectors, f.nodes, f.vectors)
+    Hd = sys.accelerance_direct(lines[1:], s.nodes, s.vectors, f.nodes, f.vectors)
+    assert_allclose(H[..., 0], 0.0)
+    assert_allclose(H[..., 1:], Hd, rtol=1e-8, atol=1e-10 * np.abs(Hd).max())
+    constant = ReferenceSystem(engine.system.body, engine.mounts, damping=damping)
+    H0 = constant.accelerance(lines[1:], s.nodes, s.vectors, f.nodes, f.vectors)
+    assert np.abs(H[..., 1:] - H0).max() > 0.01 * np.abs(H0).max()
+
+
+def test_stiffening_truth_holds_at_its_frequency(engine):
+    """The truth's K is the mounts' at ``stiffness_hz`` and rises 25 % a decade; the rigid
+    system's FRFs use each line's K (a dense 6-DOF solve per line, written here)."""
+    rigid = ReferenceSystem(engine.system.body, engine.mounts, rigid=True,
+                            stiffening=0.25, stiffness_hz=7.0)
+    t = rigid.truth
+    assert_allclose(t.K, engine.truth.K, rtol=1e-14)
+    assert_allclose(t.stiffness_at([7.0, 70.0, 0.7]),
+                    [t.K, 1.25 * t.K, t.K / 1.25], rtol=1e-12)
+    assert_allclose(t.stiffness_at([0.0, 0.01]), [t.K / 1.25**2] * 2, rtol=1e-12)  # plateau
+    s, f, b = engine.sensors, engine.forces, engine.system.body
+    freq = engine.freq[::53]
+    H = rigid.accelerance(freq, s.nodes, s.vectors, f.nodes, f.vectors)
+    R = np.einsum("ni,nij->nj", s.vectors, rigid_map(b.xyz[s.nodes]))
+    T = np.einsum("nji,nj->in", rigid_map(b.xyz[f.nodes]), f.vectors)
+    for k, fk in enumerate(freq):
+        w = 2 * np.pi * fk
+        g = (fk / 7.0) ** np.log10(1.25)
+        Z = g * (t.K + 1j * t.K_loss) - w**2 * t.M
+        assert_allclose(H[..., k], -(w**2) * R @ np.linalg.solve(Z, T), rtol=1e-9)
+
+
+def test_stiffening_scenario_states_its_frequency():
+    """A scenario's stiffening mounts hold their rates at the geometric mean of the rigid-body
+    modes those rates give; without stiffening the FRFs are the constant mounts' exactly."""
+    spec = ScenarioSpec(seed=31, shape="engine", n_lines=200, stiffening=0.3)
+    sc, sc0 = build_scenario(spec), build_scenario(ScenarioSpec(seed=31, shape="engine",
+                                                                n_lines=200))
+    f0 = sc0.truth.rigid_modes()[0]
+    assert sc.truth.stiffness_hz == pytest.approx(float(np.exp(np.mean(np.log(f0)))),
+                                                  rel=1e-12)
+    assert sc.truth.stiffening == 0.3 and sc0.truth.stiffening == 0.0
+    assert_allclose(sc.truth.K, sc0.truth.K, rtol=1e-14)
+    assert not np.allclose(sc.H_exact, sc0.H_exact, rtol=1e-3)
