@@ -53,6 +53,7 @@ from processing.stages import (
 from processing.stiffness import (
     DAMPING_BLOCKS,
     DUPLICATION,
+    line_functions,
     stiffness_normal,
     vech_index,
     vech_normal,
@@ -291,12 +292,14 @@ def _line_inverses(Xs: NDArray[np.complex128], T: NDArray[np.float64]) -> (
 
 def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
                       Xs: NDArray[np.complex128], ws_: NDArray[np.float64],
+                      stiffening: NDArray[np.float64] | None = None,
                       ) -> tuple[Triple, Triple]:
     """The stiffness step of the main fit, M -> (K, C, D), for resamples' stiffness lines Xs
     (n, n_l, 6, n_e) with column weights ``ws_`` (n, n_e, n_l): it is affine in M, returned
     as its value at M = 0, (K, C, D) each (n, 6, 6), and its change per unit of each
     parameter, each (n, 10, 6, 6)
-    (:class:`processing.stages.StiffnessStep`, vectorised over resamples)."""
+    (:class:`processing.stages.StiffnessStep`, vectorised over resamples); ``stiffening``:
+    the main fit's ``g(w)`` on the stiffness lines (improved method without a window)."""
     n = Xs.shape[0]
     w = problem.w[weights.stiffness_lines]
     a, T, symmetric = problem.window_decay, problem.T, problem.solver.symmetric
@@ -324,9 +327,11 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
     Cw = np.conj(Xs) * ws_.transpose(0, 2, 1)[:, :, None, :]
     Z = Cw @ np.swapaxes(Xs, -1, -2)  # (n, n_l, 6, 6)
     R = Cw @ T.T  # (n, n_l, 6, 6)
-    powers = np.stack([w**p for p in range(4)], axis=1) + 0j  # (n_l, 4)
-    Gs = (Z.reshape(n, -1, 36).transpose(0, 2, 1) @ powers).reshape(n, 6, 6, 4)
-    Qs = (R.reshape(n, -1, 36).transpose(0, 2, 1) @ powers).reshape(n, 6, 6, 4)
+    # the moments' per-line factors: powers 0..3 of w (and w^2 again for C with C), or with
+    # the mounts' stiffening g those of processing.stiffness.line_functions
+    funcs = line_functions(w, stiffening).T + 0j  # (n_l, 5)
+    Gs = (Z.reshape(n, -1, 36).transpose(0, 2, 1) @ funcs).reshape(n, 6, 6, 5)
+    Qs = (R.reshape(n, -1, 36).transpose(0, 2, 1) @ funcs).reshape(n, 6, 6, 5)
     G = [Gs[..., p] for p in range(4)]
     # sum wt w^q conj(x) (-s^2) x^T and .. t^T, q = 0, 1 (-s^2 = w^2 without a window)
     A0, A1 = (G[q + 2] - a**2 * G[q] - 2j * a * G[q + 1] for q in (0, 1))
@@ -334,7 +339,7 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
     s2 = (np.ones(6) if problem.row_scale is None
           else np.asarray(problem.row_scale, dtype=np.float64) ** 2)
     G0r, G0i, G1r, G1i = G[0].real, G[0].imag, G[1].real, G[1].imag
-    full = [[G0r, -G1i, -G0i], [G1i, G[2].real, G1r], [G0i, G1r, G0r]]
+    full = [[G0r, -G1i, -G0i], [G1i, Gs[..., 4].real, G1r], [G0i, G1r, G0r]]
     blocks = DAMPING_BLOCKS[model]
     k = len(blocks)
     Nb = np.concatenate([np.concatenate([full[r][c] for c in blocks], axis=2)
@@ -408,12 +413,15 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
         AK = -moment(1.0 / s_2)
         AC = a * AK - moment(1j * wm / s_2)
         AD = np.zeros_like(AK)
-    else:  # B = T + (K + j w C + j D) X / w^2
-        AK = moment(1.0 / wm**2 + 0j)
+    else:  # B = T + (g (K + j D) + j w C) X / w^2, g the mounts' stiffening (or 1)
+        g = 1.0 if fitted.stiffening is None else fitted.stiffening.factor(wm)
+        AK = moment(g / wm**2 + 0j)
         AC = moment(1j / wm)
-        AD = moment(1j / wm**2)
-    (K0, C0, D0), (Kl, Cl, Dl) = _stiffness_affine(problem, weights, fitted.damping_model, Xs,
-                                                   ws_)
+        AD = moment(1j * g / wm**2)
+    ws = problem.w[weights.stiffness_lines]
+    (K0, C0, D0), (Kl, Cl, Dl) = _stiffness_affine(
+        problem, weights, fitted.damping_model, Xs, ws_,
+        None if fitted.stiffening is None else fitted.stiffening.factor(ws))
     W0 = WT + K0 @ AK + C0 @ AC + D0 @ AD
     Wl = Kl @ AK[:, None] + Cl @ AC[:, None] + Dl @ AD[:, None]  # (n, 10, 6, 6)
     t0 = np.einsum("npq,nq->np", solver, W0.reshape(n, 36))
@@ -505,8 +513,9 @@ def _stiffness_solve(problem: Problem, model: str, G: list[NDArray[np.complex128
     NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
 ]:
     """K, C, D (m, 6, 6) of the improved method's stiffness step for mass matrices M (m, 6,
-    6) from the stiffness moments G0..G3, Q0..Q3 (m, 6, 6) of :class:`processing.stiffness.
-    StiffnessMoments` (:func:`processing.stiffness.fit_stiffness`, vectorised)."""
+    6) from the stiffness moments G0..G3, G2c and Q0..Q3 (m, 6, 6) of
+    :class:`processing.stiffness.StiffnessMoments` (:func:`processing.stiffness.
+    fit_stiffness`, vectorised)."""
     m, a = M.shape[0], problem.window_decay
     R0, R1 = ((G[q + 2] - a**2 * G[q] - 2j * a * G[q + 1]) @ np.swapaxes(M, 1, 2)
               - (Q[q + 2] - a**2 * Q[q] - 2j * a * Q[q + 1]) for q in (0, 1))
@@ -516,7 +525,7 @@ def _stiffness_solve(problem: Problem, model: str, G: list[NDArray[np.complex128
     blocks = DAMPING_BLOCKS[model]
     r = np.concatenate([np.swapaxes(parts_rhs[b] * s2, 1, 2).reshape(m, 36) for b in blocks],
                        axis=1)
-    N = stiffness_normal(G[0], G[1], G[2], s2, model)  # type: ignore[arg-type]
+    N = stiffness_normal(G[0], G[1], G[4], s2, model)  # type: ignore[arg-type]
     if problem.solver.symmetric:
         first, second, off, back = vech_index(len(blocks))
         v = np.linalg.solve(vech_normal(N), (r[:, first] + np.where(off, r[:, second], 0.0))
@@ -539,13 +548,15 @@ class _StiffnessLines:
 
     def __init__(self, w: NDArray[np.float64], Xs: NDArray[np.complex128],
                  ws_: NDArray[np.float64], shp: NDArray[np.complex128],
-                 T: NDArray[np.float64]) -> None:
+                 T: NDArray[np.float64], stiffening: NDArray[np.float64] | None = None,
+                 ) -> None:
         n = Xs.shape[0]
         self.T = T
         self.A, self.P, self.S, self.x, self.c = [], [], [], [], []
         Xf = np.swapaxes(Xs.reshape(n, 6, -1), 1, 2)
-        for p in range(4):  # powers 0..3 of w
-            wt = ws_ * w**p  # (n, n_e, n_l)
+        # the per-line factors of G0..G3 and G2c (processing.stiffness.line_functions)
+        for f in line_functions(w, stiffening):
+            wt = ws_ * f  # (n, n_e, n_l)
             Xw = np.conj(Xs) * wt[:, None]
             self.A.append(Xw.reshape(n, 6, -1) @ Xf)
             self.P.append(Xw @ shp.T)  # (n, 6, n_e, n_s)
@@ -556,10 +567,10 @@ class _StiffnessLines:
     def moments(self, idx: NDArray[np.intp], Y: NDArray[np.float64] | None) -> tuple[
         list[NDArray[np.complex128]], list[NDArray[np.complex128]]
     ]:
-        """G0..G3 and Q0..Q3 (m, 6, 6) of resamples ``idx`` cleaned of ``Y shp`` (none when
-        Y is None)."""
+        """G0..G3, G2c and Q0..Q3, G2c's (m, 6, 6) of resamples ``idx`` cleaned of ``Y shp``
+        (none when Y is None)."""
         G, Q = [], []
-        for p in range(4):
+        for p in range(5):
             A, x = self.A[p][idx], self.x[p][idx]
             if Y is not None:
                 m = idx.size
@@ -596,12 +607,14 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     # B = T + K*_m Xc / w^2 as sum_k L_k (f_k Xc): with an exponential window's decay a,
     # (K + a C + j w C) Xc / -s^2, else (K + j w C + j D) Xc / w^2
     s_2 = (1j * wm + a) ** -2
+    g = 1.0 if fitted.stiffening is None else fitted.stiffening.factor(wm)
     f = (np.array([-s_2, -(a + 1j * wm) * s_2]) if a
-         else np.array([wm**-2 + 0j, 1j / wm, 1j / wm**2]))
+         else np.array([g * wm**-2 + 0j, 1j / wm, 1j * g / wm**2]))
     lines = _MassLines(Xm, wm_, ml0.shapes, s2, problem.T, f, shp_m)
     tol = max(problem.solver.tol, 1e-9)
     theta = np.broadcast_to(fitted.theta, (n, 10)).copy()
-    stiff = _StiffnessLines(ws, Xs, ws_, shp_s, problem.T)
+    stiff = _StiffnessLines(ws, Xs, ws_, shp_s, problem.T,
+                            None if fitted.stiffening is None else fitted.stiffening.factor(ws))
     K, C, D = _stiffness_solve(problem, model, *stiff.moments(np.arange(n), None),
                                _masses(theta))
     Y = np.zeros((n, 6, Xm.shape[2], shp.shape[0]))

@@ -117,7 +117,7 @@ class MassLineProblem:
             self._solver = scipy.linalg.cho_solve(factor, self._MBs, check_finite=False)
         except np.linalg.LinAlgError:  # singular: the minimum-norm solution
             self._solver = np.linalg.pinv(self.normal) @ self._MBs
-        self._kc_key: object = None
+        self._kc_key: tuple[object, object] | None = None
         self._kc: tuple[NDArray[np.float64], ...] | None = None
 
     def _weighted(self, Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
@@ -226,24 +226,30 @@ class MassLineProblem:
         Xc: NDArray[np.complex128],
         w: NDArray[np.float64],
         D: NDArray[np.float64] | None = None,
+        stiffening: NDArray[np.float64] | None = None,
     ) -> MassLineFit:
-        """:meth:`solve` for ``B = T + (K + j w C + j D) Xc / w^2`` (the iteration of section
-        2.2; ``D`` the structural damping, none when omitted).
+        """:meth:`solve` for ``B = T + (g(w) (K + j D) + j w C) Xc / w^2`` (the iteration of
+        section 2.2; ``D`` the structural damping, none when omitted; ``stiffening`` the
+        mounts' ``g(w) = K(w) / K`` on these lines, 1 when omitted).
 
-        The moments of ``Xc`` are kept while the same array is passed again, so
+        The moments of ``Xc`` are kept while the same arrays are passed again, so
         each further iteration is 6x6 algebra.
         """
+        g = 1.0 if stiffening is None else stiffening
         if self._Q is not None:  # leakage coefficients need B itself
             Xf = Xc.reshape(6, -1)
             KD = K if D is None else K + 1j * D
-            KX = (KD @ Xf).reshape(Xc.shape) + 1j * w * (C @ Xf).reshape(Xc.shape)
+            KX = g * (KD @ Xf).reshape(Xc.shape) + 1j * w * (C @ Xf).reshape(Xc.shape)
             return self.solve(T[:, :, None] + KX / w**2)
-        if self._kc_key is not Xc or self._kc is None:
+        key = (Xc, stiffening)
+        if (self._kc_key is None or any(a is not b for a, b in zip(self._kc_key, key,
+                                                                   strict=True))
+                or self._kc is None):
             WT = self._weighted(T[:, :, None] + 0j) @ self._Xp.T
-            P2 = self._weighted(Xc / w**2) @ self._Xp.T
+            P2 = self._weighted(Xc * (g / w**2)) @ self._Xp.T
             P1 = self._weighted(1j * Xc / w) @ self._Xp.T
-            P0 = self._weighted(1j * Xc / w**2) @ self._Xp.T
-            self._kc_key, self._kc = Xc, (WT, P2, P1, P0)
+            P0 = self._weighted(1j * Xc * (g / w**2)) @ self._Xp.T
+            self._kc_key, self._kc = key, (WT, P2, P1, P0)
         WT, P2, P1, P0 = self._kc
         W = WT + K @ P2 + C @ P1
         return self._finish(W if D is None else W + D @ P0, None)

@@ -61,6 +61,9 @@ class IdentifyOptions:
     uncertainty: bool = True
     #: damping model of K*: chosen from the data ("auto") or viscous K + jwC only
     damping: Literal["auto", "viscous"] = "auto"
+    #: improved method: the mounts' stiffening with frequency read from the stiffness lines
+    #: and carried into the mass line when they call for it ("auto"), or K constant
+    stiffening: Literal["auto", "constant"] = "auto"
     #: stated test uncertainties propagated by Monte Carlo (:mod:`processing.montecarlo`)
     stated: StatedUncertainty | None = None
     #: resamples of the bootstrap over the hits or blocks of time data

@@ -16,6 +16,7 @@ from processing.geometry import DEFAULT_MAX_COND_T, GeometryReport
 from processing.inertia import InertiaProperties
 from processing.modes import rigid_body_modes
 from processing.selection import ElasticPeak
+from processing.stiffness import Stiffening
 from processing.synthesis import SynthesisFit
 
 __all__ = ["UNCERTAIN_KEYS", "Contribution", "IdentificationResult", "Method", "Uncertainty"]
@@ -152,6 +153,11 @@ class IdentificationResult:
     #: why the coherence check is not made ("no coherence in the input", "one hit a
     #: point": a coherence of 1 by definition), or "" when it is
     coherence_unchecked: str = ""
+    #: the mounts' stiffening with frequency, ``K(f) = K (f / f_k)^alpha`` (K and D then
+    #: hold at ``f_k``), None for a constant K
+    stiffening: Stiffening | None = None
+    #: how the stiffness's frequency dependence was chosen, in words
+    stiffening_note: str = ""
 
     @property
     def coherence_low_fraction(self) -> float:
@@ -221,6 +227,11 @@ class IdentificationResult:
             "structural_damping": self.D.tolist(),
             "damping_model": self.damping_model,
             "damping_choice": self.damping_note,
+            "stiffening": (None if self.stiffening is None else {
+                "per_decade": self.stiffening.per_decade,
+                "exponent": self.stiffening.alpha,
+                "stiffness_at_hz": self.stiffening.reference_hz}),
+            "stiffening_choice": self.stiffening_note,
             "bands": {"mass_line": list(self.mass_band), "stiffness": list(self.stiffness_band)},
             "band_choice": self.band_reason,
             "mass_line_model": self.model_note,

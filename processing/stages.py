@@ -60,8 +60,10 @@ from processing.stiffness import (
     DAMPING_MODELS,
     DampingModel,
     LineOperators,
+    Stiffening,
     StiffnessMoments,
     choose_damping,
+    choose_stiffening,
     dynamic_stiffness,
     fit_stiffness,
     line_operators,
@@ -372,6 +374,11 @@ class Fit:
     #: theta of the same model fitted to the lower and the upper half of the mass lines
     half_thetas: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(
         default=None, repr=False, compare=False)
+    #: the mounts' stiffening with frequency carried into the mass line (K and D then hold
+    #: at its reference frequency), None for a constant K
+    stiffening: Stiffening | None = None
+    #: how the stiffness's frequency dependence was chosen, in words
+    stiffening_note: str = ""
 
 
 class StiffnessStep:
@@ -393,14 +400,24 @@ class StiffnessStep:
         self.weights = weights.stiffness
         self.mean = operators.mean_kc(stiff_in_band)
         self._moments: StiffnessMoments | None = None
-        self._key: object = None
+        self._key: tuple[object, object] | None = None
         self.model: DampingModel = "viscous"
+        #: the mounts' stiffening (None: K constant), in the fit of K and in the mass line
+        self.stiffening: Stiffening | None = None
+
+    def factor(self, w: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        """``K(w) / K`` at w (rad/s); None for a constant K."""
+        return None if self.stiffening is None else self.stiffening.factor(w)
 
     def moments(self, Xs: NDArray[np.complex128]) -> StiffnessMoments:
-        """The stiffness moments of Xs, kept while the same array is passed."""
-        if self._key is not Xs or self._moments is None:
+        """The stiffness moments of Xs (with the step's stiffening), kept while the same
+        array and stiffening are passed."""
+        if (self._key is None or self._key[0] is not Xs or self._key[1] is not self.stiffening
+                or self._moments is None):
             p = self.problem
-            self._moments, self._key = stiffness_moments(Xs, p.T, self.w, self.weights), Xs
+            self._moments = stiffness_moments(Xs, p.T, self.w, self.weights,
+                                              self.factor(self.w))
+            self._key = (Xs, self.stiffening)
         return self._moments
 
     def __call__(self, M: NDArray[np.float64], Xs: NDArray[np.complex128]) -> (
@@ -438,8 +455,30 @@ class StiffnessStep:
                                "removed from C, by K*(jw + a), which holds for damping "
                                "analytic in s)")
         ch = choose_damping(Xs, p.T, w, M, weights=self.weights, row_scale=p.row_scale,
-                            symmetric=p.solver.symmetric, moments=self.moments(Xs))
+                            symmetric=p.solver.symmetric, moments=self.moments(Xs),
+                            stiffening=self.factor(w))
         return ch.model, ch.reason
+
+    def choose_stiffening(self, M: NDArray[np.float64], Xs: NDArray[np.complex128],
+                          most: float = np.inf) -> tuple[Stiffening | None, str]:
+        """The mounts' stiffening the stiffness lines Xs call for at mass matrix M, with the
+        step's damping model (BIC, see :func:`processing.stiffness.choose_stiffening`), read
+        on the lines up to :data:`STIFFENING_TOP` times the highest rigid-body mode of M and
+        the fitted K: above the modes a line's K* is mostly ``w^2`` times what the mass
+        matrix misses (its error, the elastic modes' residual), whose rise with frequency
+        would read as a stiffening; and on none above ``most`` (rad/s)."""
+        p = self.problem
+        K = self(M, Xs)[0]
+        try:
+            top = STIFFENING_TOP * float(np.sqrt(max(float(
+                scipy.linalg.eigh(0.5 * (K + K.T), M, eigvals_only=True)[-1]), 0.0)))
+        except (np.linalg.LinAlgError, ValueError):
+            return None, "stiffness constant over frequency: the fit has no rigid-body modes"
+        sel = self.w <= min(top, most)
+        ch = choose_stiffening(Xs[..., sel], p.T, self.w[sel], M, weights=self.weights[:, sel],
+                               row_scale=p.row_scale, symmetric=p.solver.symmetric,
+                               model=self.model)
+        return ch.stiffening, ch.reason
 
 
 def upper_residual(w: NDArray[np.float64]) -> NDArray[np.complex128]:
@@ -473,6 +512,7 @@ def iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
     Xm, wm = problem.X[..., msel], problem.w[msel]
     Xs = step.lines
     s_m = 1j * wm + a
+    g = step.factor(wm)
     Xcm, Xcs = Xm, Xs
     K, C, D, theta = np.zeros((6, 6)), np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(10)
     if start is not None:
@@ -485,7 +525,7 @@ def iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
             KX = ((K + a * C) @ Xf).reshape(Xm.shape) + 1j * wm * (C @ Xf).reshape(Xm.shape)
             fit_ = ml.solve(T[:, :, None] - KX / s_m**2 + 0j)
         else:
-            fit_ = ml.solve_kc(T, K, C, Xcm, wm, D if step.model != "viscous" else None)
+            fit_ = ml.solve_kc(T, K, C, Xcm, wm, D if step.model != "viscous" else None, g)
         new = fit_.theta
         M = mass_matrix(new)
         if fit_.leakage is not None:  # B - M X = -M Y b: clean X of the fitted leakage
@@ -503,13 +543,15 @@ def iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
 
 def _mass_line_rhs(problem: Problem, Xm: NDArray[np.complex128], wm: NDArray[np.float64],
                    K: NDArray[np.float64], C: NDArray[np.float64],
-                   D: NDArray[np.float64] | None = None) -> NDArray[np.complex128]:
+                   D: NDArray[np.float64] | None = None,
+                   stiffening: NDArray[np.float64] | None = None) -> NDArray[np.complex128]:
     """``B = T + K* X / w^2`` on the mass lines (K* = K + j w C + j D as the exponential
-    window shows it)."""
+    window shows it; K and D times the mounts' stiffening on these lines when given)."""
     a = problem.window_decay
     s2 = (1j * wm + a) ** 2
-    KD = K + a * C + (0 if D is None else 1j * D)
-    KX = np.einsum("ab,bel->ael", KD, Xm) + 1j * wm * np.einsum("ab,bel->ael", C, Xm)
+    KD = K + (0 if D is None else 1j * D)
+    KX = (np.einsum("ab,bel->ael", KD, Xm) * (1.0 if stiffening is None else stiffening)
+          + a * np.einsum("ab,bel->ael", C, Xm) + 1j * wm * np.einsum("ab,bel->ael", C, Xm))
     return problem.T[:, :, None] - KX / s2 + 0j
 
 
@@ -713,6 +755,14 @@ def solve(problem: Problem, bands: Bands, weights: LineWeights,
             if model in tried:
                 break
             tried.add(model)
+    stiffening_note = "stiffness constant over frequency: the article's model (plain method)"
+    if problem.improved and problem.window_decay:
+        stiffening_note = ("stiffness constant over frequency: kept with an exponential "
+                           "window (its correction holds for a constant K)")
+    elif problem.improved and opt.stiffening != "auto":
+        stiffening_note = "stiffness constant over frequency: asked for"
+    elif problem.improved:
+        best, stiffening_note = _stiffening(problem, bands, weights, step, shapes, best)
     theta, K, C, D, Xs = best.theta, best.K, best.C, best.D, best.Xs
     halves = None
     if ((opt.uncertainty or _leakage_unmodelled(problem, bands))
@@ -727,7 +777,8 @@ def solve(problem: Problem, bands: Bands, weights: LineWeights,
             theta = theta_c
             K, C, D = step(mass_matrix(theta), Xs)
     msel = weights.mass_lines
-    rhs = _mass_line_rhs(problem, problem.X[..., msel], problem.w[msel], K, C, D)
+    rhs = _mass_line_rhs(problem, problem.X[..., msel], problem.w[msel], K, C, D,
+                         step.factor(problem.w[msel]))
 
     def stiffness_map(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         K_, C_, _D = step(M, Xs)
@@ -735,7 +786,48 @@ def solve(problem: Problem, bands: Bands, weights: LineWeights,
 
     return Fit(theta, K, C, best.iterations, best.converged, best.fit.normal, enforced, ops,
                note, D, step.model, damping_note, mass_line=best.ml, mass_rhs=rhs,
-               stiffness_map=stiffness_map, half_thetas=halves)
+               stiffness_map=stiffness_map, half_thetas=halves, stiffening=step.stiffening,
+               stiffening_note=stiffening_note)
+
+
+#: the stiffening is read on the stiffness lines up to this factor over the highest
+#: rigid-body mode (:meth:`StiffnessStep.choose_stiffening`)
+STIFFENING_TOP = 1.25
+#: with elastic modes seen and their leakage not modelled, the stiffening is read on the
+#: lines up to this fraction of the lowest one (its residual there: 1 % of the mass line's)
+STIFFENING_ELASTIC = 0.1
+#: rounds of reading the stiffening and fitting again with it (the mass matrix the fit
+#: moves changes the stiffness lines' equations a little)
+STIFFENING_ROUNDS = 3
+
+
+def _stiffening(problem: Problem, bands: Bands, weights: LineWeights, step: StiffnessStep,
+                shapes: list[NDArray[np.complex128]], best: _Candidate) -> tuple[
+    _Candidate, str
+]:
+    """The fit with the mounts' stiffening, read from the stiffness lines at the fitted mass
+    matrix, in the stiffness fit and the mass line, when the lines call for it
+    (:meth:`StiffnessStep.choose_stiffening`); else ``best`` as it is. Read again at each
+    new fit's mass matrix, at most :data:`STIFFENING_ROUNDS` times; ``step`` keeps the
+    stiffening taken (the last one found, once one is)."""
+    note = ""
+    # elastic modes seen but their leakage not modelled: their residual rises on the
+    # stiffness lines as (f / f_e)^2; only the lines where it is under 1 % are read
+    f_e = min((pk.frequency for pk in problem.peaks), default=np.inf)
+    most = 2 * np.pi * STIFFENING_ELASTIC * f_e if _leakage_unmodelled(problem, bands) else np.inf
+    for _ in range(STIFFENING_ROUNDS):
+        found, why = step.choose_stiffening(mass_matrix(best.theta), best.Xs, most)
+        if found is None:
+            return best, note or why
+        before = step.stiffening
+        step.stiffening = found
+        done = best.iterations
+        best = _fit_model(problem, weights, step, shapes, start=best)
+        best = dataclasses.replace(best, iterations=done + best.iterations)
+        note = why
+        if before is not None and abs(found.alpha - before.alpha) < 1e-3:
+            break
+    return best, note
 
 
 # --- stage 4: checks -------------------------------------------------------------------------
@@ -887,6 +979,8 @@ def assemble(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
         damping_model=fitted.damping_model,
         damping_note=fitted.damping_note,
         uncertainty=uncertain,
+        stiffening=fitted.stiffening,
+        stiffening_note=fitted.stiffening_note,
     )
 
 

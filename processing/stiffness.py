@@ -6,6 +6,11 @@ pseudo-inverse of X (eq. 14). Over a band, the real ``K``, ``C`` (viscous) and
 these equations in the least-squares sense (optionally symmetric), from 6x6
 moments of X. Which damping terms enter (:data:`DAMPING_MODELS`) is chosen from
 the data by :func:`choose_damping` (docs/mounts.md).
+
+Mounts that stiffen with frequency: ``K* = g(w) (K + j D) + j w C`` with a known
+``g(w) = (w / w_k)^alpha`` (K, D then hold at ``w_k``) is the same least squares with
+``g x`` for the regressor of K and D; the moments carry g (:func:`stiffness_moments`).
+:func:`choose_stiffening` reads alpha from the data (docs/mounts.md).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+import scipy.optimize
 from numpy.typing import NDArray
 
 __all__ = [
@@ -25,11 +31,15 @@ __all__ = [
     "DampingModel",
     "LineOperators",
     "MeanStiffness",
+    "Stiffening",
+    "StiffeningChoice",
     "StiffnessFit",
     "StiffnessMoments",
     "choose_damping",
+    "choose_stiffening",
     "dynamic_stiffness",
     "fit_stiffness",
+    "line_functions",
     "line_operators",
     "stiffness_moments",
     "stiffness_normal",
@@ -209,6 +219,11 @@ class StiffnessMoments:
     ``Gp = sum wt w^p conj(x) x^T`` and ``Qp = sum wt w^p conj(x) t^T`` over
     columns and lines, so that ``sum wt w^q conj(x) y^T = G(q+2) M^T - Q(q+2)``
     for ``y = w^2 (M x - t)``.
+
+    With the mounts' stiffening ``g`` (``stiffened``), the moments the fit of K, C, D
+    uses carry it: G0 ``g^2``, G1 ``g w``, G2 and Q2 ``g w^2`` (the right-hand side of K
+    and D), G3 and Q3 ``w^3`` (that of C) and ``G2c`` ``w^2`` (C with C); Q0 and Q1 are
+    then not formed (no exponential window's correction).
     """
 
     G0: NDArray[np.complex128]
@@ -220,6 +235,9 @@ class StiffnessMoments:
     Q2: NDArray[np.complexfloating]
     Q3: NDArray[np.complexfloating]
     n_equations: int
+    #: the C-with-C moment ``sum wt w^2 conj(x) x^T`` where it differs from G2 (stiffening)
+    G2c: NDArray[np.complex128] | None = None
+    stiffened: bool = False
     #: solvers of the normal equations per (row scale, symmetric), filled on first use
     _solvers: dict[tuple[bytes, bool, str], NDArray[np.float64]] = field(
         default_factory=dict, compare=False, repr=False)
@@ -233,7 +251,8 @@ class StiffnessMoments:
         S = self._solvers.get(key)
         if S is None:
             n = len(DAMPING_BLOCKS[model])
-            Nfull = stiffness_normal(self.G0, self.G1, self.G2, s2, model)
+            Nfull = stiffness_normal(self.G0, self.G1,
+                                     self.G2 if self.G2c is None else self.G2c, s2, model)
             if symmetric:  # unknowns [vech K; vech C; ...] through the duplication matrix
                 back = vech_index(n)[3]
                 S = np.asarray(np.linalg.solve(vech_normal(Nfull), _dup_t(n))[back],
@@ -244,23 +263,43 @@ class StiffnessMoments:
         return S
 
 
+def line_functions(w: NDArray[np.float64], stiffening: NDArray[np.float64] | None,
+                   ) -> NDArray[np.float64]:
+    """The per-line factors (5, n_l) of the moments G0..G3 and G2c of
+    :class:`StiffnessMoments` (Q0..Q3 take the first four): ``1, w, w^2, w^3, w^2``, or with
+    the mounts' stiffening g ``g^2, g w, g w^2, w^3, w^2``."""
+    w = np.asarray(w, dtype=float)
+    if stiffening is None:
+        return np.stack([np.ones_like(w), w, w**2, w**3, w**2])
+    g = np.asarray(stiffening, dtype=float)
+    return np.stack([g**2, g * w, g * w**2, w**3, w**2])
+
+
 def stiffness_moments(
     X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64],
     weights: NDArray[np.float64] | None = None,
+    stiffening: NDArray[np.float64] | None = None,
 ) -> StiffnessMoments:
-    """Moments of the stiffness equations (see :class:`StiffnessMoments`)."""
+    """Moments of the stiffness equations (see :class:`StiffnessMoments`); ``stiffening``:
+    the mounts' ``g(w)`` on the lines, when K and D stiffen with frequency."""
     n_e, n_l = X.shape[1:]
     wt = np.ones((n_e, n_l)) if weights is None else np.asarray(weights, float)
     Xf = X.reshape(6, -1)
     wl = np.broadcast_to(w, (n_e, n_l)).ravel()
     Tf = np.broadcast_to(T[:, :, None], X.shape).reshape(6, -1)
     Xw = np.conj(Xf) * wt.ravel() + 0j
+    n_eq = 2 * 6 * n_e * n_l
+    if stiffening is not None:
+        F = np.broadcast_to(line_functions(w, stiffening)[:, None, :], (5, n_e, n_l))
+        G = [(Xw * f.ravel()) @ Xf.T for f in F]
+        Q = [(Xw * f.ravel()) @ Tf.T for f in F[:4]]
+        return StiffnessMoments(*G[:4], *Q, n_eq, G[4], True)
     G, Q = [], []
     for _ in range(4):  # powers 0..3 of w
         G.append(Xw @ Xf.T)
         Q.append(Xw @ Tf.T)
         Xw = Xw * wl
-    return StiffnessMoments(G[0], G[1], G[2], G[3], Q[0], Q[1], Q[2], Q[3], 2 * 6 * n_e * n_l)
+    return StiffnessMoments(G[0], G[1], G[2], G[3], Q[0], Q[1], Q[2], Q[3], n_eq)
 
 
 def fit_stiffness(
@@ -300,6 +339,8 @@ def fit_stiffness(
     if decay and model != "viscous":
         raise ValueError(f"an exponential window's correction needs viscous damping, not {model}")
     mom = X if isinstance(X, StiffnessMoments) else stiffness_moments(X, T, w, weights)
+    if decay and mom.stiffened:
+        raise ValueError("an exponential window's correction is for a constant K")
     a = decay
     # sum wt w^q conj(x) (-s^2) (M x - t)^T with -s^2 = w^2 - a^2 - 2 j a w (q = 0, 1)
     G = (mom.G0, mom.G1, mom.G2, mom.G3)
@@ -322,14 +363,18 @@ def stiffness_residual(
     M: NDArray[np.float64], sf: StiffnessFit, *,
     weights: NDArray[np.float64] | None = None,
     row_scale: NDArray[np.float64] | None = None,
+    stiffening: NDArray[np.float64] | None = None,
 ) -> tuple[float, float]:
-    """Weighted sums of squares of ``(K + j w C + j D) X_j - w_j^2 (M X_j - T)`` and of the
-    right-hand side ``w_j^2 (M X_j - T)``, over the lines (the quantities :func:`fit_stiffness`
-    compares), for X (6, n_exc, n_lines)."""
+    """Weighted sums of squares of ``(g (K + j D) + j w C) X_j - w_j^2 (M X_j - T)`` and of
+    the right-hand side ``w_j^2 (M X_j - T)``, over the lines (the quantities
+    :func:`fit_stiffness` compares), for X (6, n_exc, n_lines); g the mounts' stiffening on
+    the lines (1 when omitted)."""
     Xf = X.reshape(6, -1)
     shape = X.shape
+    g = 1.0 if stiffening is None else stiffening
     Y = (w**2) * ((M @ Xf).reshape(shape) - T[:, :, None])
-    R = ((sf.K + 1j * sf.D) @ Xf).reshape(shape) + 1j * w * (sf.C @ Xf).reshape(shape) - Y
+    R = (g * ((sf.K + 1j * sf.D) @ Xf).reshape(shape) + 1j * w * (sf.C @ Xf).reshape(shape)
+         - Y)
     wt = np.ones(shape[1:]) if weights is None else np.asarray(weights, float)
     s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
     rss = float(np.einsum("i,iel,el->", s2, np.abs(R) ** 2, wt))
@@ -359,6 +404,7 @@ def choose_damping(
     row_scale: NDArray[np.float64] | None = None,
     symmetric: bool = True,
     moments: StiffnessMoments | None = None,
+    stiffening: NDArray[np.float64] | None = None,
 ) -> DampingChoice:
     """Viscous C, structural D or both in ``K*``, by the Bayesian information criterion of the
     stiffness fit over the lines given.
@@ -370,14 +416,16 @@ def choose_damping(
     more than 10 (strong evidence): a stiffness band too narrow to tell ``w C`` from a
     constant gives nearly equal residuals and keeps it.
     """
-    mom = moments if moments is not None else stiffness_moments(X, T, w, weights)
+    mom = (moments if moments is not None
+           else stiffness_moments(X, T, w, weights, stiffening))
     wt = np.ones(X.shape[1:]) if weights is None else np.asarray(weights, float)
     n = 2 * 6 * int(np.count_nonzero(wt))
     per_block = 21 if symmetric else 36
     bic: dict[str, float] = {}
     for model in DAMPING_MODELS:
         sf = fit_stiffness(mom, T, w, M, row_scale=row_scale, symmetric=symmetric, model=model)
-        rss, yss = stiffness_residual(X, T, w, M, sf, weights=weights, row_scale=row_scale)
+        rss, yss = stiffness_residual(X, T, w, M, sf, weights=weights, row_scale=row_scale,
+                                      stiffening=stiffening)
         rss = max(rss, _RSS_FLOOR * yss, 1e-300)
         bic[model] = n * float(np.log(rss / n)) + per_block * len(DAMPING_BLOCKS[model]) * np.log(n)
     best = min(DAMPING_MODELS, key=lambda m: bic[m])
@@ -390,3 +438,111 @@ def choose_damping(
     reason = (f"damping {words[chosen]}: BIC over the stiffness lines relative to viscous C: "
               f"{others} (another model is taken when lower by more than {_BIC_MARGIN:g})")
     return DampingChoice(chosen, bic, reason)
+
+
+@dataclass(frozen=True)
+class Stiffening:
+    """The mounts' stiffening with frequency: ``K(w) = K (w / w_k)^alpha``, K (and D) stated
+    at ``reference_hz`` = ``w_k / 2 pi``."""
+
+    alpha: float
+    reference_hz: float
+
+    @property
+    def per_decade(self) -> float:
+        """Rise of K per decade of frequency (0.25: +25 %)."""
+        return float(10.0**self.alpha - 1.0)
+
+    def factor(self, w: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``K(w) / K`` at angular frequencies w, rad/s."""
+        return np.asarray((np.asarray(w, dtype=float) / (2 * np.pi * self.reference_hz))
+                          ** self.alpha, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class StiffeningChoice:
+    """The mounts' stiffening read from the stiffness lines (None: K constant), and why."""
+
+    stiffening: Stiffening | None
+    bic: dict[str, float]
+    reason: str
+
+
+#: largest rise per decade searched: a factor 2 a decade
+STIFFENING_MAX = 1.0
+#: least rise per decade taken: elastomer mounts rise 10-40 %; a smaller rise changes the
+#: mass line's K term less than K's own uncertainty, and is what other trends on the lines
+#: (an elastic mode's residual, a small error of the mass matrix) read as
+STIFFENING_MIN = 0.05
+#: fewest stiffness lines, and the least frequency ratio they span (half a decade: a
+#: narrower span reads a slope per decade from noise), to read a stiffening from
+STIFFENING_MIN_LINES, STIFFENING_MIN_SPAN = 8, 3.0
+
+
+def choose_stiffening(
+    X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64],
+    M: NDArray[np.float64], *,
+    weights: NDArray[np.float64] | None = None,
+    row_scale: NDArray[np.float64] | None = None,
+    symmetric: bool = True,
+    model: DampingModel = "viscous",
+) -> StiffeningChoice:
+    """A constant K, or one rising as ``(w / w_k)^alpha``, by the Bayesian information
+    criterion of the stiffness fit over the lines given (as :func:`choose_damping`).
+
+    ``w_k`` is the lines' weighted geometric mean frequency (the weight of a line: its
+    columns' weights), where K is then stated; alpha minimises the residual of the fit with
+    ``g(w) = (w / w_k)^alpha`` for K and D (a bounded scalar search over a rise of at most
+    :data:`STIFFENING_MAX` a decade). The stiffening is taken when its BIC (one unknown
+    more) is lower than the constant K's by more than 10 and alpha is not at the search's
+    bound, and the rise is at least :data:`STIFFENING_MIN` a decade; the reason gives the
+    rise found either way.
+
+    Only a rise is searched: mounts stiffen with frequency. An apparent fall is the body's
+    flexibility in series with the mounts (its elastic modes above the band soften what the
+    stiffness lines show as they come nearer), which is no property of the mounts and must
+    not be carried into the mass line.
+    """
+    wt = np.ones(X.shape[1:]) if weights is None else np.asarray(weights, float)
+    line = wt.sum(axis=0)
+    used = line > 0
+    if np.count_nonzero(used) < STIFFENING_MIN_LINES:
+        return StiffeningChoice(None, {}, f"stiffness constant over frequency: "
+                                f"{np.count_nonzero(used)} stiffness lines (at least "
+                                f"{STIFFENING_MIN_LINES} to read a rise from)")
+    if w[used].max() < STIFFENING_MIN_SPAN * w[used].min():
+        return StiffeningChoice(None, {}, "stiffness constant over frequency: the stiffness "
+                                f"lines span less than {STIFFENING_MIN_SPAN:g} times in "
+                                "frequency")
+    w_k = float(np.exp(np.sum(line[used] * np.log(w[used])) / np.sum(line[used])))
+    f_k = w_k / (2 * np.pi)
+
+    def rss(alpha: float) -> float:
+        g = (w / w_k) ** alpha
+        mom = stiffness_moments(X, T, w, weights, g)
+        sf = fit_stiffness(mom, T, w, M, row_scale=row_scale, symmetric=symmetric, model=model)
+        r, y = stiffness_residual(X, T, w, M, sf, weights=weights, row_scale=row_scale,
+                                  stiffening=g)
+        return max(r, _RSS_FLOOR * y, 1e-300)
+
+    bound = float(np.log10(1.0 + STIFFENING_MAX))
+    best = scipy.optimize.minimize_scalar(rss, bounds=(0.0, bound), method="bounded",
+                                          options={"xatol": 1e-5})
+    alpha = float(best.x)
+    n = 2 * 6 * int(np.count_nonzero(wt))
+    p = (21 if symmetric else 36) * len(DAMPING_BLOCKS[model])
+    bic = {"constant": n * float(np.log(rss(0.0) / n)) + p * np.log(n),
+           "rising": n * float(np.log(float(best.fun) / n)) + (p + 1) * np.log(n)}
+    rise = 10.0**alpha - 1.0
+    gain = bic["rising"] - bic["constant"]
+    span = f"{w[used].min() / (2 * np.pi):.3g}-{w[used].max() / (2 * np.pi):.3g} Hz"
+    if gain < -_BIC_MARGIN and STIFFENING_MIN <= rise and alpha < 0.98 * bound:
+        return StiffeningChoice(Stiffening(alpha, f_k), bic, (
+            f"stiffness rising {rise:+.1%} per decade over the stiffness lines ({span}; BIC "
+            f"{gain:+.4g} against a constant K): K stated at {f_k:.3g} Hz, and carried into "
+            f"the mass line as K (f / {f_k:.3g} Hz)^{alpha:.4f}"))
+    return StiffeningChoice(None, bic, (
+        f"stiffness constant over frequency: a rise of {rise:+.1%} per decade fits the "
+        f"stiffness lines ({span}) with BIC {gain:+.4g} against a constant K (taken when "
+        f"lower by more than {_BIC_MARGIN:g}, a rise of {STIFFENING_MIN:.0%} to "
+        f"{STIFFENING_MAX:.0%} a decade)"))
