@@ -293,7 +293,8 @@ def stiffness_moments(
         F = np.broadcast_to(line_functions(w, stiffening)[:, None, :], (5, n_e, n_l))
         G = [(Xw * f.ravel()) @ Xf.T for f in F]
         Q = [(Xw * f.ravel()) @ Tf.T for f in F[:4]]
-        return StiffnessMoments(*G[:4], *Q, n_eq, G[4], True)
+        return StiffnessMoments(G[0], G[1], G[2], G[3], Q[0], Q[1], Q[2], Q[3], n_eq, G[4],
+                                True)
     G, Q = [], []
     for _ in range(4):  # powers 0..3 of w
         G.append(Xw @ Xf.T)

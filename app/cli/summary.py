@@ -162,15 +162,19 @@ def print_result(
     if u is not None:
         con.print(SPREADS, markup=False)
     con.print(inertia_table(result, truth))
-    con.print(matrix_table("Stiffness K at O (N/m, N/rad, N m/m, N m/rad)", result.K, K_truth,
-                           *_spreads(u, "stiffness")))
+    at = ("" if result.stiffening is None
+          else f", at {result.stiffening.reference_hz:.3g} Hz: K(f) = K (f / "
+               f"{result.stiffening.reference_hz:.3g} Hz)^{result.stiffening.alpha:.4f}")
+    con.print(matrix_table(f"Stiffness K at O (N/m, N/rad, N m/m, N m/rad{at})", result.K,
+                           K_truth, *_spreads(u, "stiffness")))
     con.print(matrix_table("Damping C at O (N s/m, ...)", result.C, C_truth,
                            *_spreads(u, "damping")))
     if result.damping_model != "viscous":
         con.print(matrix_table("Structural damping D at O (K* = K + jwC + jD; N/m, ...)",
                                result.D, None))
-    if result.damping_note:
-        con.print(f"{result.damping_note[0].upper()}{result.damping_note[1:]}")
+    for note in (result.damping_note, result.stiffening_note if result.stiffening else ""):
+        if note:
+            con.print(f"{note[0].upper()}{note[1:]}")
     mb, sb = result.mass_band, result.stiffness_band
     con.print(
         f"Bands: mass line {mb[0]:.1f}-{mb[1]:.1f} Hz ({len(result.mass_lines)} lines), "

@@ -130,7 +130,8 @@ def _matrices(r: IdentificationResult, u: Uncertainty | None) -> list[str]:
     """The K, C and D tables at O."""
     return [
         "<h2>Stiffness K at O</h2><p>N/m, N/rad, N m/m, N m/rad; DOF order x, y, z, rx, "
-        "ry, rz.</p>",
+        f"ry, rz.{'' if r.stiffening is None else ' ' + html.escape(r.stiffening_note) + '.'}"
+        "</p>",
         _table(("", *figures.DOF_LABELS),
                [(d, *row) for d, row in zip(figures.DOF_LABELS,
                                             format_matrix(r.K, u, "stiffness"),

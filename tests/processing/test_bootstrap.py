@@ -107,6 +107,11 @@ def _scenario_frfs(**spec: object) -> FRFSet:
     ({"seed": 34, "noise": 0.0, "elastic_ratio": 6.0}, IdentifyOptions(), None),  # leakage shapes
     ({"seed": 35, "noise": 0.01, "elastic_ratio": None}, IdentifyOptions(),
      SolverSettings(symmetric=False)),
+    # mounts stiffening 30 % a decade: g(w) in the stiffness moments and the mass line
+    ({"seed": 36, "noise": 0.01, "elastic_ratio": None, "stiffening": 0.3}, IdentifyOptions(),
+     None),
+    ({"seed": 38, "noise": 0.0, "elastic_ratio": 6.0, "stiffening": 0.3}, IdentifyOptions(),
+     None),  # leakage shapes
 ])
 def test_resamples_of_the_data_itself_give_the_fit(spec: dict[str, object],
                                                    options: IdentifyOptions,
@@ -116,6 +121,7 @@ def test_resamples_of_the_data_itself_give_the_fit(spec: dict[str, object],
     m = _with_copies(_scenario_frfs(n_sensors=3, n_forces=8, **spec))
     fitted, boot = idm.bootstrap_identify(m, options, n=4, solver=solver)
     assert isinstance(boot, bsm.Bootstrap), boot
+    assert (fitted.stiffening is not None) == ("stiffening" in spec), fitted.stiffening_note
     scale = np.abs(fitted.theta[0])
     assert_allclose(boot.theta, np.broadcast_to(fitted.theta, boot.theta.shape), rtol=1e-7,
                     atol=1e-9 * scale * np.abs(fitted.theta).max() / scale)

@@ -334,8 +334,8 @@ class ResultsView(QtWidgets.QWidget):
         fill_table(self.C, ("C at O", *dofs),
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.C, u, "damping"),
                                                 strict=True)])
-        self.damping_note.setText(f"K* = K + jωC + jD; {r.damping_note}."
-                                  if r.damping_note else "K* = K + jωC + jD")
+        notes = [n for n in (r.damping_note, r.stiffening_note if r.stiffening else "") if n]
+        self.damping_note.setText("; ".join(["K* = K + jωC + jD", *notes]) + ".")
         fill_table(self.D, ("D at O", *dofs),
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.D), strict=True)])
         self.K.setToolTip("N/m (translation rows/columns), N/rad, N m/m, N m/rad")
