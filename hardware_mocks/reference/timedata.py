@@ -28,6 +28,15 @@ is ``F = (I + m_a H_dd)^-1 G V`` (``H_dd`` the accelerance between the drive poi
 force drops out at the structure's resonances. Two shakers at once share part of their drive
 signal (correlated references).
 
+A real test's error budget on the recorded channels (:class:`Budget`, all off by default;
+``budget=`` of either spec): noise at a fraction of each channel's RMS, each response
+channel's time skew against the force (a fraction of a sample, applied on the FFT lines
+before the recording is formed), mains hum (50 or 60 Hz and two harmonics) on the
+responses, and a converter of a few bits over a fixed input range per channel for the whole
+test (the range a headroom over the channel's largest value in the test: quiet channels sit
+near the converter's floor), one or two response channels of some runs ranged so low that
+their largest samples clip (every hit reaching the range is labelled clipped).
+
 :func:`write_uff` writes a test as UFF dataset 58/58b time records (ordinate 13 force, 12
 acceleration, one load case per run) with units (164) and nodes (2411), written here from
 the format's description (no project code), so the project's reader is checked against an
@@ -46,7 +55,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
 
@@ -57,7 +66,7 @@ from numpy.typing import NDArray
 from hardware_mocks.reference.scenarios import Scenario
 from hardware_mocks.reference.system import ReferenceSystem, Truth
 
-__all__ = ["HammerSpec", "Hit", "ShakerSpec", "TimeRecording", "TimeTest", "good_and_bad",
+__all__ = ["Budget", "HammerSpec", "Hit", "ShakerSpec", "TimeRecording", "TimeTest", "good_and_bad",
            "hammer_test", "shaker_test", "write_uff"]
 
 #: the tail after a recording is followed until the slowest mode is down to this fraction
@@ -154,6 +163,31 @@ class TimeTest:
 
 
 @dataclass(frozen=True)
+class Budget:
+    """A real test's errors on the recorded channels (module notes); the defaults add none.
+
+    ``rms_noise``: noise on the force and on each response, the fraction of that channel's
+    RMS over the run; ``skew``: each response channel's delay against the force, drawn
+    within +-``skew`` samples; ``hum``: mains hum on each response at this fraction of its
+    RMS (``mains_hz`` and its 2nd and 3rd harmonics at 0.5 and 0.3 of it, random phases);
+    ``bits``: a converter of this many bits over a fixed range per channel (a headroom drawn
+    log-uniform in ``headroom`` over the channel's largest value in the test), None for
+    none; ``clip_runs``: runs where one or two response channels are ranged under their
+    ``clip_samples``-th (drawn) largest sample, so that they clip there and wherever else
+    the test reaches that level.
+    """
+
+    rms_noise: float = 0.0
+    skew: float = 0.0
+    hum: float = 0.0
+    mains_hz: float = 50.0
+    bits: int | None = None
+    headroom: tuple[float, float] = (2.0, 100.0)
+    clip_runs: int = 0
+    clip_samples: tuple[int, int] = (1, 5)
+
+
+@dataclass(frozen=True)
 class HammerSpec:
     """What a hammer test draws.
 
@@ -182,6 +216,7 @@ class HammerSpec:
     damping: float = 1.0
     tip: float = 1.0
     fs: float | None = None
+    budget: Budget = field(default_factory=Budget)
 
 
 @dataclass(frozen=True)
@@ -211,6 +246,7 @@ class ShakerSpec:
     drift: float = 1e-3
     damping: float = 1.0
     fs: float | None = None
+    budget: Budget = field(default_factory=Budget)
 
 
 def _sample_rate(scenario: Scenario, fs: float | None) -> float:
@@ -227,11 +263,13 @@ def _tail(system: ReferenceSystem) -> float:
 
 def _through(system: ReferenceSystem, scenario: Scenario, forces: NDArray[np.float64],
              exc: NDArray[np.int64], fs: float, tail: float, armature: float = 0.0,
+             delay: NDArray[np.float64] | None = None,
              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The forces and the exact responses (n_resp, n) of the system to ``forces``
     (n_ref, n) at the scenario's excitations ``exc``; with ``armature`` > 0, ``forces`` are
     the shakers' blocked forces ``G V`` and the forces applied are ``(I + m_a H_dd)^-1 G V``.
-    Both pass the anti-alias filter (:func:`_anti_alias`) as a measurement's would."""
+    Both pass the anti-alias filter (:func:`_anti_alias`) as a measurement's would;
+    ``delay`` (n_resp,) s: each response recorded that much late (channel skew)."""
     n = forces.shape[1]
     N = scipy.fft.next_fast_len(n + int(np.ceil(tail * fs)), real=True)
     F = scipy.fft.rfft(forces, N, axis=-1)
@@ -251,6 +289,8 @@ def _through(system: ReferenceSystem, scenario: Scenario, forces: NDArray[np.flo
         X[:, lo:lo + _BLOCK] = np.einsum("ref,ef->rf", H, Fb)
     G = _anti_alias(freq, fs)
     true_force = scipy.fft.irfft(F * G, N, axis=-1)[:, :n]
+    if delay is not None:
+        X = X * np.exp(-2j * np.pi * freq[None, :] * np.asarray(delay, float)[:, None])
     return true_force, scipy.fft.irfft(X * G, N, axis=-1)[:, :n]
 
 
@@ -302,6 +342,66 @@ def _force_errors(f: NDArray[np.float64], fs: float, rng: np.random.Generator, s
     return f + off + drift + noise * scale * rng.normal(size=f.shape)
 
 
+def _delays(budget: Budget, n_resp: int, fs: float, rng: np.random.Generator) -> (
+    NDArray[np.float64] | None
+):
+    """Each response channel's skew against the force, s (None without)."""
+    if not budget.skew:
+        return None
+    return np.asarray(rng.uniform(-budget.skew, budget.skew, n_resp) / fs, dtype=np.float64)
+
+
+def _apply_budget(runs: list[TimeRecording], b: Budget, fs: float,
+                  rng: np.random.Generator) -> list[TimeRecording]:
+    """The runs as the test's channels record them under ``b`` (the skew is applied when the
+    responses are formed); hits reaching a channel's range are labelled clipped."""
+    if b == Budget():
+        return runs
+    forces, resps = [], []
+    for r in runs:
+        f, x = r.forces.copy(), r.responses.copy()
+        rms_x = np.sqrt(np.mean(x**2, axis=1, keepdims=True))
+        if b.hum:
+            t = np.arange(r.n_samples) / fs
+            ph = rng.uniform(0, 2 * np.pi, (x.shape[0], 3))
+            x += b.hum * rms_x * sum(a * np.sin(2 * np.pi * k * b.mains_hz * t + ph[:, k - 1:k])
+                                     for k, a in ((1, 1.0), (2, 0.5), (3, 0.3)))
+        if b.rms_noise:
+            f += (b.rms_noise * np.sqrt(np.mean(f**2, axis=1, keepdims=True))
+                  * rng.normal(size=f.shape))
+            x += b.rms_noise * rms_x * rng.normal(size=x.shape)
+        forces.append(f)
+        resps.append(x)
+    n_resp = resps[0].shape[0]
+    lo, hi = np.log(b.headroom)
+    top_x = np.max([np.max(np.abs(x), axis=1) for x in resps], axis=0)
+    top_f = max(float(np.max(np.abs(f))) for f in forces)
+    range_x = top_x * np.exp(rng.uniform(lo, hi, n_resp))
+    range_f = top_f * float(np.exp(rng.uniform(lo, hi)))
+    for k in rng.choice(len(runs), size=min(b.clip_runs, len(runs)), replace=False):
+        for c in rng.choice(n_resp, size=int(rng.integers(1, 3)), replace=False):
+            m = int(rng.integers(b.clip_samples[0], b.clip_samples[1] + 1))
+            range_x[c] = min(range_x[c], float(np.sort(np.abs(resps[k][c]))[-m - 1]))
+    out = []
+    for r, f, x in zip(runs, forces, resps, strict=True):
+        if b.bits is not None:  # the converter's codes, its range its last code
+            lsb_x = 2 * range_x[:, None] / 2**b.bits
+            x = np.round(x / lsb_x) * lsb_x
+            lsb_f = 2 * range_f / 2**b.bits
+            f = np.round(f / lsb_f) * lsb_f
+        x = np.clip(x, -range_x[:, None], range_x[:, None])
+        f = np.clip(f, -range_f, range_f)
+        hits = r.hits
+        if hits:
+            at = [round(h.time * fs) for h in hits] + [r.n_samples]
+            full = (np.any(np.abs(x) >= range_x[:, None] * (1 - 1e-12), axis=0)
+                    | np.any(np.abs(f) >= range_f * (1 - 1e-12), axis=0))
+            hits = tuple(replace(h, clipped=h.clipped or bool(np.any(full[a:z])))
+                         for h, a, z in zip(hits, at[:-1], at[1:], strict=True))
+        out.append(replace(r, forces=f, responses=x, hits=hits))
+    return out
+
+
 def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
     """One hammer test of ``scenario``: per excitation point one run of ``spec.hits`` hits.
 
@@ -309,7 +409,9 @@ def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
     distinct runs (at most one defect a run), at random hits; :class:`Hit` labels them.
     """
     rng = np.random.default_rng([spec.seed, 58])
+    rng_b = np.random.default_rng([spec.seed, 60])  # the budget's draws: a stream of its own
     fs = _sample_rate(scenario, spec.fs)
+    skew = _delays(spec.budget, scenario.sensors.nodes.size, fs, rng_b)
     system = (scenario.system if spec.damping == 1.0
               else scenario.system.with_mount_damping(spec.damping))
     tail = _tail(system)
@@ -342,11 +444,11 @@ def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
             delay = width[which] * rng.uniform(2.5, 8.0)
             f[0] += _pulse(t, times[which] + delay, width[which],
                            peak[which] * rng.uniform(0.2, 0.6))
-        tf0, x0 = _through(system, scenario, f[:1], np.array([e]), fs, tail)
+        tf0, x0 = _through(system, scenario, f[:1], np.array([e]), fs, tail, delay=skew)
         ch, scale, top = 0, 1.0, np.inf
         if kind == "clipped":  # the hit, the channel and the ADC range: a flat top of 3+
             seg = (t >= times[which]) & (t < times[which] + gaps[which])
-            tf1, x1 = _through(system, scenario, f[1:], np.array([e]), fs, tail)
+            tf1, x1 = _through(system, scenario, f[1:], np.array([e]), fs, tail, delay=skew)
             others = np.max(np.abs(x0[:, ~seg] + x1[:, ~seg]), axis=1)
             flat = _flat_level(x0[:, seg] + x1[:, seg])
             ch = int(np.argmax(flat / others))
@@ -364,6 +466,7 @@ def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
                          clipped=kind == "clipped" and k == which) for k in range(spec.hits))
         runs.append(TimeRecording(e + 1, np.array([e]), force, resp, hits))
         widths.append(width)
+    runs = _apply_budget(runs, spec.budget, fs, rng_b)
     return TimeTest(scenario, system, "hammer", fs, tuple(runs),
                     {"spacing": spec.spacing, "pulse_width": float(np.median(widths)),
                      "tail": tail, "damping": spec.damping})
@@ -392,8 +495,10 @@ def shaker_test(scenario: Scenario, spec: ShakerSpec) -> TimeTest:
     """One shaker test of ``scenario``: each excitation point driven once (``shakers=1``), or
     pairs of points driven together (``shakers=2``; an odd last point alone)."""
     rng = np.random.default_rng([spec.seed, 59])
+    rng_b = np.random.default_rng([spec.seed, 61])  # the budget's draws: a stream of its own
     fs = _sample_rate(scenario, spec.fs)
     fmax = fs / 2.56
+    skew = _delays(spec.budget, scenario.sensors.nodes.size, fs, rng_b)
     system = (scenario.system if spec.damping == 1.0
               else scenario.system.with_mount_damping(spec.damping))
     tail = _tail(system)
@@ -406,11 +511,13 @@ def shaker_test(scenario: Scenario, spec: ShakerSpec) -> TimeTest:
         if exc.size == 2:  # correlated references: part of one drive in the other
             c = spec.correlation
             v[1] = c * v[0] + np.sqrt(1 - c**2) * v[1]
-        true_force, x = _through(system, scenario, spec.force * v, exc, fs, tail, spec.armature)
+        true_force, x = _through(system, scenario, spec.force * v, exc, fs, tail, spec.armature,
+                                 skew)
         resp = _sensor_errors(x, fs, rng, spec.noise_response, spec.settling,
                               spec.drift)
         force = _force_errors(true_force, fs, rng, spec.force, spec.noise_force, spec.offset)
         runs.append(TimeRecording(k + 1, exc, force, resp))
+    runs = _apply_budget(runs, spec.budget, fs, rng_b)
     return TimeTest(scenario, system, spec.kind, fs, tuple(runs),
                     {"tail": tail, "damping": spec.damping, "armature": spec.armature})
 

@@ -12,6 +12,7 @@ from numpy.testing import assert_allclose
 from app.io.uff import read_time_uff
 from hardware_mocks.reference.scenarios import Scenario, ScenarioSpec, build_scenario
 from hardware_mocks.reference.timedata import (
+    Budget,
     HammerSpec,
     ShakerSpec,
     good_and_bad,
@@ -137,3 +138,72 @@ def test_uff_reads_back(tmp_path: Path, binary: bool) -> None:
         assert got.exc_node == sc.forces.ids[e]
         assert_allclose(got.exc_dir, sc.forces.reported_dirs[e])
         assert_allclose(got.resp_dirs, sc.sensors.reported_dirs)
+
+
+_QUIET = {"noise_force": 0.0, "noise_response": 0.0, "offset": 0.0, "settling": 0.0,
+          "drift": 0.0}
+
+
+def test_skewed_channels_are_the_exact_frf_delayed() -> None:
+    """Skew up to a sample: each response's DFT ratio is the model's FRF times the delay
+    ``exp(-j w tau)`` of its channel, tau within the drawn bound, the force undelayed."""
+    sc = _scenario(2)
+    spec = HammerSpec(seed=3, hits=1, spacing=12.0, damping=3.0, fs=512, **_QUIET)
+    t0 = hammer_test(sc, spec)
+    t = hammer_test(sc, HammerSpec(**{**spec.__dict__, "budget": Budget(skew=1.0)}))
+    r, r0 = t.runs[0], t0.runs[0]
+    assert_allclose(r.forces, r0.forces, rtol=0, atol=0)
+    F = np.fft.rfft(r.forces[0])
+    freq = np.fft.rfftfreq(r.n_samples, 1 / t.fs)
+    keep = (freq > 0.5) & (freq < t.fs / 2.56)
+    H = t.exact_frf(freq[keep])[:, 0]
+    ratio = (np.fft.rfft(r.responses, axis=-1)[:, keep] / F[keep]) / H
+    w = 2 * np.pi * freq[keep]
+    tau = -(np.angle(ratio) @ w) / (w @ w)  # each channel's delay: the phase's slope
+    assert np.all(np.abs(tau) <= 1.0 / t.fs) and np.ptp(tau) > 0.1 / t.fs
+    err = np.abs(ratio - np.exp(-1j * w[None] * tau[:, None])) * np.abs(H) / np.max(
+        np.abs(H), axis=-1, keepdims=True)
+    assert err.max() < 1e-4
+
+
+def test_converter_codes_clip_and_label_the_hits() -> None:
+    """A 16-bit converter over fixed ranges: every sample a multiple of its channel's step;
+    the clipped runs' channels sit at their range on 1-5 samples of the loudest hit, and
+    exactly the hits that reach a range are labelled clipped."""
+    sc = _scenario()
+    b = Budget(bits=16, headroom=(2.0, 50.0), clip_runs=2, clip_samples=(1, 5))
+    t = hammer_test(sc, HammerSpec(seed=5, hits=4, fs=512, budget=b))
+    ranges = np.max([np.max(np.abs(r.responses), axis=1) for r in t.runs], axis=0)
+    clipped_hits = 0
+    for r in t.runs:
+        at = [round(h.time * t.fs) for h in r.hits] + [r.n_samples]
+        for h, a, z in zip(r.hits, at[:-1], at[1:], strict=True):
+            reach = np.any(np.abs(r.responses[:, a:z]) >= ranges[:, None] * (1 - 1e-12))
+            assert h.clipped == bool(reach)
+            clipped_hits += h.clipped
+    assert 1 <= clipped_hits < 4 * len(t.runs)
+    # codes: each channel's samples are whole multiples of one step, at most 2^16 of them
+    for x in (x for r in t.runs for x in r.responses):
+        levels = np.unique(x)
+        step = np.min(np.diff(levels))
+        assert_allclose(levels / step, np.round(levels / step), rtol=0, atol=1e-6)
+        assert levels.size <= 2**16
+
+
+def test_mains_hum_sits_at_the_mains_lines() -> None:
+    """Hum on the responses at 50 Hz and its harmonics, at the drawn fraction of each
+    channel's RMS; the force has none."""
+    sc = _scenario()
+    spec = ShakerSpec(seed=2, duration=8.0, fs=512, **_QUIET)
+    t0 = shaker_test(sc, spec)
+    t = shaker_test(sc, ShakerSpec(**{**spec.__dict__, "budget": Budget(hum=0.05)}))
+    r, r0 = t.runs[0], t0.runs[0]
+    assert_allclose(r.forces, r0.forces, rtol=0, atol=0)
+    d = r.responses - r0.responses
+    D = np.abs(np.fft.rfft(d, axis=-1))
+    freq = np.fft.rfftfreq(r.n_samples, 1 / t.fs)
+    lines = [int(np.argmin(np.abs(freq - f))) for f in (50.0, 100.0, 150.0)]
+    assert set(np.argsort(D, axis=-1)[:, -3:].ravel()) <= set(lines)
+    rms0 = np.sqrt(np.mean(r0.responses**2, axis=1))
+    amp = np.sqrt(2) * np.sqrt(np.mean(d**2, axis=1)) / np.sqrt(1 + 0.5**2 + 0.3**2)
+    assert_allclose(amp, 0.05 * rms0, rtol=0.02)
