@@ -34,8 +34,8 @@ channel's time skew against the force (a fraction of a sample, applied on the FF
 before the recording is formed), mains hum (50 or 60 Hz and two harmonics) on the
 responses, and a converter of a few bits over a fixed input range per channel for the whole
 test (the range a headroom over the channel's largest value in the test: quiet channels sit
-near the converter's floor), one or two response channels of some runs ranged so low that
-their largest samples clip (every hit reaching the range is labelled clipped).
+near the converter's floor), and response channels ranged just under their largest samples,
+which clip (every hit reaching a range is labelled clipped).
 
 :func:`write_uff` writes a test as UFF dataset 58/58b time records (ordinate 13 force, 12
 acceleration, one load case per run) with units (164) and nodes (2411), written here from
@@ -137,6 +137,8 @@ class TimeTest:
     fs : sample rate, Hz
     runs : the recordings
     settings : what was drawn (pulse widths, spacing, noise levels, ...) for reports
+    ranges : each response channel's input range with a :class:`Budget`'s converter or
+        clipping, m/s^2 (what a station file would state), else None
     """
 
     scenario: Scenario
@@ -145,6 +147,7 @@ class TimeTest:
     fs: float
     runs: tuple[TimeRecording, ...]
     settings: dict[str, float] = field(default_factory=dict)
+    ranges: NDArray[np.float64] | None = None
 
     @property
     def truth(self) -> Truth:
@@ -172,9 +175,9 @@ class Budget:
     RMS (``mains_hz`` and its 2nd and 3rd harmonics at 0.5 and 0.3 of it, random phases);
     ``bits``: a converter of this many bits over a fixed range per channel (a headroom drawn
     log-uniform in ``headroom`` over the channel's largest value in the test), None for
-    none; ``clip_runs``: runs where one or two response channels are ranged under their
-    ``clip_samples``-th (drawn) largest sample, so that they clip there and wherever else
-    the test reaches that level.
+    none; ``clip_channels``: that many response channels (drawn) ranged under their
+    ``clip_samples``-th (drawn) largest sample in the test, so that they clip for that many
+    samples, in the run where they peak.
     """
 
     rms_noise: float = 0.0
@@ -183,7 +186,7 @@ class Budget:
     mains_hz: float = 50.0
     bits: int | None = None
     headroom: tuple[float, float] = (2.0, 100.0)
-    clip_runs: int = 0
+    clip_channels: int = 0
     clip_samples: tuple[int, int] = (1, 5)
 
 
@@ -352,11 +355,13 @@ def _delays(budget: Budget, n_resp: int, fs: float, rng: np.random.Generator) ->
 
 
 def _apply_budget(runs: list[TimeRecording], b: Budget, fs: float,
-                  rng: np.random.Generator) -> list[TimeRecording]:
+                  rng: np.random.Generator) -> tuple[list[TimeRecording],
+                                                     NDArray[np.float64] | None]:
     """The runs as the test's channels record them under ``b`` (the skew is applied when the
-    responses are formed); hits reaching a channel's range are labelled clipped."""
+    responses are formed), and the response channels' input ranges (None without a
+    converter or clipping); hits reaching a channel's range are labelled clipped."""
     if b == Budget():
-        return runs
+        return runs, None
     forces, resps = [], []
     for r in runs:
         f, x = r.forces.copy(), r.responses.copy()
@@ -378,10 +383,12 @@ def _apply_budget(runs: list[TimeRecording], b: Budget, fs: float,
     top_f = max(float(np.max(np.abs(f))) for f in forces)
     range_x = top_x * np.exp(rng.uniform(lo, hi, n_resp))
     range_f = top_f * float(np.exp(rng.uniform(lo, hi)))
-    for k in rng.choice(len(runs), size=min(b.clip_runs, len(runs)), replace=False):
-        for c in rng.choice(n_resp, size=int(rng.integers(1, 3)), replace=False):
-            m = int(rng.integers(b.clip_samples[0], b.clip_samples[1] + 1))
-            range_x[c] = min(range_x[c], float(np.sort(np.abs(resps[k][c]))[-m - 1]))
+    for c in rng.choice(n_resp, size=min(b.clip_channels, n_resp), replace=False):
+        # ranged under the test's m-th largest sample: m samples clip, in the run where the
+        # channel peaks (and wherever else the test comes as near the top)
+        m = int(rng.integers(b.clip_samples[0], b.clip_samples[1] + 1))
+        every = np.sort(np.concatenate([np.abs(x[c]) for x in resps]))
+        range_x[c] = min(range_x[c], float(every[-m]))
     out = []
     for r, f, x in zip(runs, forces, resps, strict=True):
         if b.bits is not None:  # the converter's codes, its range its last code
@@ -399,7 +406,8 @@ def _apply_budget(runs: list[TimeRecording], b: Budget, fs: float,
             hits = tuple(replace(h, clipped=h.clipped or bool(np.any(full[a:z])))
                          for h, a, z in zip(hits, at[:-1], at[1:], strict=True))
         out.append(replace(r, forces=f, responses=x, hits=hits))
-    return out
+    ranged = b.bits is not None or b.clip_channels > 0
+    return out, (np.asarray(range_x, dtype=np.float64) if ranged else None)
 
 
 def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
@@ -466,10 +474,10 @@ def hammer_test(scenario: Scenario, spec: HammerSpec) -> TimeTest:
                          clipped=kind == "clipped" and k == which) for k in range(spec.hits))
         runs.append(TimeRecording(e + 1, np.array([e]), force, resp, hits))
         widths.append(width)
-    runs = _apply_budget(runs, spec.budget, fs, rng_b)
+    runs, ranges = _apply_budget(runs, spec.budget, fs, rng_b)
     return TimeTest(scenario, system, "hammer", fs, tuple(runs),
                     {"spacing": spec.spacing, "pulse_width": float(np.median(widths)),
-                     "tail": tail, "damping": spec.damping})
+                     "tail": tail, "damping": spec.damping}, ranges)
 
 
 def _drive(kind: str, n: int, fs: float, fmax: float, spec: ShakerSpec,
@@ -517,9 +525,9 @@ def shaker_test(scenario: Scenario, spec: ShakerSpec) -> TimeTest:
                               spec.drift)
         force = _force_errors(true_force, fs, rng, spec.force, spec.noise_force, spec.offset)
         runs.append(TimeRecording(k + 1, exc, force, resp))
-    runs = _apply_budget(runs, spec.budget, fs, rng_b)
+    runs, ranges = _apply_budget(runs, spec.budget, fs, rng_b)
     return TimeTest(scenario, system, spec.kind, fs, tuple(runs),
-                    {"tail": tail, "damping": spec.damping, "armature": spec.armature})
+                    {"tail": tail, "damping": spec.damping, "armature": spec.armature}, ranges)
 
 
 # ---- UFF (dataset 164, 2411, 58/58b), written from the format's description ----

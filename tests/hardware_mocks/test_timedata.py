@@ -168,12 +168,17 @@ def test_skewed_channels_are_the_exact_frf_delayed() -> None:
 
 def test_converter_codes_clip_and_label_the_hits() -> None:
     """A 16-bit converter over fixed ranges: every sample a multiple of its channel's step;
-    the clipped runs' channels sit at their range on 1-5 samples of the loudest hit, and
-    exactly the hits that reach a range are labelled clipped."""
+    two channels sit at their range on 1-5 samples of the test, and exactly the hits that
+    reach a range are labelled clipped."""
     sc = _scenario()
-    b = Budget(bits=16, headroom=(2.0, 50.0), clip_runs=2, clip_samples=(1, 5))
+    b = Budget(bits=16, headroom=(2.0, 50.0), clip_channels=2, clip_samples=(1, 5))
     t = hammer_test(sc, HammerSpec(seed=5, hits=4, fs=512, budget=b))
-    ranges = np.max([np.max(np.abs(r.responses), axis=1) for r in t.runs], axis=0)
+    ranges = t.ranges
+    assert ranges is not None
+    over = [np.sum(np.abs(r.responses) >= ranges[:, None] * (1 - 1e-12), axis=1)
+            for r in t.runs]  # samples at each channel's range, each run
+    at_top = np.sum(over, axis=0)
+    assert np.count_nonzero(at_top) == 2 and np.all(at_top <= 5)
     clipped_hits = 0
     for r in t.runs:
         at = [round(h.time * t.fs) for h in r.hits] + [r.n_samples]
