@@ -166,6 +166,40 @@ def _errs(t: TimeTest, res: dict[str, Any]) -> dict[str, float]:
     return errors(t.truth, res["mass"], res["cog"], res["inertia_origin"], res["inertia_cog"], K)
 
 
+#: the stated uncertainty's groups: result key, the truth's value, entries compared
+_GROUPS = (("mass", "mass", lambda a: np.atleast_1d(a)), ("cog", "cog", np.ravel),
+           ("inertia", "inertia_cog", lambda a: np.asarray(a)[np.triu_indices(3)]))
+
+
+def _z(t: TimeTest, res: dict[str, Any]) -> dict[str, list[float]] | None:
+    """|error| / stated std of each entry of each group (mass, CoG, inertia about the CoG),
+    or None when the result states no std."""
+    std = res.get("std")
+    if not std:
+        return None
+    out = {}
+    for name, key, pick in _GROUPS:
+        err = np.abs(pick(np.asarray(res[key], float)) - pick(np.asarray(getattr(t.truth, key),
+                                                                          float)))
+        s = pick(np.asarray(std[key], float))
+        out[name] = [float(e / v) if v > 0 else float("inf") for e, v in zip(err, s, strict=True)]
+    return out
+
+
+def coverage_line(rows: list[dict[str, Any]]) -> str:
+    """Coverage of the stated 95 % intervals (|error| <= 1.96 std) over the answered cases'
+    entries, and the median |error| / std, per group."""
+    parts = []
+    for name, _, _ in _GROUPS:
+        z = np.concatenate([r["time"]["z"][name] for r in rows
+                            if r["time"].get("z") is not None] or [np.zeros(0)])
+        if z.size:
+            parts.append(f"{name} {np.mean(z <= 1.96):.0%} covered, median |error|/std "
+                         f"{np.median(z):.2f} ({z.size} entries)")
+    return ("stated 95 % intervals of the time data's default result: " + "; ".join(parts)
+            if parts else "no stated uncertainty")
+
+
 def _hit_counts(t: TimeTest, out: str) -> dict[str, int]:
     """Rejected hits from the pipeline's lines ``load case N (node ..): k hits accepted,
     rejected: hit i: ...``, matched to the generator's labels by order."""
@@ -200,7 +234,8 @@ def evaluate(i: int, kind: str, budget: str | None = None) -> dict[str, Any]:
         row["defaults"] = [ln for ln in out.splitlines()
                            if ln.startswith(("excitation ", "record ", "trigger level",
                                              "shaker force", "earlier ", "record tails"))]
-        row["time"] = {"refused": why} if res is None else {"errors": _errs(t, res)}
+        row["time"] = ({"refused": why} if res is None else
+                       {"errors": _errs(t, res), "z": _z(t, res)})
         if kind == "hammer":
             row["hits"] = _hit_counts(t, out)
         # the exact FRFs on the lines the time data gave, identified the same way
@@ -361,6 +396,7 @@ def write_docs(rows: list[dict[str, Any]], elapsed: float, argv: list[str],
         "- shaker records read from the force: " + "; ".join(
             f"{d}: '{how}' x{n}" for (d, how), n in sorted(drives.items())),
         f"- {hits_line(rows)}",
+        f"- {coverage_line(rows)}",
         "",
         "| " + " | ".join(HEADER) + " |",
         "| " + " | ".join("---" if i < 2 else "---:" for i in range(len(HEADER))) + " |",
@@ -406,6 +442,7 @@ def main(argv: list[str] | None = None) -> int:
                 a.json.write_text(json.dumps(rows, indent=1, default=float))
     print(report(rows))
     print(hits_line(rows))
+    print(coverage_line(rows))
     print("| " + " | ".join(HEADER) + " |")
     for cells in table(rows):
         print("| " + " | ".join(cells) + " |")

@@ -290,6 +290,31 @@ def _line_inverses(Xs: NDArray[np.complex128], T: NDArray[np.float64]) -> (
     return np.asarray(T @ Xp)
 
 
+def _article_stiffness_affine(problem: Problem, Xs: NDArray[np.complex128],
+                              w: NDArray[np.float64]) -> tuple[Triple, Triple]:
+    """:func:`_stiffness_affine` of the plain method: eq. 14 averaged over the stiffness lines
+    w (rad/s) of resamples' Xs (n, n_l, 6, n_e), with an exponential window's correction."""
+    n = Xs.shape[0]
+    a, T, symmetric = problem.window_decay, problem.T, problem.solver.symmetric
+    MB = MASS_BASIS[None]  # (1, 10, 6, 6), symmetric
+    zero, zl = np.zeros((n, 6, 6)), np.zeros((n, 10, 6, 6))
+    B = _line_inverses(Xs, T)
+    if a:  # P_j = -s_j^2 (M - B_j); C: least squares of Im P = w C; K = mean Re P - a C
+        sq = (1j * w + a) ** 2
+        C0 = np.einsum("l,nlij->nij", w, (sq[:, None, None] * B).imag) / np.sum(w**2)
+        K0 = np.mean((sq[:, None, None] * B).real, axis=1) - a * C0
+        cc = float(np.sum(w * (-sq).imag) / np.sum(w**2))
+        kk = float(np.mean((-sq).real)) - a * cc
+        Kl, Cl = np.broadcast_to(kk * MB, zl.shape), np.broadcast_to(cc * MB, zl.shape)
+        if symmetric:
+            K0, C0 = 0.5 * (K0 + np.swapaxes(K0, 1, 2)), 0.5 * (C0 + np.swapaxes(C0, 1, 2))
+        return (K0, C0, zero), (Kl, Cl, zl)
+    # the article's line average of eq. 14: K = mean(w^2) M - mean(w^2 Re B), C
+    K0 = -np.mean((w**2)[:, None, None] * B.real, axis=1)
+    C0 = -np.mean(w[:, None, None] * B.imag, axis=1)
+    return (K0, C0, zero), (np.broadcast_to(np.mean(w**2) * MB, zl.shape), zl, zl)
+
+
 def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
                       Xs: NDArray[np.complex128], ws_: NDArray[np.float64],
                       stiffening: NDArray[np.float64] | None = None,
@@ -306,21 +331,7 @@ def _stiffness_affine(problem: Problem, weights: LineWeights, model: str,
     MB = MASS_BASIS[None]  # (1, 10, 6, 6), symmetric
     zero, zl = np.zeros((n, 6, 6)), np.zeros((n, 10, 6, 6))
     if not problem.improved:
-        B = _line_inverses(Xs, T)
-        if a:  # P_j = -s_j^2 (M - B_j); C: least squares of Im P = w C; K = mean Re P - a C
-            sq = (1j * w + a) ** 2
-            C0 = np.einsum("l,nlij->nij", w, (sq[:, None, None] * B).imag) / np.sum(w**2)
-            K0 = np.mean((sq[:, None, None] * B).real, axis=1) - a * C0
-            cc = float(np.sum(w * (-sq).imag) / np.sum(w**2))
-            kk = float(np.mean((-sq).real)) - a * cc
-            Kl, Cl = np.broadcast_to(kk * MB, zl.shape), np.broadcast_to(cc * MB, zl.shape)
-            if symmetric:
-                K0, C0 = 0.5 * (K0 + np.swapaxes(K0, 1, 2)), 0.5 * (C0 + np.swapaxes(C0, 1, 2))
-            return (K0, C0, zero), (Kl, Cl, zl)
-        # the article's line average of eq. 14: K = mean(w^2) M - mean(w^2 Re B), C
-        K0 = -np.mean((w**2)[:, None, None] * B.real, axis=1)
-        C0 = -np.mean(w[:, None, None] * B.imag, axis=1)
-        return (K0, C0, zero), (np.broadcast_to(np.mean(w**2) * MB, zl.shape), zl, zl)
+        return _article_stiffness_affine(problem, Xs, w)
     # improved: the direct fit from 6x6 moments (processing.stiffness.fit_stiffness, with
     # an exponential window's decay a: K + a C for K and -s^2 for w^2 on the right)
     # moments sum wt w^p conj(x) x^T (and t^T) as sums over lines of per-line 6x6 sums
