@@ -66,6 +66,9 @@ def add_parser(sub: Any) -> None:
                    help="constrain the inertia to physically consistent values")
     p.add_argument("--method", choices=("improved", "plain"), default="improved",
                    help="improved (default) or the article's plain method")
+    p.add_argument("--stiffening", choices=("auto", "constant"), default="auto",
+                   help="the mounts' stiffening with frequency: read from the stiffness lines "
+                        "when they show one (auto, default) or K constant (docs/mounts.md)")
     p.add_argument("--refine-points", type=int, default=0, metavar="N",
                    help="rounds of response-point location refinement from the data (e.g. 3; "
                         f"at most {MAX_REFINE_ROUNDS}; no bootstrap)")
@@ -168,6 +171,7 @@ def options_from(args: argparse.Namespace, stated: StatedUncertainty | None) -> 
                         "--bootstrap or --refine-points")
     return IdentifyOptions(
         method=args.method,
+        stiffening=args.stiffening,
         mass_band=bands["--mass-band"],
         stiffness_band=bands["--stiffness-band"],
         physical=args.physical,

@@ -4,6 +4,8 @@ seeds of these tests only (the benchmark's suites are 4242 and 5151)."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -89,3 +91,24 @@ def test_choose_stiffening_on_equations_written_here() -> None:
             assert isinstance(ch.stiffening, Stiffening)
             assert ch.stiffening.alpha == pytest.approx(alpha, abs=1e-4)
             assert ch.stiffening.per_decade == pytest.approx(0.2, abs=3e-4)
+
+
+def test_the_command_line_reads_or_keeps_the_stiffening(tmp_path) -> None:
+    """``insitu identify`` reads the stiffening by default and states it in the result JSON;
+    ``--stiffening constant`` keeps K constant."""
+    from app.cli.main import main
+    from app.io.uff import write_frf_uff
+
+    sc = build_scenario(ScenarioSpec(seed=8106, shape="engine", n_forces=12, elastic_ratio=None,
+                                     stiffening=0.3, n_lines=800))
+    path = tmp_path / "frf.uff"
+    write_frf_uff(path, _frfs(sc), binary=True)
+    out = {}
+    for name, extra in (("auto", []), ("constant", ["--stiffening", "constant"])):
+        js = tmp_path / f"{name}.json"
+        assert main(["identify", str(path), *extra, "--no-uncertainty", "--out", str(js)]) == 0
+        out[name] = json.loads(js.read_text())
+    assert out["auto"]["stiffening"]["per_decade"] == pytest.approx(0.3, abs=0.05)
+    assert out["auto"]["stiffening_choice"].startswith("stiffness rising")
+    assert out["constant"]["stiffening"] is None
+    assert out["constant"]["stiffening_choice"].endswith("asked for")
