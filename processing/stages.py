@@ -898,7 +898,9 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
     except (np.linalg.LinAlgError, ValueError):
         used = weights.stiffness_lines | weights.mass_lines
         rigid_hz = quick_rigid_modes(problem.X[..., used], problem.T, problem.w[used])
-    H_syn = synthesise(freq, problem.E, problem.T, M, K, fitted.C, fitted.D)
+    H_syn = synthesise(freq, problem.E, problem.T, M, K, fitted.C, fitted.D,
+                       None if fitted.stiffening is None
+                       else fitted.stiffening.factor(2 * np.pi * freq))
     syn = synthesis_error(freq, problem.H, H_syn, (float(freq[0]), bands.mass_band[1]))
     Ks_line = fitted.operators.stiffness(M)
     if tau:

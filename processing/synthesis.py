@@ -25,6 +25,7 @@ def synthesise(
     K: NDArray[np.float64],
     C: NDArray[np.float64],
     D: NDArray[np.float64] | None = None,
+    stiffening: NDArray[np.float64] | None = None,
 ) -> NDArray[np.complex128]:
     """Accelerance FRFs (n_resp, n_exc, n_f) of the identified rigid-body model.
 
@@ -32,14 +33,18 @@ def synthesise(
     ``M q'' + C q' + (K + j D) q = T f`` (one 12x12 eigenproblem, then one product for all
     lines: the state-space resolvent at ``s = j w`` is ``(K + j D + s C + s^2 M)^-1``
     exactly, a complex stiffness included); falls back to one 6x6 solve per line when the
-    modes are nearly defective. ``D`` is the structural damping (none when omitted).
+    modes are nearly defective. ``D`` is the structural damping (none when omitted);
+    ``stiffening`` the mounts' ``K(w) / K`` on the lines (K and D stiffen: one 6x6 solve per
+    line, ``g (K + j D) + j w C - w^2 M``).
     """
     w = 2 * np.pi * np.asarray(freq, dtype=float)
     Kc: NDArray[np.float64] | NDArray[np.complex128] = (
         K if D is None or not np.any(D) else K + 1j * D)
-    modal = _modal_receptance(E, T, M, Kc, C)
+    modal = None if stiffening is not None else _modal_receptance(E, T, M, Kc, C)
     if modal is None:
-        Z = Kc[None] + 1j * w[:, None, None] * C[None] - (w**2)[:, None, None] * M[None]
+        g = np.ones_like(w) if stiffening is None else np.asarray(stiffening, dtype=float)
+        Z = (g[:, None, None] * Kc[None] + 1j * w[:, None, None] * C[None]
+             - (w**2)[:, None, None] * M[None])
         A = -(w**2)[:, None, None] * np.linalg.solve(Z, np.broadcast_to(T, (len(w), *T.shape)))
         return np.einsum("ra,fae->ref", E, A)
     R, lam = modal  # (n_r * n_e, 12), (12,)

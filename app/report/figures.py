@@ -145,7 +145,8 @@ def draw_rigidity(plot: pg.PlotItem, a: Analysis) -> None:
 
 def draw_dynamic_stiffness(plot: pg.PlotItem, a: Analysis, rotational: bool = False) -> None:
     """|K*(f)| of the diagonal terms per line (article Fig. 12) and the fitted
-    |K + j w C + j D| (D zero unless the damping model holds it)."""
+    |g(f) (K + j D) + j w C| (D zero unless the damping model holds it; g the mounts'
+    stiffening, 1 for a constant K)."""
     kind = "rotational" if rotational else "translational"
     unit = "N m/rad" if rotational else "N/m"
     _prepare(plot, f"Dynamic stiffness at O, {kind} (cf. article Fig. 12)",
@@ -160,8 +161,11 @@ def draw_dynamic_stiffness(plot: pg.PlotItem, a: Analysis, rotational: bool = Fa
         color = COLORS[n]
         plot.plot(f, np.abs(r.stiffness_per_line[:, i, i]), pen=None, symbol="o", symbolSize=4,
                   symbolBrush=color, symbolPen=None, name=f"{DOF_LABELS[i]} per line")
-        fit = np.abs(r.K[i, i] + 1j * w * r.C[i, i] + 1j * r.D[i, i])
+        g = 1.0 if r.stiffening is None else r.stiffening.factor(w)
+        fit = np.abs(g * (r.K[i, i] + 1j * r.D[i, i]) + 1j * w * r.C[i, i])
         label = {"viscous": "K+jωC", "hysteretic": "K+jD"}.get(r.damping_model, "K+jωC+jD")
+        if r.stiffening is not None:
+            label = label.replace("K", "K(f)")
         plot.plot(f, fit, pen=pg.mkPen(color, width=2, style=QtCore.Qt.PenStyle.DashLine),
                   name=f"{DOF_LABELS[i]} fit {label}")
 

@@ -195,3 +195,33 @@ def test_rubber_mounts_in_results(qtbot, make_window, choose_file, tmp_path: Pat
     _shot(window, "results_mounts_rubber", tmp_path)
     res.table_tabs.setCurrentWidget(res.damping_page)
     _shot(window, "results_damping", tmp_path)
+
+
+def test_stiffening_mounts_in_the_results(qtbot, make_window, choose_file,
+                                          tmp_path: Path) -> None:
+    """FRFs of mounts stiffening 30 % a decade (the independent reference model): the
+    results' damping page says the stiffness rises, at which frequency K holds and how it
+    was chosen, as the command line's result does."""
+    from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
+    from processing.data import FRFSet, Geometry
+
+    sc = build_scenario(ScenarioSpec(seed=8107, shape="engine", n_forces=12, n_lines=800,
+                                     elastic_ratio=None, stiffening=0.3))
+    ids, xyz = sc.geometry()
+    uff = tmp_path / "stiffening.uff"
+    write_frf_uff(uff, FRFSet(sc.freq, sc.H, sc.sensors.ids, sc.sensors.reported_dirs,
+                              sc.forces.ids, sc.forces.reported_dirs, Geometry(ids, xyz)))
+    window: MainWindow = make_window()
+    choose_file(uff)
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
+        window.open_action.trigger()
+    res = window.results_view
+    note = res.damping_note.text()
+    assert "stiffness rising +" in note and "K stated at" in note, note
+    out = tmp_path / "r.json"
+    assert main(["identify", str(uff), "--no-uncertainty", "--out", str(out)]) == 0
+    js = json.loads(out.read_text())
+    assert f"{js['stiffening_choice']}" in note  # the same words as the command line's
+    window.tabs.setCurrentWidget(res)
+    res.table_tabs.setCurrentWidget(res.damping_page)
+    _shot(window, "results_stiffening", tmp_path)
