@@ -145,14 +145,16 @@ def budget_case(i: int, kind: str, suite: str) -> TimeTest:
 
 
 def identify_cli(path: Path, *extra: str) -> tuple[dict[str, Any] | None, str, str]:
-    """``insitu identify PATH EXTRA --out JSON`` in-process: result (None if refused), the
-    refusal's last stderr line, stdout."""
+    """``insitu identify PATH EXTRA --out JSON`` in-process: result (None if refused; a
+    result written with exit status 2, runs left out, counts), the refusal's last stderr
+    line, stdout."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "r.json"
         o, e = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
             code = insitu_main(["identify", str(path), *extra, "--out", str(out)])
-        res = json.loads(out.read_text()) if code == 0 and out.exists() else None
+        # exit status 2 with a result: runs were left out (the result holds the others)
+        res = json.loads(out.read_text()) if code in (0, 2) and out.exists() else None
     lines = e.getvalue().strip().splitlines()
     return res, (lines[-1] if lines else f"exit status {code}") if res is None else "", o.getvalue()
 
