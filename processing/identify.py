@@ -238,9 +238,13 @@ def uncertainty(st: Stages,
     used = weights.stiffness_lines[bands.in_stiffness]
     msel = weights.mass_lines
     coh = problem.coherence
+    w_s = problem.w[weights.stiffness_lines]
+    Ks = st.checks.stiffness_per_line[used]
+    if fitted.stiffening is not None:  # each line's K* brought to f_k: (K* - j w C) / g + j w C
+        jwC = 1j * w_s[:, None, None] * fitted.C[None]
+        Ks = (Ks - jwC) / fitted.stiffening.factor(w_s)[:, None, None] + jwC
     cov: FitCovariance = fit_covariance(
-        fitted.mass_line, fitted.theta, fitted.mass_rhs, fitted.stiffness_map,
-        st.checks.stiffness_per_line[used], problem.w[weights.stiffness_lines], fitted.K,
+        fitted.mass_line, fitted.theta, fitted.mass_rhs, fitted.stiffness_map, Ks, w_s, fitted.K,
         fitted.C, half_thetas=fitted.half_thetas, D=fitted.D, w_mass=problem.w[msel],
         force_noise=0.0 if coh is None else force_noise_ratio(coh[..., msel], weights.mass),
         stiff_weight=regressor_weights(problem.X[..., weights.stiffness_lines],
