@@ -216,6 +216,7 @@ class RecordingProcedure(Procedure):
                 result_json = result.to_json()
             except (InputError, GeometryError) as err:
                 message = f"identification failed: {err}"
+                self.message = message  # the run finishes, with why it has no result
                 self.emit("on_error", message)
         # a run is done once its FRFs are on the disk (a full disk fails it: shutdown then
         # finds no FRFs and the writer says why)
