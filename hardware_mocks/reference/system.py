@@ -321,9 +321,15 @@ class ReferenceSystem:
         # receptance factors, R0 = left diag(d) right (0 at 0 Hz, where the accelerance is)
         d = np.divide(g, -w2[None, :], out=np.zeros_like(g), where=w2[None, :] > 0)
         Lu, Ru = U.T @ left, right @ U  # (3k, N), (N, 3k)
-        A_su = np.einsum("rn,nf,nu->fru", L, d, Ru)
-        A_uu = np.einsum("un,nf,nv->fuv", Lu, d, Ru)
-        A_uf = np.einsum("un,nf,ne->fue", Lu, d, R)
+
+        def resolvent(a: NDArray[np.complex128], b: NDArray[np.complex128],
+                      ) -> NDArray[np.complex128]:
+            """``a diag(d_f) b`` at every line f, (n_f, rows of a, columns of b): one
+            product of the modes' outer products with d."""
+            ab = (a[:, None, :] * b.T[None, :, :]).reshape(-1, lam.size)
+            return np.asarray((ab @ d).reshape(a.shape[0], b.shape[1], -1).transpose(2, 0, 1))
+
+        A_su, A_uu, A_uf = resolvent(L, Ru), resolvent(Lu, Ru), resolvent(Lu, R)
         D = (stiffening_factor(np.sqrt(w2) / (2 * np.pi), self.stiffening, self.stiffness_hz)
              - 1.0)[:, None, None] * Km[None]
         eye = np.eye(Km.shape[0])[None]
