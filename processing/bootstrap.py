@@ -54,6 +54,7 @@ from processing.stiffness import (
     DAMPING_BLOCKS,
     DUPLICATION,
     line_functions,
+    stiffening_factor,
     stiffness_normal,
     vech_index,
     vech_normal,
@@ -431,8 +432,7 @@ def _solve_batch(problem: Problem, weights: LineWeights, fitted: Fit,
         AD = moment(1j * g / wm**2)
     ws = problem.w[weights.stiffness_lines]
     (K0, C0, D0), (Kl, Cl, Dl) = _stiffness_affine(
-        problem, weights, fitted.damping_model, Xs, ws_,
-        None if fitted.stiffening is None else fitted.stiffening.factor(ws))
+        problem, weights, fitted.damping_model, Xs, ws_, stiffening_factor(fitted.stiffening, ws))
     W0 = WT + K0 @ AK + C0 @ AC + D0 @ AD
     Wl = Kl @ AK[:, None] + Cl @ AC[:, None] + Dl @ AD[:, None]  # (n, 10, 6, 6)
     t0 = np.einsum("npq,nq->np", solver, W0.reshape(n, 36))
@@ -625,7 +625,7 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     tol = max(problem.solver.tol, 1e-9)
     theta = np.broadcast_to(fitted.theta, (n, 10)).copy()
     stiff = _StiffnessLines(ws, Xs, ws_, shp_s, problem.T,
-                            None if fitted.stiffening is None else fitted.stiffening.factor(ws))
+                            stiffening_factor(fitted.stiffening, ws))
     K, C, D = _stiffness_solve(problem, model, *stiff.moments(np.arange(n), None),
                                _masses(theta))
     Y = np.zeros((n, 6, Xm.shape[2], shp.shape[0]))

@@ -241,15 +241,13 @@ class MassLineProblem:
             KD = K if D is None else K + 1j * D
             KX = g * (KD @ Xf).reshape(Xc.shape) + 1j * w * (C @ Xf).reshape(Xc.shape)
             return self.solve(T[:, :, None] + KX / w**2)
-        key = (Xc, stiffening)
-        if (self._kc_key is None or any(a is not b for a, b in zip(self._kc_key, key,
-                                                                   strict=True))
-                or self._kc is None):
+        if (self._kc_key is None or self._kc_key[0] is not Xc
+                or self._kc_key[1] is not stiffening or self._kc is None):
             WT = self._weighted(T[:, :, None] + 0j) @ self._Xp.T
             P2 = self._weighted(Xc * (g / w**2)) @ self._Xp.T
             P1 = self._weighted(1j * Xc / w) @ self._Xp.T
             P0 = self._weighted(1j * Xc * (g / w**2)) @ self._Xp.T
-            self._kc_key, self._kc = key, (WT, P2, P1, P0)
+            self._kc_key, self._kc = (Xc, stiffening), (WT, P2, P1, P0)
         WT, P2, P1, P0 = self._kc
         W = WT + K @ P2 + C @ P1
         return self._finish(W if D is None else W + D @ P0, None)

@@ -67,6 +67,7 @@ from processing.stiffness import (
     dynamic_stiffness,
     fit_stiffness,
     line_operators,
+    stiffening_factor,
     stiffness_moments,
 )
 from processing.synthesis import SynthesisFit, synthesis_error, synthesise
@@ -407,7 +408,7 @@ class StiffnessStep:
 
     def factor(self, w: NDArray[np.float64]) -> NDArray[np.float64] | None:
         """``K(w) / K`` at w (rad/s); None for a constant K."""
-        return None if self.stiffening is None else self.stiffening.factor(w)
+        return stiffening_factor(self.stiffening, w)
 
     def moments(self, Xs: NDArray[np.complex128]) -> StiffnessMoments:
         """The stiffness moments of Xs (with the step's stiffening), kept while the same
@@ -459,16 +460,17 @@ class StiffnessStep:
                             stiffening=self.factor(w))
         return ch.model, ch.reason
 
-    def choose_stiffening(self, M: NDArray[np.float64], Xs: NDArray[np.complex128],
-                          most: float = np.inf) -> tuple[Stiffening | None, str]:
-        """The mounts' stiffening the stiffness lines Xs call for at mass matrix M, with the
-        step's damping model (BIC, see :func:`processing.stiffness.choose_stiffening`), read
-        on the lines up to :data:`STIFFENING_TOP` times the highest rigid-body mode of M and
-        the fitted K: above the modes a line's K* is mostly ``w^2`` times what the mass
-        matrix misses (its error, the elastic modes' residual), whose rise with frequency
-        would read as a stiffening; and on none above ``most`` (rad/s)."""
+    def choose_stiffening(self, M: NDArray[np.float64], K: NDArray[np.float64],
+                          Xs: NDArray[np.complex128], most: float = np.inf,
+                          ) -> tuple[Stiffening | None, str]:
+        """The mounts' stiffening the stiffness lines Xs call for at mass matrix M (K the
+        step's stiffness there), with the step's damping model (BIC, see
+        :func:`processing.stiffness.choose_stiffening`), read on the lines up to
+        :data:`STIFFENING_TOP` times the highest rigid-body mode of M and K: above the modes
+        a line's K* is mostly ``w^2`` times what the mass matrix misses (its error, the
+        elastic modes' residual), whose rise with frequency would read as a stiffening; and
+        on none above ``most`` (rad/s)."""
         p = self.problem
-        K = self(M, Xs)[0]
         try:
             top = STIFFENING_TOP * float(np.sqrt(max(float(
                 scipy.linalg.eigh(0.5 * (K + K.T), M, eigvals_only=True)[-1]), 0.0)))
@@ -816,7 +818,7 @@ def _stiffening(problem: Problem, bands: Bands, weights: LineWeights, step: Stif
     f_e = min((pk.frequency for pk in problem.peaks), default=np.inf)
     most = 2 * np.pi * STIFFENING_ELASTIC * f_e if _leakage_unmodelled(problem, bands) else np.inf
     for _ in range(STIFFENING_ROUNDS):
-        found, why = step.choose_stiffening(mass_matrix(best.theta), best.Xs, most)
+        found, why = step.choose_stiffening(mass_matrix(best.theta), best.K, best.Xs, most)
         if found is None:
             return best, note or why
         before = step.stiffening
@@ -899,8 +901,7 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
         used = weights.stiffness_lines | weights.mass_lines
         rigid_hz = quick_rigid_modes(problem.X[..., used], problem.T, problem.w[used])
     H_syn = synthesise(freq, problem.E, problem.T, M, K, fitted.C, fitted.D,
-                       None if fitted.stiffening is None
-                       else fitted.stiffening.factor(2 * np.pi * freq))
+                       stiffening_factor(fitted.stiffening, 2 * np.pi * freq))
     syn = synthesis_error(freq, problem.H, H_syn, (float(freq[0]), bands.mass_band[1]))
     Ks_line = fitted.operators.stiffness(M)
     if tau:

@@ -41,6 +41,7 @@ __all__ = [
     "fit_stiffness",
     "line_functions",
     "line_operators",
+    "stiffening_factor",
     "stiffness_moments",
     "stiffness_normal",
     "stiffness_residual",
@@ -220,7 +221,7 @@ class StiffnessMoments:
     columns and lines, so that ``sum wt w^q conj(x) y^T = G(q+2) M^T - Q(q+2)``
     for ``y = w^2 (M x - t)``.
 
-    With the mounts' stiffening ``g`` (``stiffened``), the moments the fit of K, C, D
+    With the mounts' stiffening ``g`` (:attr:`stiffened`), the moments the fit of K, C, D
     uses carry it: G0 ``g^2``, G1 ``g w``, G2 and Q2 ``g w^2`` (the right-hand side of K
     and D), G3 and Q3 ``w^3`` (that of C) and ``G2c`` ``w^2`` (C with C); Q0 and Q1 are
     then not formed (no exponential window's correction).
@@ -237,10 +238,14 @@ class StiffnessMoments:
     n_equations: int
     #: the C-with-C moment ``sum wt w^2 conj(x) x^T`` where it differs from G2 (stiffening)
     G2c: NDArray[np.complex128] | None = None
-    stiffened: bool = False
     #: solvers of the normal equations per (row scale, symmetric), filled on first use
     _solvers: dict[tuple[bytes, bool, str], NDArray[np.float64]] = field(
         default_factory=dict, compare=False, repr=False)
+
+    @property
+    def stiffened(self) -> bool:
+        """The moments carry the mounts' stiffening (they have their own C-with-C moment)."""
+        return self.G2c is not None
 
     def solver(self, s2: NDArray[np.float64], symmetric: bool,
                model: DampingModel = "viscous") -> NDArray[np.float64]:
@@ -293,8 +298,7 @@ def stiffness_moments(
         F = np.broadcast_to(line_functions(w, stiffening)[:, None, :], (5, n_e, n_l))
         G = [(Xw * f.ravel()) @ Xf.T for f in F]
         Q = [(Xw * f.ravel()) @ Tf.T for f in F[:4]]
-        return StiffnessMoments(G[0], G[1], G[2], G[3], Q[0], Q[1], Q[2], Q[3], n_eq, G[4],
-                                True)
+        return StiffnessMoments(G[0], G[1], G[2], G[3], Q[0], Q[1], Q[2], Q[3], n_eq, G[4])
     G, Q = [], []
     for _ in range(4):  # powers 0..3 of w
         G.append(Xw @ Xf.T)
@@ -462,6 +466,12 @@ class Stiffening:
                           ** self.alpha, dtype=np.float64)
 
 
+def stiffening_factor(stiffening: Stiffening | None, w: NDArray[np.float64],
+                      ) -> NDArray[np.float64] | None:
+    """``K(w) / K`` at w (rad/s) of ``stiffening``; None for a constant K (None)."""
+    return None if stiffening is None else stiffening.factor(w)
+
+
 @dataclass(frozen=True)
 class StiffeningChoice:
     """The mounts' stiffening read from the stiffness lines (None: K constant), and why."""
@@ -486,14 +496,13 @@ def _minimise(f: Callable[[float], float], bound: float) -> tuple[float, float]:
     """The minimum of a smooth f over [0, bound]: a grid of 31, a finer one of 11 around its
     least point, then the vertex of the parabola through the least point and its two
     neighbours (numpy only: scipy.optimize costs the command line 0.1 s to import)."""
-    grid = np.linspace(0.0, bound, 31)
-    for _ in range(2):
-        vals = np.array([f(float(a)) for a in grid])
-        k = int(np.argmin(vals))
-        h = grid[1] - grid[0]
-        if _ == 0:
-            grid = np.linspace(max(grid[k] - h, 0.0), min(grid[k] + h, bound), 11)
-    x, y = grid, vals
+    coarse = np.linspace(0.0, bound, 31)
+    k = int(np.argmin([f(float(a)) for a in coarse]))
+    h = coarse[1] - coarse[0]
+    x = np.linspace(max(coarse[k] - h, 0.0), min(coarse[k] + h, bound), 11)
+    y = np.array([f(float(a)) for a in x])
+    k = int(np.argmin(y))
+    h = x[1] - x[0]
     if 0 < k < x.size - 1:
         a, b, c = y[k - 1], y[k], y[k + 1]
         den = a - 2 * b + c

@@ -59,6 +59,15 @@ from hardware_mocks.reference.mounts import (
 __all__ = ["ReferenceSystem", "Truth"]
 
 
+def _through_modes(a: NDArray[np.complex128], b: NDArray[np.complex128],
+                   factors: NDArray[np.complex128]) -> NDArray[np.complex128]:
+    """``a diag(factors[:, f]) b`` at every line f, (rows of a, columns of b, n_f): one
+    product of the modes' outer products ``a[:, n] b[n, :]`` with the modes' line factors
+    (N, n_f)."""
+    ab = (a[:, None, :] * b.T[None, :, :]).reshape(-1, a.shape[1])
+    return np.asarray((ab @ factors).reshape(a.shape[0], b.shape[1], -1), dtype=np.complex128)
+
+
 @dataclass(frozen=True)
 class Truth:
     """Exact rigid-body parameters of a reference system (global frame, SI).
@@ -312,8 +321,7 @@ class ReferenceSystem:
             g = -w2[None, :] / (1j * np.sqrt(w2)[None, :] - lam[:, None])
         else:
             g = -w2[None, :] / (lam[:, None] - w2[None, :])  # (N, n_f)
-        AB = (L[:, None, :] * R.T[None, :, :]).reshape(-1, lam.size)  # (n_r n_e, N)
-        out: NDArray[np.complex128] = (AB @ g).reshape(L.shape[0], R.shape[1], w2.size)
+        out = _through_modes(L, R, g)  # (n_r, n_e, n_f)
         if not self.stiffening:
             return out
         # mounts at g K_m: Woodbury on the receptance, R = R0 - R0 U D (I + U^T R0 U D)^-1 U^T R0
@@ -321,15 +329,8 @@ class ReferenceSystem:
         # receptance factors, R0 = left diag(d) right (0 at 0 Hz, where the accelerance is)
         d = np.divide(g, -w2[None, :], out=np.zeros_like(g), where=w2[None, :] > 0)
         Lu, Ru = U.T @ left, right @ U  # (3k, N), (N, 3k)
-
-        def resolvent(a: NDArray[np.complex128], b: NDArray[np.complex128],
-                      ) -> NDArray[np.complex128]:
-            """``a diag(d_f) b`` at every line f, (n_f, rows of a, columns of b): one
-            product of the modes' outer products with d."""
-            ab = (a[:, None, :] * b.T[None, :, :]).reshape(-1, lam.size)
-            return np.asarray((ab @ d).reshape(a.shape[0], b.shape[1], -1).transpose(2, 0, 1))
-
-        A_su, A_uu, A_uf = resolvent(L, Ru), resolvent(Lu, Ru), resolvent(Lu, R)
+        A_su, A_uu, A_uf = (_through_modes(a, b, d).transpose(2, 0, 1)
+                            for a, b in ((L, Ru), (Lu, Ru), (Lu, R)))
         D = (stiffening_factor(np.sqrt(w2) / (2 * np.pi), self.stiffening, self.stiffness_hz)
              - 1.0)[:, None, None] * Km[None]
         eye = np.eye(Km.shape[0])[None]
@@ -345,10 +346,12 @@ class ReferenceSystem:
         m3 = np.repeat(self.body.masses, 3)
         Sr = self._dof_vectors(resp_nodes, resp_vectors)
         Fe = self._dof_vectors(exc_nodes, exc_vectors).T
+        body = self.dynamic_stiffness(0.0)  # the body alone; the mounts at each line's rate
+        mounts = self.dynamic_stiffness(1.0) - body
         out = []
         for f in np.asarray(freq, dtype=float).ravel():
             w = 2 * np.pi * f
             g = float(stiffening_factor(f, self.stiffening, self.stiffness_hz))
-            Z = self.dynamic_stiffness(g) + 1j * w * Cd - w**2 * np.diag(m3)
+            Z = body + g * mounts + 1j * w * Cd - w**2 * np.diag(m3)
             out.append(-(w**2) * (Sr @ np.linalg.solve(Z, Fe)))
         return np.moveaxis(np.array(out), 0, -1)
