@@ -79,7 +79,8 @@ FIGURES = ("mass", "cog", "inertia")
 TABLE = (("mass", "mass %"), ("cog", "CoG mm"), ("inertia", "inertia %"), ("stiffness", "K %"))
 #: what each identification is, in the table
 SOURCES = (("time", "time data, default options"), ("exact", "exact FRFs, same lines"),
-           ("bands", "time data in the exact FRFs' bands"))
+           ("bands", "time data in the exact FRFs' bands"),
+           ("nodelay", "time data, --channel-delays off (budget suites)"))
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "accuracy.md"
 TITLE = "## Time data: hammer and shaker tests"
 
@@ -240,6 +241,10 @@ def evaluate(i: int, kind: str, budget: str | None = None) -> dict[str, Any]:
                        {"errors": _errs(t, res), "z": _z(t, res)})
         if kind == "hammer":
             row["hits"] = _hit_counts(t, out)
+        if budget is not None:  # the channels' skew left in: what taking it out buys
+            res4, why4, _ = identify_cli(path, "--channel-delays", "off")
+            row["nodelay"] = ({"refused": why4} if res4 is None
+                              else {"errors": _errs(t, res4), "z": _z(t, res4)})
         # the exact FRFs on the lines the time data gave, identified the same way
         try:
             frf = load(path, Settings()).frf
@@ -292,7 +297,7 @@ def report(rows: list[dict[str, Any]]) -> str:
             for r in rs:
                 hits.update(r["hits"])
             lines.append(f"  hits: {dict(hits)}")
-        for key in ("time", "exact", "bands"):
+        for key, _ in SOURCES:
             have = [r for r in rs if key in r]
             if not have:
                 continue
@@ -323,6 +328,8 @@ def table(rows: list[dict[str, Any]]) -> list[list[str]]:
             continue
         for key, name in SOURCES:
             have = [r for r in rs if key in r]
+            if not have:
+                continue
             refused = sum("refused" in r[key] for r in have)
             body.append([kind, name, str(len(have)), str(refused),
                          *(_fmt(_cell(rs, key, f)) for f, _ in TABLE)])

@@ -27,7 +27,9 @@ from numpy.typing import NDArray
 from processing.blas import one_blas_thread
 from processing.bootstrap import DEFAULT_RESAMPLES, Bootstrap, Progress, resample
 from processing.data import FRFSet, InputError
+from processing.delays import ChannelDelays, estimate_delays
 from processing.geometry import excitation_matrix
+from processing.inertia import mass_matrix
 from processing.measurement import Measurement
 from processing.montecarlo import simulate
 from processing.problem import (
@@ -59,6 +61,8 @@ from processing.stages import (
     upper_residual,
     weigh_lines,
 )
+from processing.stiffness import stiffening_factor
+from processing.synthesis import synthesise
 from processing.uncertainty import (
     FitCovariance,
     combine,
@@ -111,6 +115,7 @@ class _Data:
     rigid_tops: tuple[float | None, float | None]
     units: TimeUnits | None
     notes: tuple[str, ...]
+    measurement: Measurement
 
 
 def _data(measurement: Measurement, options: IdentifyOptions,
@@ -134,7 +139,7 @@ def _data(measurement: Measurement, options: IdentifyOptions,
         notes += rigid_notes
     return _Data(frf, frf.resp_xyz, prov.exponential_tau,
                  TIME_DATA_ERROR_FLOOR if prov.estimated else COHERENCE_NOISE_FLOOR,
-                 elastic_top, tops, measurement.time_units, tuple(notes))
+                 elastic_top, tops, measurement.time_units, tuple(notes), measurement)
 
 
 # --- the stages ------------------------------------------------------------------------------
@@ -149,6 +154,10 @@ class Stages:
     weights: LineWeights
     fitted: Fit
     checks: Checks
+    #: the response channels' delays taken out of the FRFs before the fit, or None
+    delays: ChannelDelays | None = None
+    #: how the channel delays were read, in words
+    delays_note: str = ""
 
 
 def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stages:
@@ -174,6 +183,117 @@ def _fit_in_bands(problem: Problem, bands: Bands) -> tuple[Bands, LineWeights, F
     return bands, weights, solve(problem, bands, weights, ops)
 
 
+# --- the response channels' delays ----------------------------------------------------------
+
+#: rounds of the channel-delay correction: read the delays against the fit, take them out,
+#: fit again (:mod:`processing.delays`)
+DELAY_ROUNDS = 6
+#: the rounds stop when one turns no channel's phase at the top line by more than this, rad
+DELAY_SETTLED = 2e-3
+#: the delays are taken out when one is at least this many standard deviations from zero
+#: and turns its channel's phase at the top line by at least DELAY_PHASE rad
+DELAY_Z = 5.0
+DELAY_PHASE = 0.01
+#: the delays are kept only when they take the phase misfit to at most this fraction of the
+#: FRFs' as given and under DELAY_MISFIT rad: delays explain most of the phase, not a
+#: model that does not fit
+DELAY_GAIN = 0.5
+DELAY_MISFIT = 0.2
+#: the delays are read from this factor times the highest rigid-body mode up
+DELAY_LINES_FROM = 1.25
+#: at least this many lines, else the mass line's
+DELAY_MIN_LINES = 8
+
+
+def _delay_lines(st: Stages, top: float) -> NDArray[np.bool_]:
+    """The lines the delays are read on: from above the rigid-body modes to ``top`` (the
+    first fit's mass-line top: the rigid model holds there), or the mass line's."""
+    p = st.problem
+    modes = st.checks.rigid_modes_hz[np.isfinite(st.checks.rigid_modes_hz)]
+    lo = DELAY_LINES_FROM * float(np.max(modes)) if modes.size else np.inf
+    sel = (p.freq >= lo) & (p.freq <= top) & p.line_ok
+    return sel if np.count_nonzero(sel) >= DELAY_MIN_LINES else st.weights.mass_lines
+
+
+def _delays_against_fit(st: Stages, sel: NDArray[np.bool_]) -> ChannelDelays:
+    """The delays of the problem's FRFs against the FRFs its fit synthesises, on ``sel``."""
+    p, f = st.problem, st.fitted
+    freq = p.freq[sel]
+    model = synthesise(freq, p.E, p.T, mass_matrix(f.theta), f.K, f.C, f.D,
+                       stiffening_factor(f.stiffening, 2 * np.pi * freq))
+    return estimate_delays(freq, p.H[..., sel], model, p.col_weights[:, sel])
+
+
+def _without_delays(d: _Data, delays: ChannelDelays, options: IdentifyOptions,
+                    solver: SolverSettings) -> _Data:
+    """The data with the delays taken out of the FRFs and of the per-unit spectra."""
+    m = d.measurement
+    frf = dataclasses.replace(m.frf, H=delays.shifted(m.frf.freq, m.frf.H))
+    prov = m.provenance
+    if prov.units is not None:
+        prov = dataclasses.replace(prov, units=delays.units(prov.units))
+    out = _data(dataclasses.replace(m, frf=frf, provenance=prov), options, solver)
+    return dataclasses.replace(out, resp_xyz=d.resp_xyz)
+
+
+def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
+                    ) -> tuple[Stages, _Data]:
+    """The stages of ``d``, with the response channels' delays taken out first when the
+    fit's phase shows them (:mod:`processing.delays`): the delays are read against the
+    fitted model, taken out and the fit run again, until a round changes them no more."""
+    st = _stages(d, options, solver)
+    if options.channel_delays == "off":
+        return dataclasses.replace(st, delays_note="channel delays not read: asked for"), d
+    if not problem_reads_delays(st.problem):
+        return dataclasses.replace(st, delays_note="channel delays not read: the article's "
+                                   "method"), d
+    top = float(st.bands.mass_band[1])
+    sel = _delay_lines(st, top)
+    step = _delays_against_fit(st, sel)
+    w_top = 2 * np.pi * float(st.problem.freq[sel][-1])
+    z = np.abs(step.seconds) / np.where(step.std > 0, step.std, np.inf)
+    turn = w_top * np.abs(step.seconds)
+    if not np.any((z >= DELAY_Z) & (turn >= DELAY_PHASE)):
+        return dataclasses.replace(
+            st, delays_note=(f"no channel delay: the largest turns the phase by "
+                             f"{np.max(turn):.3f} rad at {w_top / 2 / np.pi:.0f} Hz "
+                             f"({np.max(z):.1f} sd), under {DELAY_PHASE} rad or {DELAY_Z} sd")), d
+    # each round on the first fit's lines; the round whose data fit their own model best
+    # is kept (the FRFs as given when none fits better)
+    first = step.misfit
+    best: tuple[float, Stages, _Data, ChannelDelays | None, int] = (first, st, d, None, 0)
+    total, span = step, (float(st.problem.freq[sel][0]), float(st.problem.freq[sel][-1]))
+    for rounds in range(1, DELAY_ROUNDS + 1):
+        d_k = _without_delays(d, total, options, solver)
+        try:
+            st_k = _stages(d_k, options, solver)
+        except InputError:  # a round's fit refused: the best round so far stands
+            break
+        step = _delays_against_fit(st_k, sel)
+        if step.misfit < best[0]:
+            best = (step.misfit, st_k, d_k, total, rounds)
+        if w_top * float(np.max(np.abs(step.seconds))) < DELAY_SETTLED:
+            break
+        total = total + step
+    misfit, st_k, d_k, kept, rounds = best
+    if kept is None or misfit > min(DELAY_GAIN * first, DELAY_MISFIT):
+        return dataclasses.replace(
+            st, delays_note=(f"channel delays not taken out: they take the phase misfit from "
+                             f"{first:.3f} rad only to {misfit:.3f} rad (at most "
+                             f"{DELAY_GAIN:g}x and {DELAY_MISFIT} rad): the model does not fit "
+                             "for another reason")), d
+    note = (f"channel delays read on {kept.lines} lines {span[0]:.1f}-{span[1]:.1f} Hz and "
+            f"taken out (round {rounds}; phase misfit {first:.3f} -> {misfit:.3f} "
+            f"rad): up to {1e3 * np.max(np.abs(kept.seconds)):.3g} ms")
+    return dataclasses.replace(st_k, delays=kept, delays_note=note), d_k
+
+
+def problem_reads_delays(problem: Problem) -> bool:
+    """Whether channel delays are read for ``problem``: the improved method (the article's
+    plain method takes the FRFs as they are)."""
+    return problem.improved
+
+
 @one_blas_thread
 def stages(measurement: Measurement, options: IdentifyOptions | None = None,
            solver: SolverSettings | None = None) -> Stages:
@@ -186,7 +306,7 @@ def stages(measurement: Measurement, options: IdentifyOptions | None = None,
         With a one-line message naming the problem and what to do.
     """
     opt, sol = options or IdentifyOptions(), solver or SolverSettings()
-    return _stages(_data(measurement, opt, sol), opt, sol)
+    return _delayed_stages(_data(measurement, opt, sol), opt, sol)[0]
 
 
 # --- uncertainty -----------------------------------------------------------------------------
@@ -283,14 +403,20 @@ Preliminary = Callable[[IdentificationResult], None]
 def _fit_once(d: _Data, options: IdentifyOptions, solver: SolverSettings,
               progress: Progress | None = None,
               preliminary: Preliminary | None = None) -> IdentificationResult:
-    st = _stages(d, options, solver)
+    st, d = _delayed_stages(d, options, solver)
     frf = d.frf
     nodes = (frf.resp_nodes, frf.exc_nodes)
     if preliminary is not None and _bootstrap_runs(options, d.units):
-        preliminary(assemble(st.problem, st.bands, st.weights, st.fitted, st.checks,
-                             uncertainty(st, nodes)))
+        preliminary(_assembled(st, uncertainty(st, nodes)))
     unc = uncertainty(st, nodes, d.units, progress) if options.uncertainty else None
-    return assemble(st.problem, st.bands, st.weights, st.fitted, st.checks, unc)
+    return _assembled(st, unc)
+
+
+def _assembled(st: Stages, unc: Uncertainty | None) -> IdentificationResult:
+    """The result of the stages (:func:`processing.stages.assemble`) with their delays."""
+    return dataclasses.replace(
+        assemble(st.problem, st.bands, st.weights, st.fitted, st.checks, unc),
+        channel_delays=st.delays, channel_delays_note=st.delays_note)
 
 
 @one_blas_thread
@@ -382,11 +508,15 @@ def _refined(d: _Data, opt: IdentifyOptions, solver: SolverSettings) -> Identifi
     step does not improve the fit (the previous locations are kept). The reason is
     given in the warnings.
     """
-    once = dataclasses.replace(opt, refine_points=0)
+    # the channel delays read once, on the given locations, and kept for every round
+    st0, d = _delayed_stages(d, opt, solver)
+    once = dataclasses.replace(opt, refine_points=0, channel_delays="off")
     d = dataclasses.replace(d, units=None)
 
     def identify_at(xyz: NDArray[np.float64]) -> IdentificationResult:
-        return _fit_once(dataclasses.replace(d, resp_xyz=xyz), once, solver)
+        return dataclasses.replace(_fit_once(dataclasses.replace(d, resp_xyz=xyz), once, solver),
+                                   channel_delays=st0.delays,
+                                   channel_delays_note=st0.delays_note)
 
     frf = d.frf
     xyz0 = np.asarray(d.resp_xyz, dtype=float)
@@ -425,10 +555,12 @@ def bootstrap_identify(measurement: Measurement, options: IdentifyOptions | None
     """The fit of ``fit(measurement, options)`` (every stage, bands and model as it chooses
     them; no point refinement) and its bootstrap over the measurement's hits or blocks
     alone (without the other sources): for studies of the bootstrap itself."""
-    units = measurement.time_units
-    if units is None:
+    if measurement.time_units is None:
         raise InputError("the measurement carries no per-hit or per-block spectra for every "
                          "column (time data only)")
-    st = stages(measurement, options, solver)
+    opt, sol = options or IdentifyOptions(), solver or SolverSettings()
+    st, d = _delayed_stages(_data(measurement, opt, sol), opt, sol)
+    units = d.units
+    assert units is not None
     return st.fitted, resample(st.problem, st.bands, st.weights, st.fitted, units, n, seed,
                                progress)

@@ -64,6 +64,10 @@ class IdentifyOptions:
     #: improved method: the mounts' stiffening with frequency read from the stiffness lines
     #: and carried into the mass line when they call for it ("auto"), or K constant
     stiffening: Literal["auto", "constant"] = "auto"
+    #: improved method: each response channel's delay against the force read from the FRFs'
+    #: phase and taken out when it shows ("auto"), or the FRFs taken as they are
+    #: (:mod:`processing.delays`)
+    channel_delays: Literal["auto", "off"] = "auto"
     #: stated test uncertainties propagated by Monte Carlo (:mod:`processing.montecarlo`)
     stated: StatedUncertainty | None = None
     #: resamples of the bootstrap over the hits or blocks of time data

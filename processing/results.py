@@ -12,6 +12,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from processing.delays import ChannelDelays
 from processing.geometry import DEFAULT_MAX_COND_T, GeometryReport
 from processing.inertia import InertiaProperties
 from processing.modes import rigid_body_modes
@@ -158,6 +159,11 @@ class IdentificationResult:
     stiffening: Stiffening | None = None
     #: how the stiffness's frequency dependence was chosen, in words
     stiffening_note: str = ""
+    #: each response channel's delay against the force, taken out of the FRFs before the
+    #: fit (in the FRFs' response order), None when none was
+    channel_delays: ChannelDelays | None = None
+    #: how the channel delays were read, in words
+    channel_delays_note: str = ""
 
     @property
     def coherence_low_fraction(self) -> float:
@@ -232,6 +238,11 @@ class IdentificationResult:
                 "exponent": self.stiffening.alpha,
                 "stiffness_at_hz": self.stiffening.reference_hz}),
             "stiffening_choice": self.stiffening_note,
+            "channel_delays": (None if self.channel_delays is None else {
+                "seconds": self.channel_delays.seconds.tolist(),
+                "std": self.channel_delays.std.tolist(),
+                "lines": self.channel_delays.lines}),
+            "channel_delays_choice": self.channel_delays_note,
             "bands": {"mass_line": list(self.mass_band), "stiffness": list(self.stiffness_band)},
             "band_choice": self.band_reason,
             "mass_line_model": self.model_note,

@@ -31,7 +31,8 @@ from app.cli.frf import add_processing_arguments, settings_from
 #: the ``insitu identify`` options a campaign takes, with identify's own definitions and
 #: defaults (those of the FRFs from time data are added from identify's parser too); an option
 #: is listed here once :func:`run` passes it on to :func:`app.batch.campaign.identify_file`
-_IDENTIFY = {"mass_band", "stiffness_band", "physical", "method", "stiffening", "refine_points",
+_IDENTIFY = {"mass_band", "stiffness_band", "physical", "method", "stiffening", "channel_delays",
+             "refine_points",
              "no_uncertainty", "location_uncertainty", "angle_uncertainty", "gain_uncertainty",
              "draws", "bootstrap"}
 

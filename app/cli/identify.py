@@ -69,6 +69,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--stiffening", choices=("auto", "constant"), default="auto",
                    help="the mounts' stiffening with frequency: read from the stiffness lines "
                         "when they show one (auto, default) or K constant (docs/mounts.md)")
+    p.add_argument("--channel-delays", choices=("auto", "off"), default="auto",
+                   help="each response channel's delay against the force (channel skew): read "
+                        "from the FRFs' phase and taken out when it shows (auto, default) or "
+                        "FRFs as they are (docs/identification.md)")
     p.add_argument("--refine-points", type=int, default=0, metavar="N",
                    help="rounds of response-point location refinement from the data (e.g. 3; "
                         f"at most {MAX_REFINE_ROUNDS}; no bootstrap)")
@@ -172,6 +176,7 @@ def options_from(args: argparse.Namespace, stated: StatedUncertainty | None) -> 
     return IdentifyOptions(
         method=args.method,
         stiffening=args.stiffening,
+        channel_delays=args.channel_delays,
         mass_band=bands["--mass-band"],
         stiffness_band=bands["--stiffness-band"],
         physical=args.physical,

@@ -191,7 +191,11 @@ def build_report(a: Analysis, title: str = "In situ identification report",
         parts += [
             f"<p>Bands: mass line {r.mass_band[0]:g}-{r.mass_band[1]:g} Hz, stiffness "
             f"{r.stiffness_band[0]:g}-{r.stiffness_band[1]:g} Hz. Rigid-body modes: "
-            + html.escape(modes_text(r.rigid_modes_hz, u)) + " Hz.</p>",
+            + html.escape(modes_text(r.rigid_modes_hz, u)) + " Hz."
+            + ("" if r.channel_delays is None
+               else " " + html.escape(r.channel_delays_note[0].upper()
+                                      + r.channel_delays_note[1:]) + ".")
+            + "</p>",
             "<h2>Inertia parameters</h2>",
             _uncertainty(u),
             _table(("parameter", "unit", "about the CoG", "about the origin O"),
