@@ -62,7 +62,9 @@ import numpy as np  # noqa: E402
 from app.cli.main import main as insitu_main  # noqa: E402
 from app.io.uff import write_frf_uff  # noqa: E402
 from app.pipeline import Settings, load  # noqa: E402
+from hardware_mocks.reference.article import ArticleRefusalError  # noqa: E402
 from hardware_mocks.reference.metrics import errors  # noqa: E402
+from hardware_mocks.reference.plain import plain_identify  # noqa: E402
 from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario  # noqa: E402
 from hardware_mocks.reference.timedata import (  # noqa: E402
     Budget,
@@ -80,7 +82,9 @@ TABLE = (("mass", "mass %"), ("cog", "CoG mm"), ("inertia", "inertia %"), ("stif
 #: what each identification is, in the table
 SOURCES = (("time", "time data, default options"), ("exact", "exact FRFs, same lines"),
            ("bands", "time data in the exact FRFs' bands"),
-           ("nodelay", "time data, --channel-delays off (budget suites)"))
+           ("nodelay", "time data, --channel-delays off (budget suites)"),
+           ("plain", "plain baseline: H1 as a script does it, the article's method and band "
+                     "rule (budget suites)"))
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "accuracy.md"
 TITLE = "## Time data: hammer and shaker tests"
 
@@ -245,6 +249,12 @@ def evaluate(i: int, kind: str, budget: str | None = None) -> dict[str, Any]:
             res4, why4, _ = identify_cli(path, "--channel-delays", "off")
             row["nodelay"] = ({"refused": why4} if res4 is None
                               else {"errors": _errs(t, res4), "z": _z(t, res4)})
+            try:  # the plain baseline on the same samples (hardware_mocks/reference/plain.py)
+                a = plain_identify(t)
+                row["plain"] = {"errors": errors(t.truth, a.mass, a.cog, a.inertia_origin,
+                                                 a.inertia_cog, a.K)}
+            except ArticleRefusalError as err:
+                row["plain"] = {"refused": str(err)}
         # the exact FRFs on the lines the time data gave, identified the same way
         try:
             frf = load(path, Settings()).frf
@@ -339,6 +349,13 @@ def table(rows: list[dict[str, Any]]) -> list[list[str]]:
             ratio.append("-" if t is None or e is None else
                          f"{t[0] / max(e[0], 1e-300):.2f} / {t[1] / max(e[1], 1e-300):.2f}")
         body.append([kind, "ratio time data / exact FRFs", "", "", *ratio])
+        if any("plain" in r for r in rs):
+            ratio = []
+            for f, _ in TABLE:
+                t, b = _cell(rs, "time", f), _cell(rs, "plain", f)
+                ratio.append("-" if t is None or b is None else
+                             f"{t[0] / max(b[0], 1e-300):.2f} / {t[1] / max(b[1], 1e-300):.2f}")
+            body.append([kind, "ratio time data / plain baseline", "", "", *ratio])
     return body
 
 
