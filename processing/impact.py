@@ -9,7 +9,8 @@ a new trigger is armed only after the record ends. Every hit gets a verdict:
 - *double hit*: after the force has fallen below half the double-hit level, it rises
   again above ``double_hit_ratio`` times the peak within the record;
 - *overload* on a named channel: a peak at or above 99 % of its range (when the ranges are
-  given), else the extreme level that other hits of the recording reach too
+  given), else a sample at its converter's last code (:func:`converter_tops`, read from
+  the samples' code step) or the extreme level that other hits of the recording reach too
   (:func:`common_clip`: a digitiser's last code), or a clipped (flat-topped) waveform:
   ``clip_samples`` consecutive samples at the channel's peak;
 - *incomplete*: the record runs past the end (or start) of the data.
@@ -46,6 +47,7 @@ __all__ = [
     "ImpactResult",
     "ImpactSettings",
     "common_clip",
+    "converter_tops",
     "excitation_type",
     "exponential_for",
     "find_triggers",
@@ -259,6 +261,55 @@ def common_clip(rec: NDArray[np.float64]) -> NDArray[np.bool_]:
                   - np.nanmin(spread, axis=0, initial=np.inf)) > 1e-6 * np.abs(top)
         out |= at & ((at.sum(axis=0) >= 2) & differ)[None, :]
     return _many_codes(rec, out)
+
+
+#: converters whose last code a recording's samples show: 16 and 24 bits (signed codes)
+CONVERTER_BITS = (16, 24)
+#: a channel's samples are a converter's codes when this fraction of them sits within
+#: CODE_TOLERANCE of a whole number of its smallest step
+CODES_ON_GRID = 0.999
+CODE_TOLERANCE = 1e-3
+
+
+def converter_tops(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(n_ch,)`` each channel's converter's last code, in the samples' unit, or inf.
+
+    A digitised channel's samples are whole numbers of its code step ``q`` (the smallest
+    step between two of its values) times its scale: read from the samples, the step gives
+    the converter's full scale, ``2^(b-1) q`` for ``b`` the fewest bits of
+    :data:`CONVERTER_BITS` that hold the largest code seen. A sample at the last code
+    (``2^(b-1) - 1`` or more steps) is where the converter clipped, as a device flags it: a
+    clip of one sample on one hit shows no flat top and no level other hits reach. Inf for
+    a channel whose samples are not on one grid (a file of floats, a scaled or filtered
+    record), or that holds fewer than :data:`CLIP_MIN_CODES` codes.
+
+    Examples
+    --------
+    >>> q = 2 * 5.0 / 2**24  # a 24-bit converter over +-5 V, 2 V RMS: clips at 2.5 sd
+    >>> v = np.random.default_rng(0).normal(0.0, 2.0, (1, 20000))
+    >>> x = np.clip(np.round(v / q) * q, -2**23 * q, 2**23 * q)
+    >>> round(float(converter_tops(x)[0]), 5)
+    5.0
+    """
+    x = np.asarray(x, dtype=float)
+    srt = np.sort(x, axis=-1)
+    d = np.diff(srt, axis=-1)
+    scale = np.max(np.abs(srt[..., [0, -1]]), axis=-1, keepdims=True)
+    q = np.min(np.where(d > 1e-12 * scale, d, np.inf), axis=-1)  # (n_ch,)
+    out = np.full(x.shape[0], np.inf)
+    ok = np.isfinite(q) & (q > 0)
+    if not np.any(ok):
+        return out
+    codes = x[ok] / q[ok, None]
+    on_grid = np.mean(np.abs(codes - np.round(codes)) < CODE_TOLERANCE, axis=-1) >= CODES_ON_GRID
+    top_code = np.max(np.abs(codes), axis=-1)
+    bits = np.array(CONVERTER_BITS, dtype=float)
+    fits = top_code[:, None] <= 2.0 ** (bits - 1) + 0.5  # (n, n_bits)
+    half = np.where(np.any(fits, axis=1), 2.0 ** (bits[np.argmax(fits, axis=1)] - 1), np.inf)
+    tops = np.where(on_grid & (top_code >= CLIP_MIN_CODES), (half - 1 - CODE_TOLERANCE) * q[ok],
+                    np.inf)
+    out[ok] = tops
+    return out
 
 
 def _many_codes(rec: NDArray[np.float64], flagged: NDArray[np.bool_]) -> NDArray[np.bool_]:
@@ -518,9 +569,13 @@ class _Hits:
         if full_scale is not None:  # the channels' input ranges decide
             over = np.abs(rec).max(axis=-1) >= 0.99 * full_scale
             why = "peak at or above 99 % of its range"
-        else:  # the run's hits tell: a level several reach is the converter's end
-            over = common_clip(rec)
-            why = "clipped: it reaches the extreme other hits of the run stop at"
+        else:  # the converter's last code, read from the samples; or, the run's hits tell:
+            # a level several reach is the converter's end
+            last = np.abs(rec).max(axis=-1) >= converter_tops(x)[None, :]
+            common = common_clip(rec)
+            over = last | common
+            why = ("clipped: a sample at its converter's last code" if np.any(last) else
+                   "clipped: it reaches the extreme other hits of the run stop at")
         return cls(triggers, starts, complete, rec, g, peak_force, first_above, fall, rerise,
                    rerise < L, clipped, over, why)
 

@@ -219,3 +219,41 @@ def test_a_channel_clipped_at_the_same_level_rejects_every_hit_reaching_it(engin
     quiet = clean.copy()
     quiet[5] = np.round(quiet[5] / np.abs(quiet[5]).max() * 4)
     assert all(v.accepted for v in process_impacts(quiet, FS, s).verdicts)
+
+
+def test_a_single_sample_at_the_converters_last_code_rejects_its_hit(engine):
+    """Every channel digitised by a 24-bit converter (each response's range 1.5x its largest
+    hit, the force's 2x); one response's range then set under one hit's peak so that one
+    sample of that hit alone clips: no flat top, no level another hit reaches, yet the
+    sample sits at the converter's last code: that hit is rejected naming the channel, the
+    others accepted. The same records unquantised (floats) or quantised without the clip
+    reject none (the tops read from the samples: inf for floats, the full scale otherwise)."""
+    from processing.impact import converter_tops
+
+    *_, ir = engine
+    peaks = np.random.default_rng(43).uniform(150, 250, 4)
+    clean = _hammer(ir, peaks, seed=44)
+    s = ImpactSettings(20.0, L, PRE, exp_tau=TAU)
+    names = ["hammer", *(f"acc{i}" for i in range(12))]
+    top = np.abs(clean).max(axis=-1) * np.r_[2.0, np.full(12, 1.5)]
+
+    def digitised(x: np.ndarray, full: np.ndarray) -> np.ndarray:
+        q = (2 * full / 2**24)[:, None]
+        return np.clip(np.round(x / q) * q, -2**23 * q, 2**23 * q)
+
+    assert_allclose(converter_tops(digitised(clean, top)), top * (1 - 1.001 / 2**23),
+                    rtol=1e-9)
+    assert np.all(np.isinf(converter_tops(clean)))
+    assert all(v.accepted for v in process_impacts(digitised(clean, top), FS, s,
+                                                   channel_names=names).verdicts)
+    seg = [np.abs(clean[9, int((1.0 + SPACING * k) * FS):int((1.0 + SPACING * (k + 1)) * FS)])
+           for k in range(4)]
+    k = int(np.argmax([a.max() for a in seg]))
+    second = np.sort(np.concatenate(seg))[-2]  # the level under the test's largest sample
+    top[9] = 0.5 * (second + seg[k].max())
+    x = digitised(clean, top)
+    assert np.count_nonzero(np.abs(x[9]) >= top[9]) == 1
+    res = process_impacts(x, FS, s, channel_names=names)
+    reasons = {v.index: v.reason for v in res.verdicts if not v.accepted}
+    assert list(reasons) == [k]
+    assert reasons[k] == "overload on acc8 (clipped: a sample at its converter's last code)"
