@@ -225,3 +225,36 @@ def test_stiffening_mounts_in_the_results(qtbot, make_window, choose_file,
     window.tabs.setCurrentWidget(res)
     res.table_tabs.setCurrentWidget(res.damping_page)
     _shot(window, "results_stiffening", tmp_path)
+
+
+def test_channel_delays_in_the_results(qtbot, make_window, choose_file, tmp_path: Path) -> None:
+    """FRFs whose responses are each up to a sample late at 1024 Hz (the independent
+    reference model's, the delays put on here): the results' damping page says the delays
+    were read and taken out, in the command line's words."""
+    from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
+    from processing.data import FRFSet, Geometry
+
+    sc = build_scenario(ScenarioSpec(seed=8210, shape="engine", n_forces=12, noise=0.005,
+                                     elastic_ratio=8.0))
+    tau = np.random.default_rng(8211).uniform(-1, 1, sc.H.shape[0]) / 1024
+    H = sc.H * np.exp(-2j * np.pi * sc.freq[None, :] * tau[:, None])[:, None, :]
+    ids, xyz = sc.geometry()
+    uff = tmp_path / "skewed.uff"
+    write_frf_uff(uff, FRFSet(sc.freq, H, sc.sensors.ids, sc.sensors.reported_dirs,
+                              sc.forces.ids, sc.forces.reported_dirs, Geometry(ids, xyz),
+                              sc.coherence))
+    window: MainWindow = make_window()
+    choose_file(uff)
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
+        window.open_action.trigger()
+    res = window.results_view
+    note = res.damping_note.text()
+    out = tmp_path / "r.json"
+    assert main(["identify", str(uff), "--no-uncertainty", "--out", str(out)]) == 0
+    js = json.loads(out.read_text())
+    assert js["channel_delays"] is not None
+    assert js["channel_delays_choice"].startswith("channel delays read on")
+    assert js["channel_delays_choice"][1:] in note, note  # the command line's words
+    window.tabs.setCurrentWidget(res)
+    res.table_tabs.setCurrentWidget(res.damping_page)
+    _shot(window, "results_channel_delays", tmp_path)
