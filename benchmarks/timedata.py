@@ -211,8 +211,11 @@ def _hit_counts(t: TimeTest, out: str) -> dict[str, int]:
     """Rejected hits from the pipeline's lines ``load case N (node ..): k hits accepted,
     rejected: hit i: ...``, matched to the generator's labels by order."""
     rejected: dict[int, set[int]] = {}
+    without: set[int] = set()  # runs kept without the responses every hit overloads
     for m in re.finditer(r"load case (\d+) \(node \d+\): \d+ hits accepted(.*)", out):
         rejected[int(m.group(1))] = {int(h) - 1 for h in re.findall(r"hit (\d+):", m.group(2))}
+        if m.group(2).startswith(" without "):
+            without.add(int(m.group(1)))
     c = Counter[str]()
     for r in t.runs:
         rej = rejected.get(r.load_case)
@@ -221,7 +224,9 @@ def _hit_counts(t: TimeTest, out: str) -> dict[str, int]:
             continue
         for k, h in enumerate(r.hits):
             what = "double" if h.double else "clipped" if h.clipped else "good"
-            c[f"{what} {'rejected' if k in rej else 'accepted'}"] += 1
+            verdict = ("rejected" if k in rej else "kept without its clipped channel"
+                       if r.load_case in without else "accepted")
+            c[f"{what} {verdict}"] += 1
     return dict(c)
 
 
@@ -367,11 +372,15 @@ def hits_line(rows: list[dict[str, Any]]) -> str:
     c = Counter[str]()
     for r in rows:
         c.update(r.get("hits", {}))
+    keep = "kept without its clipped channel"
+
     def of(what: str) -> str:
-        n = c[f"{what} rejected"] + c[f"{what} accepted"]
+        n = c[f"{what} rejected"] + c[f"{what} accepted"] + c[f"{what} {keep}"]
         return f"{c[f'{what} rejected']} of {n}"
-    return (f"hammer hits rejected: double hits {of('double')}, clipped hits {of('clipped')}, "
-            f"good hits {of('good')}; runs left out: {c['run left out']}")
+    return (f"hammer hits rejected: double hits {of('double')}, clipped hits {of('clipped')} "
+            f"({c[f'clipped {keep}']} more kept without the clipped channel, the point's only "
+            f"hits), good hits {of('good')} ({c[f'good {keep}']} kept without a channel); runs "
+            f"left out: {c['run left out']}")
 
 
 def write_docs(rows: list[dict[str, Any]], elapsed: float, argv: list[str],

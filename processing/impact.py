@@ -24,6 +24,7 @@ results (:func:`processing.windows.correct_dynamic_stiffness`).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -184,6 +185,10 @@ class ImpactResult:
     meta: dict[str, object] = field(default_factory=dict, compare=False)
     #: the accepted hits' spectra, hit by hit (``keep_units``; for the bootstrap over hits)
     units: UnitSpectra | None = field(default=None, compare=False, repr=False)
+    #: responses (indices into H's rows) left out of this point's FRFs: every hit of the
+    #: point overloads them, so the hits are kept for the other responses and these get a
+    #: coherence of 0 (weighed out of the fit)
+    left_out: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         if (self.H is None) != (self.coherence is None) or (self.H is None) != (
@@ -414,8 +419,8 @@ def process_impacts(
     >>> process_impacts(x, fs, s, force_accept=True).verdicts[0].reason[:20]
     'accepted by override'
     """
-    hits, verdicts, accepted = _judged_hits(data, fs, settings, force_channel, channel_names,
-                                            ranges, force_accept, max_averages)
+    hits, verdicts, accepted, kept_anyway = _judged_hits(
+        data, fs, settings, force_channel, channel_names, ranges, force_accept, max_averages)
     L, pre = settings.record_length, settings.pretrigger
     freq = np.asarray(np.fft.rfftfreq(L, 1.0 / fs), dtype=np.float64)
     meta: dict[str, object] = {"fs": float(fs), "record_length": L, "pretrigger": pre}
@@ -428,16 +433,34 @@ def process_impacts(
     H, coh = frf(sp, estimator)
     meta["n_averages"] = int(accepted.sum())
     units = record_units(rec, fs, windows, force_channel) if keep_units else None
-    return ImpactResult(freq, H, coh, tuple(verdicts), sp, estimator, settings.exp_tau, meta,
-                        units)
+    left_out = _overloaded_responses(hits, accepted, force_channel) if kept_anyway else ()
+    return ImpactResult(freq, H, _weighed_out(coh, left_out), tuple(verdicts), sp, estimator,
+                        settings.exp_tau, meta, units, left_out)
+
+
+def _overloaded_responses(hits: _Hits, accepted: NDArray[np.bool_],
+                          force_channel: int) -> tuple[int, ...]:
+    """The responses (row indices of H) that an accepted record overloads."""
+    over = np.any((hits.over | hits.clipped)[accepted], axis=0)
+    return tuple(int(i) for i in np.flatnonzero(np.delete(over, force_channel)))
+
+
+def _weighed_out(coh: NDArray[np.float64], rows: tuple[int, ...]) -> NDArray[np.float64]:
+    """The coherence with ``rows`` set to 0 (their FRF values weigh nothing in the fit)."""
+    if not rows:
+        return coh
+    out = coh.copy()
+    out[list(rows)] = 0.0
+    return out
 
 
 def _judged_hits(data: ArrayLike, fs: float, settings: ImpactSettings, force_channel: int,
                  channel_names: Sequence[str] | None, ranges: ArrayLike | None,
                  force_accept: bool, max_averages: int | None,
-                 ) -> tuple[_Hits, list[HitVerdict], NDArray[np.bool_]]:
+                 ) -> tuple[_Hits, list[HitVerdict], NDArray[np.bool_], bool]:
     """The hits of a recording, cleaned as ``settings`` ask, one verdict per trigger (each
-    logged) and which complete records are averaged (:func:`process_impacts`'s parameters)."""
+    logged), which complete records are averaged (:func:`process_impacts`'s parameters) and
+    whether they were kept though they overload responses (:func:`_kept_without`)."""
     x, names, full_scale = _checked_input(data, fs, force_channel, channel_names, ranges,
                                           max_averages)
     hits = _Hits.find(x, fs, settings, force_channel, full_scale)
@@ -446,8 +469,36 @@ def _judged_hits(data: ArrayLike, fs: float, settings: ImpactSettings, force_cha
     if settings.complete:
         _complete_tails(x, hits, fs, force_channel)
     verdicts, accepted = _verdicts(hits, names, fs, force_accept, max_averages)
+    kept = _kept_without(hits, verdicts, accepted, names, force_channel, max_averages)
     _log_verdicts(verdicts)
-    return hits, verdicts, accepted
+    return hits, verdicts, accepted, kept
+
+
+def _kept_without(hits: _Hits, verdicts: list[HitVerdict], accepted: NDArray[np.bool_],
+                  names: Sequence[str], force_channel: int, max_averages: int | None) -> bool:
+    """When every complete hit is rejected only for overloading responses (not the force,
+    no double hit), the point would be lost for a few channels: the hits are accepted
+    instead (``verdicts`` and ``accepted`` changed in place), their verdicts saying which
+    responses are left out of the point's FRFs (:attr:`ImpactResult.left_out`). True when
+    so."""
+    over = hits.over | hits.clipped  # (n_complete, n_ch)
+    if accepted.any() or not over.shape[0] or np.any(hits.double) or np.any(
+            over[:, force_channel]) or not np.all(over.any(axis=1)):
+        return False
+    gone = ", ".join(names[int(c)] for c in np.flatnonzero(over.any(axis=0)))
+    k = 0
+    for i, v in enumerate(verdicts):
+        if np.isnan(v.peak_force):  # an incomplete record stays rejected
+            continue
+        ok = max_averages is None or k < max_averages
+        accepted[k] = ok
+        verdicts[i] = dataclasses.replace(
+            v, accepted=ok, reason=(f"accepted without {gone}: every hit of the point "
+                                    f"overloads it ({v.reason})" if ok else
+                                    f"not used: the first {max_averages} accepted hits are "
+                                    "averaged"))
+        k += 1
+    return True
 
 
 def _log_verdicts(verdicts: Sequence[HitVerdict]) -> None:
@@ -669,8 +720,10 @@ def merge_results(results: Sequence[ImpactResult]) -> ImpactResult:
     parts = [r.units for r in results if r.spectra is not None]
     units = (UnitSpectra.concat([u for u in parts if u is not None])
              if parts and all(u is not None for u in parts) else None)
-    return ImpactResult(sp.freq, H, coh, verdicts, sp, first.estimator, first.exp_tau,
-                        {**first.meta, "n_averages": sp.n_averages}, units)
+    left_out = tuple(sorted({i for r in results for i in r.left_out}))
+    return ImpactResult(sp.freq, H, _weighed_out(coh, left_out), verdicts, sp,
+                        first.estimator, first.exp_tau,
+                        {**first.meta, "n_averages": sp.n_averages}, units, left_out)
 
 
 def impact_measurement(

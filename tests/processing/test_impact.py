@@ -186,8 +186,9 @@ def test_settings_are_checked():
 def test_a_channel_clipped_at_the_same_level_rejects_every_hit_reaching_it(engine):
     """Every hit clips one response for one or two samples at the digitiser's last code
     (no flat top to see in one hit): the common extreme gives it away, every hit reaching
-    it is rejected naming the channel; the same run unclipped, identical noise-free hits and
-    a quiet channel a few codes above its noise are accepted."""
+    it names the channel, which is left out of the point's FRFs (the point is kept for the
+    other responses); the same run unclipped, identical noise-free hits and a quiet channel
+    a few codes above its noise are accepted."""
     *_, ir = engine
     peaks = np.random.default_rng(41).uniform(196, 204, 5)  # an even hand
     clean = _hammer(ir, peaks, seed=42)
@@ -204,9 +205,14 @@ def test_a_channel_clipped_at_the_same_level_rejects_every_hit_reaching_it(engin
     at_level = np.abs(clipped[7]) >= level
     assert 5 <= at_level.sum() <= 10 and not (at_level[2:] & at_level[1:-1] & at_level[:-2]).any()
     res = process_impacts(clipped, FS, s, channel_names=names)
-    assert not any(v.accepted for v in res.verdicts)
-    assert all(v.reason.startswith("overload on acc6 (clipped: it reaches the extreme")
+    # every hit of the point clips acc6 alone: the hits are kept for the other responses,
+    # acc6 left out of the point's FRFs (coherence 0, weighed out of the fit)
+    assert all(v.accepted for v in res.verdicts)
+    assert all(v.reason.startswith("accepted without acc6: every hit of the point overloads "
+                                   "it (overload on acc6 (clipped: it reaches the extreme")
                for v in res.verdicts)
+    assert res.left_out == (6,) and res.coherence is not None
+    assert np.all(res.coherence[6] == 0) and np.all(res.coherence[5] > 0)
     # the station's input ranges decide when given: this level is far below them
     ranges = np.full(clipped.shape[0], 1e6)
     assert all(v.accepted for v in process_impacts(clipped, FS, s, channel_names=names,
