@@ -348,20 +348,21 @@ def table(rows: list[dict[str, Any]]) -> list[list[str]]:
             refused = sum("refused" in r[key] for r in have)
             body.append([kind, name, str(len(have)), str(refused),
                          *(_fmt(_cell(rs, key, f)) for f, _ in TABLE)])
-        ratio = []
-        for f, _ in TABLE:
-            t, e = _cell(rs, "time", f), _cell(rs, "exact", f)
-            ratio.append("-" if t is None or e is None else
-                         f"{t[0] / max(e[0], 1e-300):.2f} / {t[1] / max(e[1], 1e-300):.2f}")
-        body.append([kind, "ratio time data / exact FRFs", "", "", *ratio])
+        body.append([kind, "ratio time data / exact FRFs", "", "", *_ratios(rs, "exact")])
         if any("plain" in r for r in rs):
-            ratio = []
-            for f, _ in TABLE:
-                t, b = _cell(rs, "time", f), _cell(rs, "plain", f)
-                ratio.append("-" if t is None or b is None else
-                             f"{t[0] / max(b[0], 1e-300):.2f} / {t[1] / max(b[1], 1e-300):.2f}")
-            body.append([kind, "ratio time data / plain baseline", "", "", *ratio])
+            body.append([kind, "ratio time data / plain baseline", "", "",
+                         *_ratios(rs, "plain")])
     return body
+
+
+def _ratios(rows: list[dict[str, Any]], key: str) -> list[str]:
+    """Per figure: the time data's median and 95th percentile over those of ``key``."""
+    out = []
+    for f, _ in TABLE:
+        t, b = _cell(rows, "time", f), _cell(rows, key, f)
+        out.append("-" if t is None or b is None else
+                   f"{t[0] / max(b[0], 1e-300):.2f} / {t[1] / max(b[1], 1e-300):.2f}")
+    return out
 
 
 HEADER = ["test", "FRFs", "cases", "refused", *(f"{h} (median / p95)" for _, h in TABLE)]

@@ -197,6 +197,19 @@ def test_rubber_mounts_in_results(qtbot, make_window, choose_file, tmp_path: Pat
     _shot(window, "results_damping", tmp_path)
 
 
+def _opened_with_cli(qtbot, make_window, choose_file, uff: Path,
+                     tmp: Path) -> tuple[MainWindow, str, dict]:
+    """The window with ``uff`` opened and analysed, its results' damping note, and the
+    command line's result JSON of the same file."""
+    window: MainWindow = make_window()
+    choose_file(uff)
+    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
+        window.open_action.trigger()
+    out = tmp / "r.json"
+    assert main(["identify", str(uff), "--no-uncertainty", "--out", str(out)]) == 0
+    return window, window.results_view.damping_note.text(), json.loads(out.read_text())
+
+
 def test_stiffening_mounts_in_the_results(qtbot, make_window, choose_file,
                                           tmp_path: Path) -> None:
     """FRFs of mounts stiffening 30 % a decade (the independent reference model): the
@@ -211,16 +224,9 @@ def test_stiffening_mounts_in_the_results(qtbot, make_window, choose_file,
     uff = tmp_path / "stiffening.uff"
     write_frf_uff(uff, FRFSet(sc.freq, sc.H, sc.sensors.ids, sc.sensors.reported_dirs,
                               sc.forces.ids, sc.forces.reported_dirs, Geometry(ids, xyz)))
-    window: MainWindow = make_window()
-    choose_file(uff)
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
-        window.open_action.trigger()
+    window, note, js = _opened_with_cli(qtbot, make_window, choose_file, uff, tmp_path)
     res = window.results_view
-    note = res.damping_note.text()
     assert "stiffness rising +" in note and "K stated at" in note, note
-    out = tmp_path / "r.json"
-    assert main(["identify", str(uff), "--no-uncertainty", "--out", str(out)]) == 0
-    js = json.loads(out.read_text())
     assert f"{js['stiffening_choice']}" in note  # the same words as the command line's
     window.tabs.setCurrentWidget(res)
     res.table_tabs.setCurrentWidget(res.damping_page)
@@ -243,15 +249,8 @@ def test_channel_delays_in_the_results(qtbot, make_window, choose_file, tmp_path
     write_frf_uff(uff, FRFSet(sc.freq, H, sc.sensors.ids, sc.sensors.reported_dirs,
                               sc.forces.ids, sc.forces.reported_dirs, Geometry(ids, xyz),
                               sc.coherence))
-    window: MainWindow = make_window()
-    choose_file(uff)
-    with qtbot.waitSignal(window.session.analysis_changed, timeout=300000):
-        window.open_action.trigger()
+    window, note, js = _opened_with_cli(qtbot, make_window, choose_file, uff, tmp_path)
     res = window.results_view
-    note = res.damping_note.text()
-    out = tmp_path / "r.json"
-    assert main(["identify", str(uff), "--no-uncertainty", "--out", str(out)]) == 0
-    js = json.loads(out.read_text())
     assert js["channel_delays"] is not None
     assert js["channel_delays_choice"].startswith("channel delays read on")
     assert js["channel_delays_choice"][1:] in note, note  # the command line's words
