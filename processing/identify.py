@@ -240,11 +240,14 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
                     ) -> tuple[Stages, _Data]:
     """The stages of ``d``, with the response channels' delays taken out first when the
     fit's phase shows them (:mod:`processing.delays`): the delays are read against the
-    fitted model, taken out and the fit run again, until a round changes them no more."""
+    fitted model, taken out and the fit run again, until a round changes them no more. The
+    round whose FRFs fit their own model best is kept, when it takes the phase misfit to at
+    most :data:`DELAY_GAIN` of the FRFs' as given and under :data:`DELAY_MISFIT`; else the
+    FRFs as given."""
     st = _stages(d, options, solver)
     if options.channel_delays == "off":
         return dataclasses.replace(st, delays_note="channel delays not read: asked for"), d
-    if not problem_reads_delays(st.problem):
+    if not st.problem.improved:  # the article's plain method takes the FRFs as they are
         return dataclasses.replace(st, delays_note="channel delays not read: the article's "
                                    "method"), d
     top = float(st.bands.mass_band[1])
@@ -286,12 +289,6 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
             f"taken out (round {rounds}; phase misfit {first:.3f} -> {misfit:.3f} "
             f"rad): up to {1e3 * np.max(np.abs(kept.seconds)):.3g} ms")
     return dataclasses.replace(st_k, delays=kept, delays_note=note), d_k
-
-
-def problem_reads_delays(problem: Problem) -> bool:
-    """Whether channel delays are read for ``problem``: the improved method (the article's
-    plain method takes the FRFs as they are)."""
-    return problem.improved
 
 
 @one_blas_thread
