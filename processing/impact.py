@@ -268,6 +268,9 @@ def common_clip(rec: NDArray[np.float64]) -> NDArray[np.bool_]:
     return _many_codes(rec, out)
 
 
+#: where a channel's converter's end is known (:func:`converter_tops`), a level several hits
+#: reach (:func:`common_clip`) is clipping only at this fraction of it or more
+COMMON_CLIP_OF_TOP = 0.5
 #: converters whose last code a recording's samples show: 16 and 24 bits (signed codes)
 CONVERTER_BITS = (16, 24)
 #: a channel's samples are a converter's codes when this fraction of them sits within
@@ -622,8 +625,13 @@ class _Hits:
             why = "peak at or above 99 % of its range"
         else:  # the converter's last code, read from the samples; or, the run's hits tell:
             # a level several reach is the converter's end
-            last = np.abs(rec).max(axis=-1) >= converter_tops(x)[None, :]
-            common = common_clip(rec)
+            tops = converter_tops(x)[None, :]
+            peak = np.abs(rec).max(axis=-1)
+            last = peak >= tops
+            # a level several hits reach is clipping where the converter's end is not known,
+            # or near it (an amplifier saturating before the converter), not far under it
+            common = common_clip(rec) & ((peak >= COMMON_CLIP_OF_TOP * tops)
+                                         | ~np.isfinite(tops))
             over = last | common
             why = ("clipped: a sample at its converter's last code" if np.any(last) else
                    "clipped: it reaches the extreme other hits of the run stop at")

@@ -263,3 +263,27 @@ def test_a_single_sample_at_the_converters_last_code_rejects_its_hit(engine):
     reasons = {v.index: v.reason for v in res.verdicts if not v.accepted}
     assert list(reasons) == [k]
     assert reasons[k] == "overload on acc8 (clipped: a sample at its converter's last code)"
+
+
+def test_a_level_two_hits_reach_far_under_the_converters_end_is_not_clipping(engine):
+    """Two hits whose largest sample on a response is the same code, a quarter of its
+    converter's full scale (two hits of one hand can): not clipping, both accepted; the same
+    records as floats (the converter's end unknown) are taken for a clip at that level (the
+    point then kept without that response)."""
+    *_, ir = engine
+    clean = _hammer(ir, [200.0, 200.0], seed=46)
+    s = ImpactSettings(20.0, L, PRE, exp_tau=TAU)
+    segs = [slice(int((1.0 + SPACING * k) * FS), int((1.0 + SPACING * k) * FS) + L - PRE)
+            for k in range(2)]  # within each hit's record
+    at = [int(np.argmax(clean[4, sg])) + sg.start for sg in segs]
+    clean[4, at] = clean[4].max()  # both hits' largest sample on acc3 the same
+    top = np.abs(clean).max(axis=-1) * 4.0
+    q = (2 * top / 2**24)[:, None]
+    x = np.round(clean / q) * q
+    res = process_impacts(x, FS, s)
+    assert all(v.accepted and not v.reason for v in res.verdicts) and res.left_out == ()
+    res = process_impacts(clean, FS, s)  # both hits named: the point kept without acc3
+    assert res.left_out == (3,)
+    assert all(v.reason.startswith("accepted without channel 4: every hit of the point "
+                                   "overloads it (overload on channel 4 (clipped: it reaches")
+               for v in res.verdicts)
