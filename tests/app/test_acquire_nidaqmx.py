@@ -23,7 +23,7 @@ from app.mockbench.bench import plan_for_bench
 from app.mockbench.simulated import SimulatedStation
 from drivers.station import load_station
 from hardware_mocks.benches import get_bench
-from tests.app.bench_checks import assert_identifies
+from tests.app.bench_checks import SIX, assert_identifies, cut_plan
 from tests.app.cli_lines import one_error_line
 
 DOCS = Path(__file__).parents[2] / "docs"
@@ -31,13 +31,14 @@ SIMULATION = '[simulation]\nbench = "engine-rigid"\n'
 MODULES = '["cDAQ1Mod1", "cDAQ1Mod2", "cDAQ1Mod3", "cDAQ1Mod4"]'
 
 
-def _plan(tmp_path: Path) -> Path:
-    """The documented plan with one hit a point (9 points, 1.5 s records)."""
+def _plan(tmp_path: Path, keep: list[int] | None = None) -> Path:
+    """The documented plan with one hit a point (9 points, 1.5 s records), or at its
+    points ``keep`` only (positions)."""
     text = (DOCS / "mock_bench_plan.toml").read_text()
     assert "\nhits = 3\n" in text
     path = tmp_path / "plan.toml"
     path.write_text(text.replace("\nhits = 3\n", "\nhits = 1\n"))
-    return path
+    return path if keep is None else cut_plan(path, keep, path)
 
 
 def _station(tmp_path: Path, simulation: str | None = SIMULATION, *,
@@ -63,9 +64,9 @@ def _acquire(station: Path, tmp_path: Path) -> int:
 def test_documented_station_identifies_the_bench(tmp_path: Path) -> None:
     out = tmp_path / "run.h5"
     assert main(["acquire", "--station", str(DOCS / "ni_station.toml"), "--plan",
-                 str(_plan(tmp_path)), "--out", str(out)]) == 0
+                 str(_plan(tmp_path, SIX)), "--out", str(out)]) == 0
     run = read_run(out, with_data=False)
-    assert run.state == "finished" and len(run.records) == 9
+    assert run.state == "finished" and len(run.records) == len(SIX)
     assert run.records.accepted.all()
     assert run.station_data["simulation"] == {"bench": "engine-rigid"}
     assert run.station_data["devices"]["frontend"]["backend"] == "frontend-nidaqmx"
@@ -76,43 +77,41 @@ def test_documented_station_identifies_the_bench(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_documented_shaker_plan_through_the_simulated_generator(tmp_path: Path) -> None:
-    """docs/ni_shaker_plan.toml (one block a point, shorter settling) on the documented
-    station: the 33500 (generator-visa through pyvisa-py) drives the shaker, the cDAQ reads
-    its force and the responses; the bench is identified, the output off at the end."""
-    text = (DOCS / "ni_shaker_plan.toml").read_text()
-    assert "\naverages = 3\n" in text and "\nsettle = 1.0\n" in text
-    plan = tmp_path / "plan.toml"
-    plan.write_text(text.replace("\naverages = 3\n", "\naverages = 1\n")
-                    .replace("\nsettle = 1.0\n", "\nsettle = 0.5\n"))
+    """docs/ni_shaker_plan.toml (one block a point, shorter settling, six of its nine
+    points) on the documented station: the 33500 (generator-visa through pyvisa-py) drives
+    the shaker, the cDAQ reads its force and the responses; the bench is identified, the
+    output off at the end."""
+    plan = _short_shaker_plan(tmp_path, SIX)
     out = tmp_path / "run.h5"
     assert main(["acquire", "--station", str(DOCS / "ni_station.toml"), "--plan", str(plan),
                  "--out", str(out)]) == 0
     run = read_run(out, with_data=False)
-    assert run.method == "shaker" and run.state == "finished" and len(run.records) == 9
+    assert run.method == "shaker" and run.state == "finished" and len(run.records) == len(SIX)
     assert run.station_data["devices"]["shaker"]["backend"] == "generator-visa"
     assert_identifies(json.loads(json.dumps(run.result)), get_bench("engine-rigid").model)
 
 
-def _short_shaker_plan(tmp_path: Path) -> Path:
-    """docs/ni_shaker_plan.toml with one block a point and 0.5 s settling."""
+def _short_shaker_plan(tmp_path: Path, keep: list[int] | None = None) -> Path:
+    """docs/ni_shaker_plan.toml with one block a point and 0.5 s settling, at its points
+    ``keep`` only (positions) if given."""
     text = (DOCS / "ni_shaker_plan.toml").read_text()
     assert "\naverages = 3\n" in text and "\nsettle = 1.0\n" in text
     plan = tmp_path / "plan.toml"
     plan.write_text(text.replace("\naverages = 3\n", "\naverages = 1\n")
                     .replace("\nsettle = 1.0\n", "\nsettle = 0.5\n"))
-    return plan
+    return plan if keep is None else cut_plan(plan, keep, plan)
 
 
 def test_documented_shaker_plan_through_the_ao_module(tmp_path: Path) -> None:
-    """docs/ni_shaker_plan.toml (one block a point, shorter settling) on
-    docs/ni_ao_station.toml: an NI 9263 output of the simulated chassis (shaker-nidaqmx)
+    """docs/ni_shaker_plan.toml (one block a point, shorter settling, six of its nine
+    points) on docs/ni_ao_station.toml: an NI 9263 output of the simulated chassis (shaker-nidaqmx)
     drives the shaker's amplifier, the cDAQ's inputs read its force and the responses; the
     bench is identified."""
     out = tmp_path / "run.h5"
     assert main(["acquire", "--station", str(DOCS / "ni_ao_station.toml"), "--plan",
-                 str(_short_shaker_plan(tmp_path)), "--out", str(out)]) == 0
+                 str(_short_shaker_plan(tmp_path, SIX)), "--out", str(out)]) == 0
     run = read_run(out, with_data=False)
-    assert run.method == "shaker" and run.state == "finished" and len(run.records) == 9
+    assert run.method == "shaker" and run.state == "finished" and len(run.records) == len(SIX)
     assert run.records.accepted.all()
     assert run.station_data["devices"]["shaker"]["backend"] == "shaker-nidaqmx"
     assert_identifies(json.loads(json.dumps(run.result)), get_bench("engine-rigid").model)

@@ -10,7 +10,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import replace
 from pathlib import Path
 
@@ -124,13 +124,13 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     yields the scheduler's address; both processes are ended after the module."""
     log = tmp_path_factory.mktemp("dask") / "scheduler.log"
     procs: list[subprocess.Popen[bytes]] = []
+    address = ""
     try:
         with log.open("wb") as fh:
             procs.append(subprocess.Popen(
                 [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
                  "127.0.0.1", "--port", "0", "--no-dashboard"],
                 stdout=subprocess.DEVNULL, stderr=fh))
-        address = ""
         deadline = time.monotonic() + 120
         while not address and time.monotonic() < deadline:
             assert procs[0].poll() is None, log.read_text()
@@ -146,8 +146,12 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             c.wait_for_workers(2, timeout=120)
         yield address
     finally:
+        if address:  # the cluster closed by its scheduler: a SIGTERM'd worker takes 8 s
+            with suppress(OSError), Client(address, timeout=10) as c:
+                c.shutdown()
         for p in reversed(procs):
-            p.terminate()
+            if p.poll() is None:
+                p.terminate()
         for p in reversed(procs):
             try:
                 p.wait(timeout=30)
