@@ -205,10 +205,10 @@ DELAY_LINES_FROM = 1.25
 DELAY_MIN_LINES = 8
 
 
-def _delay_lines(st: Stages, top: float) -> NDArray[np.bool_]:
-    """The lines the delays are read on: from above the rigid-body modes to ``top`` (the
-    first fit's mass-line top: the rigid model holds there), or the mass line's."""
-    p = st.problem
+def _delay_lines(st: Stages) -> NDArray[np.bool_]:
+    """The lines the delays are read on: from above the rigid-body modes to the top of the
+    fit's mass line (the rigid model holds there), or the mass line's."""
+    p, top = st.problem, float(st.bands.mass_band[1])
     modes = st.checks.rigid_modes_hz[np.isfinite(st.checks.rigid_modes_hz)]
     lo = DELAY_LINES_FROM * float(np.max(modes)) if modes.size else np.inf
     sel = (p.freq >= lo) & (p.freq <= top) & p.line_ok
@@ -250,8 +250,7 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
     if not st.problem.improved:  # the article's plain method takes the FRFs as they are
         return dataclasses.replace(st, delays_note="channel delays not read: the article's "
                                    "method"), d
-    top = float(st.bands.mass_band[1])
-    sel = _delay_lines(st, top)
+    sel = _delay_lines(st)
     step = _delays_against_fit(st, sel)
     w_top = 2 * np.pi * float(st.problem.freq[sel][-1])
     z = np.abs(step.seconds) / np.where(step.std > 0, step.std, np.inf)

@@ -422,7 +422,7 @@ def process_impacts(
     >>> process_impacts(x, fs, s, force_accept=True).verdicts[0].reason[:20]
     'accepted by override'
     """
-    hits, verdicts, accepted, kept_anyway = _judged_hits(
+    hits, verdicts, accepted, left_out = _judged_hits(
         data, fs, settings, force_channel, channel_names, ranges, force_accept, max_averages)
     L, pre = settings.record_length, settings.pretrigger
     freq = np.asarray(np.fft.rfftfreq(L, 1.0 / fs), dtype=np.float64)
@@ -436,16 +436,8 @@ def process_impacts(
     H, coh = frf(sp, estimator)
     meta["n_averages"] = int(accepted.sum())
     units = record_units(rec, fs, windows, force_channel) if keep_units else None
-    left_out = _overloaded_responses(hits, accepted, force_channel) if kept_anyway else ()
     return ImpactResult(freq, H, _weighed_out(coh, left_out), tuple(verdicts), sp, estimator,
                         settings.exp_tau, meta, units, left_out)
-
-
-def _overloaded_responses(hits: _Hits, accepted: NDArray[np.bool_],
-                          force_channel: int) -> tuple[int, ...]:
-    """The responses (row indices of H) that an accepted record overloads."""
-    over = np.any((hits.over | hits.clipped)[accepted], axis=0)
-    return tuple(int(i) for i in np.flatnonzero(np.delete(over, force_channel)))
 
 
 def _weighed_out(coh: NDArray[np.float64], rows: tuple[int, ...]) -> NDArray[np.float64]:
@@ -460,10 +452,11 @@ def _weighed_out(coh: NDArray[np.float64], rows: tuple[int, ...]) -> NDArray[np.
 def _judged_hits(data: ArrayLike, fs: float, settings: ImpactSettings, force_channel: int,
                  channel_names: Sequence[str] | None, ranges: ArrayLike | None,
                  force_accept: bool, max_averages: int | None,
-                 ) -> tuple[_Hits, list[HitVerdict], NDArray[np.bool_], bool]:
+                 ) -> tuple[_Hits, list[HitVerdict], NDArray[np.bool_], tuple[int, ...]]:
     """The hits of a recording, cleaned as ``settings`` ask, one verdict per trigger (each
     logged), which complete records are averaged (:func:`process_impacts`'s parameters) and
-    whether they were kept though they overload responses (:func:`_kept_without`)."""
+    the responses left out of the point's FRFs when the hits were kept though they overload
+    them (:func:`_kept_without`)."""
     x, names, full_scale = _checked_input(data, fs, force_channel, channel_names, ranges,
                                           max_averages)
     hits = _Hits.find(x, fs, settings, force_channel, full_scale)
@@ -472,22 +465,23 @@ def _judged_hits(data: ArrayLike, fs: float, settings: ImpactSettings, force_cha
     if settings.complete:
         _complete_tails(x, hits, fs, force_channel)
     verdicts, accepted = _verdicts(hits, names, fs, force_accept, max_averages)
-    kept = _kept_without(hits, verdicts, accepted, names, force_channel, max_averages)
+    left_out = _kept_without(hits, verdicts, accepted, names, force_channel, max_averages)
     _log_verdicts(verdicts)
-    return hits, verdicts, accepted, kept
+    return hits, verdicts, accepted, left_out
 
 
 def _kept_without(hits: _Hits, verdicts: list[HitVerdict], accepted: NDArray[np.bool_],
-                  names: Sequence[str], force_channel: int, max_averages: int | None) -> bool:
+                  names: Sequence[str], force_channel: int, max_averages: int | None,
+                  ) -> tuple[int, ...]:
     """When every complete hit is rejected only for overloading responses (not the force,
     no double hit), the point would be lost for a few channels: the hits are accepted
     instead (``verdicts`` and ``accepted`` changed in place), their verdicts saying which
-    responses are left out of the point's FRFs (:attr:`ImpactResult.left_out`). True when
-    so."""
+    responses are left out of the point's FRFs. Returns those responses (row indices of H,
+    those the accepted hits overload: :attr:`ImpactResult.left_out`), empty otherwise."""
     over = hits.over | hits.clipped  # (n_complete, n_ch)
     if accepted.any() or not over.shape[0] or np.any(hits.double) or np.any(
             over[:, force_channel]) or not np.all(over.any(axis=1)):
-        return False
+        return ()
     gone = ", ".join(names[int(c)] for c in np.flatnonzero(over.any(axis=0)))
     k = 0
     for i, v in enumerate(verdicts):
@@ -501,7 +495,8 @@ def _kept_without(hits: _Hits, verdicts: list[HitVerdict], accepted: NDArray[np.
                                     f"not used: the first {max_averages} accepted hits are "
                                     "averaged"))
         k += 1
-    return True
+    rows = np.flatnonzero(np.delete(np.any(over[accepted], axis=0), force_channel))
+    return tuple(int(i) for i in rows)
 
 
 def _log_verdicts(verdicts: Sequence[HitVerdict]) -> None:

@@ -166,6 +166,15 @@ class IdentificationResult:
     channel_delays_note: str = ""
 
     @property
+    def fit_notes(self) -> tuple[str, ...]:
+        """How the damping model, the stiffening (when any) and the channel delays (when
+        taken out) were chosen, in words, as every view prints them."""
+        return tuple(n for n in (self.damping_note,
+                                 self.stiffening_note if self.stiffening else "",
+                                 self.channel_delays_note if self.channel_delays is not None
+                                 else "") if n)
+
+    @property
     def coherence_low_fraction(self) -> float:
         """Fraction of the bands' FRF values under the coherence threshold (0 unchecked)."""
         return self.coherence_low / self.coherence_values if self.coherence_values else 0.0

@@ -172,10 +172,8 @@ def print_result(
     if result.damping_model != "viscous":
         con.print(matrix_table("Structural damping D at O (K* = K + jwC + jD; N/m, ...)",
                                result.D, None))
-    for note in (result.damping_note, result.stiffening_note if result.stiffening else "",
-                 result.channel_delays_note if result.channel_delays is not None else ""):
-        if note:
-            con.print(f"{note[0].upper()}{note[1:]}")
+    for note in result.fit_notes:
+        con.print(f"{note[0].upper()}{note[1:]}")
     mb, sb = result.mass_band, result.stiffness_band
     con.print(
         f"Bands: mass line {mb[0]:.1f}-{mb[1]:.1f} Hz ({len(result.mass_lines)} lines), "

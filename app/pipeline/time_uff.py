@@ -309,12 +309,11 @@ class _ImpactColumn:
         self.results.append(one)
         bad = [v for v in one.rejected if not v.reason.startswith("not used")]
         n_unused = len(one.rejected) - len(bad)
-        without = next((v.reason.split(":")[0] for v in one.verdicts
-                        if v.accepted and v.reason.startswith("accepted without")), "")
+        without = ", ".join(f"response {i + 1}" for i in one.left_out)
         self.reports.append(RunReport(
             f"load case {r.load_case} (node {self.key[0]}): {one.n_accepted} hits accepted"
-            + (f" {without[len('accepted '):]} (every hit overloads it: left out of this "
-               "point's FRFs)" if without else "")
+            + (f" without {without} (every hit overloads it: left out of this point's FRFs)"
+               if without else "")
             + (", rejected: " + "; ".join(f"hit {v.index + 1}: {v.reason}" for v in bad)
                if bad else "")
             + (f"; {n_unused} more not used (--averages {s.averages})" if n_unused else "")))

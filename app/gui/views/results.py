@@ -334,9 +334,7 @@ class ResultsView(QtWidgets.QWidget):
         fill_table(self.C, ("C at O", *dofs),
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.C, u, "damping"),
                                                 strict=True)])
-        notes = [n for n in (r.damping_note, r.stiffening_note if r.stiffening else "",
-                             r.channel_delays_note if r.channel_delays is not None else "") if n]
-        self.damping_note.setText("; ".join(["K* = K + jωC + jD", *notes]) + ".")
+        self.damping_note.setText("; ".join(["K* = K + jωC + jD", *r.fit_notes]) + ".")
         fill_table(self.D, ("D at O", *dofs),
                    [(d, *row) for d, row in zip(dofs, format_matrix(r.D), strict=True)])
         self.K.setToolTip("N/m (translation rows/columns), N/rad, N m/m, N m/rad")
