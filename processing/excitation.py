@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-import scipy.signal
 from numpy.typing import NDArray
 
 from processing.decay import CARRY_MIN, CARRY_STRETCH, free_decay, noise_sigma
@@ -49,6 +48,8 @@ def _white(
     x = rng.standard_normal(shape)
     if band is None or (band[0] == 0 and band[1] >= fs / 2):
         return x
+    import scipy.signal  # the generators' filters: 40 MB that reading records never needs
+
     lo, hi = band
     if lo == 0:
         sos = scipy.signal.butter(8, hi, "lowpass", fs=fs, output="sos")
@@ -142,6 +143,8 @@ def burst_random(
     n_on = max(round(burst_fraction * record_length), 2)
     x = _white(np.random.default_rng(seed), (n_channels, n_bursts, n_on), fs, band)
     x *= rms / np.sqrt(np.mean(x**2, axis=-1, keepdims=True))
+    import scipy.signal
+
     x *= scipy.signal.windows.tukey(n_on, min(1.0, 2 * 0.01 * record_length / n_on))
     out = np.zeros((n_channels, n_bursts, record_length))
     out[..., :n_on] = x

@@ -225,13 +225,15 @@ def _delays_against_fit(st: Stages, sel: NDArray[np.bool_]) -> ChannelDelays:
 
 
 def _without_delays(d: _Data, delays: ChannelDelays, options: IdentifyOptions,
-                    solver: SolverSettings) -> _Data:
-    """The data with the delays taken out of the FRFs and of the per-unit spectra."""
+                    solver: SolverSettings, units: bool = True) -> _Data:
+    """The data with the delays taken out of the FRFs and (``units``) of the per-unit
+    spectra; without ``units``, none (a round's fit reads only the FRFs: the units, as
+    large as the records, are shifted once, for the round kept)."""
     m = d.measurement
     frf = dataclasses.replace(m.frf, H=delays.shifted(m.frf.freq, m.frf.H))
     prov = m.provenance
     if prov.units is not None:
-        prov = dataclasses.replace(prov, units=delays.units(prov.units))
+        prov = dataclasses.replace(prov, units=delays.units(prov.units) if units else None)
     out = _data(dataclasses.replace(m, frf=frf, provenance=prov), options, solver)
     return dataclasses.replace(out, resp_xyz=d.resp_xyz)
 
@@ -263,21 +265,21 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
     # each round on the first fit's lines; the round whose data fit their own model best
     # is kept (the FRFs as given when none fits better)
     first = step.misfit
-    best: tuple[float, Stages, _Data, ChannelDelays | None, int] = (first, st, d, None, 0)
+    best: tuple[float, Stages, ChannelDelays | None, int] = (first, st, None, 0)
     total, span = step, (float(st.problem.freq[sel][0]), float(st.problem.freq[sel][-1]))
     for rounds in range(1, DELAY_ROUNDS + 1):
-        d_k = _without_delays(d, total, options, solver)
+        d_k = _without_delays(d, total, options, solver, units=False)
         try:
             st_k = _stages(d_k, options, solver)
         except InputError:  # a round's fit refused: the best round so far stands
             break
         step = _delays_against_fit(st_k, sel)
         if step.misfit < best[0]:
-            best = (step.misfit, st_k, d_k, total, rounds)
+            best = (step.misfit, st_k, total, rounds)
         if w_top * float(np.max(np.abs(step.seconds))) < DELAY_SETTLED:
             break
         total = total + step
-    misfit, st_k, d_k, kept, rounds = best
+    misfit, st_k, kept, rounds = best
     if kept is None or misfit > min(DELAY_GAIN * first, DELAY_MISFIT):
         return dataclasses.replace(
             st, delays_note=(f"channel delays not taken out: they take the phase misfit from "
@@ -287,6 +289,7 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
     note = (f"channel delays read on {kept.lines} lines {span[0]:.1f}-{span[1]:.1f} Hz and "
             f"taken out (round {rounds}; phase misfit {first:.3f} -> {misfit:.3f} "
             f"rad): up to {1e3 * np.max(np.abs(kept.seconds)):.3g} ms")
+    d_k = _without_delays(d, kept, options, solver)  # the FRFs of round k, and the units
     return dataclasses.replace(st_k, delays=kept, delays_note=note), d_k
 
 

@@ -126,10 +126,10 @@ class Settings:
             raise SettingError(f"{{overlap}} must be at least 0 and below 1, got "
                                f"{self.overlap:g}", "overlap")
         if self.window is not None:
-            import scipy.signal  # loaded only when a window is named
+            from processing.spectral import window_samples
 
             try:
-                scipy.signal.get_window(self.window, 16)
+                window_samples(self.window, 16)
             except (ValueError, TypeError) as err:
                 raise SettingError(f"{{window}} {self.window!r} is not a window scipy knows: "
                                    "use hann, hamming, blackman, flattop, boxcar, ...",
