@@ -51,6 +51,7 @@ from processing.stages import (
     assemble,
     check,
     choose_bands,
+    implausible_mass,
     mass_line_among_modes,
     monte_carlo_model,
     refuse_implausible_mass,
@@ -160,17 +161,37 @@ class Stages:
     delays_note: str = ""
 
 
+#: most times the mass line is moved above the fit's rigid-body modes (:func:`_stages`),
+#: each raising the modes' floor by at least FLOOR_RISE
+FLOOR_ROUNDS = 3
+FLOOR_RISE = 1.05
+
+
 def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stages:
     frf = d.frf
     problem = prepare(frf.freq, frf.H, d.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
                       coherence=frf.coherence, options=options, solver=solver,
                       exponential_tau=d.exponential_tau, coherence_floor=d.coherence_floor,
                       elastic_top=d.elastic_top)
-    bands, weights, fitted = _fit_in_bands(problem, choose_bands(problem, *d.rigid_tops))
-    if (floor := mass_line_among_modes(problem, bands, fitted)) is not None:
-        # the lines put the mass line among the rigid-body modes the fit finds: above them
-        bands, weights, fitted = _fit_in_bands(
-            problem, choose_bands(problem, *d.rigid_tops, rigid_floor=floor))
+    fits = [_fit_in_bands(problem, choose_bands(problem, *d.rigid_tops))]
+    floor = 0.0
+    for _ in range(FLOOR_ROUNDS):
+        # the lines put the mass line among the rigid-body modes the fit finds: above
+        # them; a fit on a mass line still among the modes reads them low: again. A fit
+        # whose mass is no answer reads no mode: above the mass line it was given
+        bands, weights, fitted = fits[-1]
+        top = mass_line_among_modes(problem, bands, fitted)
+        if (top is None and bands.choice is not None and options.mass_band is None
+                and implausible_mass(problem, bands, weights, fitted)):
+            top = float(bands.mass_band[1])
+        if top is None or top <= FLOOR_RISE * floor:
+            break
+        floor = top
+        fits.append(_fit_in_bands(
+            problem, choose_bands(problem, *d.rigid_tops, rigid_floor=floor)))
+    # the last round whose mass is an answer (the last round is refused when none is)
+    bands, weights, fitted = next((f for f in reversed(fits) if not implausible_mass(
+        problem, *f)), fits[-1])
     refuse_implausible_mass(problem, bands, weights, fitted)
     return Stages(problem, bands, weights, fitted, check(problem, bands, weights, fitted))
 

@@ -285,8 +285,8 @@ def choose_bands(
     lo, f_hi, name, set_aside = _mass_line(freq, f_rig, limits, mass_low_factor)
     reason = (f"mass line {lo:.1f}-{f_hi:.1f} Hz: from {lo / f_rig:.2g}x the highest "
               f"rigid-body mode ({f_rig:.1f} Hz"
-              + (", the fit's: the lines' estimate put the mass line among the modes"
-                 if floor else "") + f") to {name}")
+              + (", raised by the fit on a lower mass line: the lines' estimate put it "
+                 "among the modes" if floor else "") + f") to {name}")
     if set_aside:
         reason += ("; set aside, as it leaves no mass line above the rigid-body modes: "
                    + ", ".join(set_aside))

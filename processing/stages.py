@@ -84,6 +84,7 @@ __all__ = [
     "assemble",
     "check",
     "choose_bands",
+    "implausible_mass",
     "iterate",
     "leakage_shapes",
     "mass_line_among_modes",
@@ -205,7 +206,9 @@ def mass_line_among_modes(problem: Problem, bands: Bands, fitted: Fit) -> float 
     (:func:`~processing.selection.quick_rigid_modes`); on noisy FRFs under a rigidity limit
     set low by that noise, the estimate can fall far under the modes, and the mass line
     starts among them: the fit then reads resonances as mass (one noisy hit a point: 92 kg
-    for 110). The modes of the fitted M and K say so.
+    for 110). The modes of the fitted M and K say so. When the fitted M is not even
+    positive definite (the resonances read as mass make it so), the largest real positive
+    eigenvalue of ``K v = w^2 M v`` stands for the highest mode.
     """
     if bands.choice is None or problem.options.mass_band is not None:
         return None
@@ -213,7 +216,13 @@ def mass_line_among_modes(problem: Problem, bands: Bands, fitted: Fit) -> float 
     try:
         w2 = scipy.linalg.eigh(fitted.K, M, eigvals_only=True)
     except (np.linalg.LinAlgError, ValueError):
-        return None
+        try:
+            ev = scipy.linalg.eigvals(fitted.K, M)
+        except (np.linalg.LinAlgError, ValueError):
+            return None
+        w2 = np.sort(ev.real[np.isfinite(ev) & (np.abs(ev.imag) <= 1e-9 * np.abs(ev))])
+        if not w2.size:
+            return None
     top = float(np.sqrt(max(float(w2[-1]), 0.0)) / (2 * np.pi))
     return top if bands.mass_band[0] < MODE_CLEARANCE * top else None
 
@@ -847,24 +856,31 @@ def mass_line_reading(problem: Problem, weights: LineWeights) -> float:
     return float(np.median(np.trace(B.real[:, :3, :3], axis1=1, axis2=2) / 3))
 
 
-def refuse_implausible_mass(problem: Problem, bands: Bands, weights: LineWeights,
-                            fitted: Fit) -> None:
-    """Raise :class:`InputError` when the fitted mass cannot be an answer: not finite, not
-    positive, or more than :data:`MASS_READING_FACTOR` times off the mass line's own reading
-    (:func:`mass_line_reading`), as when the fit diverges on a mass line under the
-    rigid-body modes."""
+def implausible_mass(problem: Problem, bands: Bands, weights: LineWeights,
+                     fitted: Fit) -> str:
+    """Why the fitted mass cannot be an answer (not finite, not positive, or more than
+    :data:`MASS_READING_FACTOR` times off the mass line's own reading,
+    :func:`mass_line_reading`, as when the fit diverges on a mass line under the rigid-body
+    modes), in words; empty when it can."""
     mass = float(fitted.theta[0])
-    reading = mass_line_reading(problem, weights)
     lo, hi = bands.mass_band
     where = f"mass line {lo:.1f}-{hi:.1f} Hz"
     if not np.isfinite(mass) or mass <= 0:
-        raise InputError(f"no usable mass: the fit gave {mass:.3g} kg on the {where}; give the "
-                         "bands (--mass-band, --stiffness-band) or check the data")
+        return f"the fit gave {mass:.3g} kg on the {where}"
+    reading = mass_line_reading(problem, weights)
     if not reading > 0 or not (1 / MASS_READING_FACTOR <= mass / reading
                                <= MASS_READING_FACTOR):
-        raise InputError(f"no usable mass: the fit gave {mass:.3g} kg where the {where} reads "
-                         f"{reading:.3g} kg; give the bands (--mass-band, --stiffness-band) "
-                         "or check the data")
+        return f"the fit gave {mass:.3g} kg where the {where} reads {reading:.3g} kg"
+    return ""
+
+
+def refuse_implausible_mass(problem: Problem, bands: Bands, weights: LineWeights,
+                            fitted: Fit) -> None:
+    """Raise :class:`InputError` when the fitted mass cannot be an answer
+    (:func:`implausible_mass`)."""
+    if why := implausible_mass(problem, bands, weights, fitted):
+        raise InputError(f"no usable mass: {why}; give the bands (--mass-band, "
+                         "--stiffness-band) or check the data")
 
 
 @dataclass(frozen=True)
