@@ -58,6 +58,7 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
+from accuracy import stated_for  # noqa: E402  (benchmarks/, the script's folder)
 
 from app.cli.main import main as insitu_main  # noqa: E402
 from app.io.uff import write_frf_uff  # noqa: E402
@@ -193,18 +194,33 @@ def _z(t: TimeTest, res: dict[str, Any]) -> dict[str, list[float]] | None:
     return out
 
 
-def coverage_line(rows: list[dict[str, Any]]) -> str:
+def stated_flags(spec: ScenarioSpec) -> list[str]:
+    """``insitu identify``'s options stating a scenario's test uncertainties as a user who
+    knows their error levels would (``benchmarks/accuracy.py``'s ``stated_for``: location,
+    misalignment with transverse sensitivity, gain, as standard deviations)."""
+    st = stated_for(spec)
+    return ["--location-uncertainty", f"{st.location * 1e3:.6g}mm",
+            "--angle-uncertainty", f"{np.rad2deg(st.angle):.6g}deg",
+            "--gain-uncertainty", f"{st.gain * 100:.6g}%"]
+
+
+def coverage_line(rows: list[dict[str, Any]], key: str = "time") -> str:
     """Coverage of the stated 95 % intervals (|error| <= 1.96 std) over the answered cases'
-    entries, and the median |error| / std, per group."""
+    entries, and the median |error| / std, per group, of the result ``key``: the default
+    (``time``) or the default with the scenario's test uncertainties stated (``stated``)."""
     parts = []
     for name, _, _ in _GROUPS:
-        z = np.concatenate([r["time"]["z"][name] for r in rows
-                            if r["time"].get("z") is not None] or [np.zeros(0)])
+        z = np.concatenate([r[key]["z"][name] for r in rows
+                            if key in r and r[key].get("z") is not None] or [np.zeros(0)])
         if z.size:
             parts.append(f"{name} {np.mean(z <= 1.96):.0%} covered, median |error|/std "
                          f"{np.median(z):.2f} ({z.size} entries)")
-    return ("stated 95 % intervals of the time data's default result: " + "; ".join(parts)
-            if parts else "no stated uncertainty")
+    what = ("the time data's default result" if key == "time" else
+            "the same with the test uncertainties stated (--location-uncertainty, "
+            "--angle-uncertainty, --gain-uncertainty: the scenario's error levels as standard "
+            "deviations; the estimates are the default's)")
+    return (f"stated 95 % intervals of {what}: " + "; ".join(parts)
+            if parts else f"no stated uncertainty ({key})")
 
 
 def _hit_counts(t: TimeTest, out: str) -> dict[str, int]:
@@ -250,6 +266,11 @@ def evaluate(i: int, kind: str, budget: str | None = None) -> dict[str, Any]:
                        {"errors": _errs(t, res), "z": _z(t, res)})
         if kind == "hammer":
             row["hits"] = _hit_counts(t, out)
+        if budget is not None and res is not None:  # the test uncertainties stated
+            res5, why5, _ = identify_cli(path, *stated_flags(t.scenario.spec))
+            row["stated"] = ({"refused": why5} if res5 is None else
+                             {"errors": _errs(t, res5), "z": _z(t, res5),
+                              "same estimates": res5["theta"] == res["theta"]})
         if budget is not None:  # the channels' skew left in: what taking it out buys
             res4, why4, _ = identify_cli(path, "--channel-delays", "off")
             row["nodelay"] = ({"refused": why4} if res4 is None
@@ -433,6 +454,7 @@ def write_docs(rows: list[dict[str, Any]], elapsed: float, argv: list[str],
             f"{d}: '{how}' x{n}" for (d, how), n in sorted(drives.items())),
         f"- {hits_line(rows)}",
         f"- {coverage_line(rows)}",
+        *([f"- {coverage_line(rows, 'stated')}"] if budget is not None else []),
         "",
         "| " + " | ".join(HEADER) + " |",
         "| " + " | ".join("---" if i < 2 else "---:" for i in range(len(HEADER))) + " |",
@@ -479,6 +501,7 @@ def main(argv: list[str] | None = None) -> int:
     print(report(rows))
     print(hits_line(rows))
     print(coverage_line(rows))
+    print(coverage_line(rows, "stated"))
     print("| " + " | ".join(HEADER) + " |")
     for cells in table(rows):
         print("| " + " | ".join(cells) + " |")

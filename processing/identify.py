@@ -178,12 +178,16 @@ def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stage
     for _ in range(FLOOR_ROUNDS):
         # the lines put the mass line among the rigid-body modes the fit finds: above
         # them; a fit on a mass line still among the modes reads them low: again. A fit
-        # whose mass is no answer reads no mode: above the mass line it was given
+        # whose mass is no answer reads no mode: above the mass line it was given, when a
+        # mass line from twice its top fits in the data (near the end of the data the
+        # mass line more likely meets an elastic mode the residual did not show)
         bands, weights, fitted = fits[-1]
         top = mass_line_among_modes(problem, bands, fitted)
+        hi = float(bands.mass_band[1])
         if (top is None and bands.choice is not None and options.mass_band is None
+                and 2 * hi < problem.freq[-1]
                 and implausible_mass(problem, bands, weights, fitted)):
-            top = float(bands.mass_band[1])
+            top = hi
         if top is None or top <= FLOOR_RISE * floor:
             break
         floor = top

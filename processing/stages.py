@@ -207,8 +207,8 @@ def mass_line_among_modes(problem: Problem, bands: Bands, fitted: Fit) -> float 
     set low by that noise, the estimate can fall far under the modes, and the mass line
     starts among them: the fit then reads resonances as mass (one noisy hit a point: 92 kg
     for 110). The modes of the fitted M and K say so. When the fitted M is not even
-    positive definite (the resonances read as mass make it so), the largest real positive
-    eigenvalue of ``K v = w^2 M v`` stands for the highest mode.
+    positive definite (the resonances read as mass make it so) but its mass is positive,
+    the largest real positive eigenvalue of ``K v = w^2 M v`` stands for the highest mode.
     """
     if bands.choice is None or problem.options.mass_band is not None:
         return None
@@ -216,6 +216,8 @@ def mass_line_among_modes(problem: Problem, bands: Bands, fitted: Fit) -> float 
     try:
         w2 = scipy.linalg.eigh(fitted.K, M, eigvals_only=True)
     except (np.linalg.LinAlgError, ValueError):
+        if not fitted.theta[0] > 0:  # no mass, no modes to read
+            return None
         try:
             ev = scipy.linalg.eigvals(fitted.K, M)
         except (np.linalg.LinAlgError, ValueError):
