@@ -25,9 +25,11 @@ cleaning of the stiffness lines is not redone per draw: a draw's result is the n
 result plus the change the fast path gives between that draw and the unperturbed
 geometry.
 
-Available for the improved method without an exponential window (the default on FRF
-files). :func:`simulate` is pure and its inputs are plain arrays (picklable), so draws can
-be spread over processes: ``simulate(model, stated, seeds)`` for any list of seeds.
+Available for the improved method. With an exponential window the re-solve leaves the
+window's decay out (a draw's change is that of the unwindowed fit, to first order in
+``1 / (tau w)`` the windowed fit's). :func:`simulate` is pure and its inputs are plain
+arrays (picklable), so draws can be spread over processes: ``simulate(model, stated,
+seeds)`` for any list of seeds.
 """
 
 from __future__ import annotations

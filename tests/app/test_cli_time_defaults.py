@@ -221,3 +221,21 @@ def test_record_tails_printed_and_given(tmp_path: Path,
     assert main(["frf", str(shaker), "--carryover", "on", "--out", str(tmp_path / "c.uff")]) == 0
     assert "--carryover is for hammer hits and burst records, not welch records: not used" in \
         capsys.readouterr().out
+
+
+def test_stated_uncertainties_with_an_exponential_window(tmp_path: Path) -> None:
+    """A hammer test whose responses ring is windowed (here the window is given): the
+    Monte Carlo of the stated test uncertainties runs on it too (it used to refuse), and
+    the stated geometry adds to the fit's own uncertainty."""
+    t = _hammer(2)
+    src, out = tmp_path / "time.uff", tmp_path / "r.json"
+    write_uff(t, src)
+    assert main(["identify", str(src), "--exp-tau", "0.5", "--out", str(out)]) == 0
+    alone = json.loads(out.read_text())
+    assert main(["identify", str(src), "--exp-tau", "0.5", "--location-uncertainty", "2mm",
+                 "--angle-uncertainty", "1deg", "--gain-uncertainty", "1%", "--draws", "200",
+                 "--out", str(out)]) == 0
+    stated = json.loads(out.read_text())
+    assert stated["theta"] == alone["theta"]  # the estimates are the fit's
+    assert any("Monte Carlo" in s for s in stated["uncertainty"]["sources"])
+    assert np.all(np.asarray(stated["std"]["cog"]) > np.asarray(alone["std"]["cog"]))
