@@ -360,13 +360,23 @@ def _mass_line(freq: NDArray[np.float64], f_rig: float, limits: list[tuple[float
     return lo, float(freq[-1]), "the end of the data", set_aside
 
 
+#: fewest lines of an automatic stiffness band
+MIN_STIFFNESS_LINES = 4
+
+
 def _stiffness_band(freq: NDArray[np.float64], f_rig: float, lo: float,
                     stiffness_low: float | None) -> tuple[float, float]:
     """Stiffness band (Hz): from the first line (or ``stiffness_low``) to 1.5 times the
-    highest rigid-body mode, not into the mass line starting at ``lo``."""
+    highest rigid-body mode, not into the mass line starting at ``lo``; at least
+    :data:`MIN_STIFFNESS_LINES` lines, into the mass line if need be (rigid-body modes read
+    under the first lines: the fit's own modes then move both bands, see
+    :func:`processing.stages.mass_line_among_modes`)."""
     s_hi = min(1.5 * f_rig, lo)
     s_lo = float(freq[freq > 0][0]) if stiffness_low is None else float(stiffness_low)
     if s_hi <= s_lo:  # the rigid-body modes lie under the first line given: up to the mass line
         above = freq[freq > s_lo]
         s_hi = max(lo, float(above[0])) if above.size else lo
+    held = freq[freq >= s_lo]
+    if np.count_nonzero(held <= s_hi) < 2 and held.size:
+        s_hi = max(s_hi, float(held[min(MIN_STIFFNESS_LINES, held.size) - 1]))
     return s_lo, s_hi

@@ -345,3 +345,17 @@ def test_a_mass_line_among_the_modes_is_moved_above_them(seed: int, noise: float
     assert "raised by the fit on a lower mass line" in r.band_reason, r.band_reason
     assert r.mass_band[0] > 1.3 * 28.9
     assert r.properties.mass == pytest.approx(bench.model.theta[0], rel=0.03)
+
+
+def test_an_automatic_stiffness_band_holds_lines() -> None:
+    """Rigid-body modes read far under them (at 0.2 Hz on lines 0.2 Hz apart, where a
+    hammer test's lowest lines are noise) gave a stiffness band of one line, and the
+    identification refused ("holds fewer than 2 lines: widen it") before any fit could
+    move the bands above its own modes. The band now holds at least 4 lines."""
+    from processing.selection import MIN_STIFFNESS_LINES, _stiffness_band
+
+    freq = 0.2 * np.arange(1, 500)
+    lo, hi = _stiffness_band(freq, 0.2, 0.4, None)
+    assert np.count_nonzero((freq >= lo) & (freq <= hi)) == MIN_STIFFNESS_LINES
+    lo, hi = _stiffness_band(freq, 10.0, 20.0, None)  # a band of its own: as before
+    assert (lo, hi) == (0.2, 15.0)
