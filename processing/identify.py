@@ -191,8 +191,11 @@ def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stage
         if top is None or top <= FLOOR_RISE * floor:
             break
         floor = top
-        fits.append(_fit_in_bands(
-            problem, choose_bands(problem, *d.rigid_tops, rigid_floor=floor)))
+        try:
+            fits.append(_fit_in_bands(
+                problem, choose_bands(problem, *d.rigid_tops, rigid_floor=floor)))
+        except InputError:  # no bands above that floor: the rounds before stand
+            break
     # the last round whose mass is an answer (the last round is refused when none is)
     bands, weights, fitted = next((f for f in reversed(fits) if not implausible_mass(
         problem, *f)), fits[-1])
