@@ -33,10 +33,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing import _welch_kernel as _kernel
 from processing.data import ESTIMATORS
+from processing.windows import window_samples
 
 __all__ = ["ESTIMATORS", "CrossSpectra", "SpectralAccumulator", "SpectralError", "coherence",
            "combine", "free_cores", "frf", "h1", "h2", "hv", "ordinary_coherence",
-           "record_spectra", "welch_spectra", "window_samples"]
+           "record_spectra", "welch_spectra"]
 
 Scaling = Literal["density", "spectrum"]
 
@@ -278,42 +279,6 @@ def free_cores() -> int:
         return len(os.sched_getaffinity(0)) - (runnable - 1)
     except (AttributeError, OSError, IndexError, ValueError):
         return os.cpu_count() or 1
-
-
-#: the cosine-sum windows by the names :func:`scipy.signal.get_window` takes for them, and
-#: their coefficients as SciPy's ``general_cosine`` sums them
-_COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
-    **dict.fromkeys(("hann", "han"), (0.5, 0.5)),
-    **dict.fromkeys(("hamming", "hamm", "ham"), (0.54, 1.0 - 0.54)),
-    **dict.fromkeys(("blackman", "black", "blk"), (0.42, 0.50, 0.08)),
-    **dict.fromkeys(("flattop", "flat", "flt"),
-                    (0.21557895, 0.41663158, 0.277263158, 0.083578947, 0.006947368)),
-    **dict.fromkeys(("boxcar", "box", "ones", "rect", "rectangular"), (1.0,)),
-}
-
-
-def window_samples(window: str | tuple[object, ...] | ArrayLike, n: int) -> NDArray[np.float64]:
-    """The periodic window of ``n`` samples that :func:`scipy.signal.get_window` gives for
-    ``window`` (a name or a name and its parameters), or ``window`` itself (samples).
-
-    Hann, Hamming, Blackman, flat top and rectangular are summed here as SciPy sums them
-    (the same bits, tested): importing ``scipy.signal`` takes about 40 MB and 0.3 s, which
-    every time-data identification would pay for a Hann window. Raises ``ValueError`` or
-    ``TypeError`` (from SciPy) for a window it does not know.
-    """
-    if isinstance(window, str) and window in _COSINE_WINDOWS:
-        if n <= 1:
-            return np.ones(n)
-        fac = np.linspace(-np.pi, np.pi, n + 1)  # periodic: one more, the last dropped
-        w = np.zeros(n + 1)
-        for k, a in enumerate(_COSINE_WINDOWS[window]):
-            w += a * np.cos(k * fac)
-        return w[:-1]
-    if isinstance(window, (str, tuple)):
-        import scipy.signal  # any other named window
-
-        return np.asarray(scipy.signal.get_window(window, n), dtype=float)
-    return np.asarray(window, dtype=float)
 
 
 def _cosine_taps(win: NDArray[np.float64]) -> NDArray[np.float64] | None:

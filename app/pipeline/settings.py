@@ -126,7 +126,7 @@ class Settings:
             raise SettingError(f"{{overlap}} must be at least 0 and below 1, got "
                                f"{self.overlap:g}", "overlap")
         if self.window is not None:
-            from processing.spectral import window_samples
+            from processing.windows import window_samples
 
             try:
                 window_samples(self.window, 16)

@@ -34,7 +34,6 @@ from processing.spectral import (
     ordinary_coherence,
     record_spectra,
     welch_spectra,
-    window_samples,
 )
 
 FS = 256.0
@@ -450,17 +449,3 @@ def test_two_shakers_multi_reference_h1_and_multiple_coherence(engine):
     # each force alone explains only part of each response
     assert ordinary_coherence(clean)[:, :, band].mean() < 0.95
 
-
-@pytest.mark.parametrize("name", ["hann", "han", "hamming", "hamm", "ham", "blackman", "black",
-                                  "blk", "flattop", "flat", "flt", "boxcar", "box", "ones",
-                                  "rect", "rectangular"])
-@pytest.mark.parametrize("n", [1, 2, 7, 256, 2049])
-def test_cosine_windows_are_scipys_bit_for_bit(name, n):
-    assert_array_equal(window_samples(name, n), scipy.signal.get_window(name, n))
-
-
-def test_other_windows_come_from_scipy():
-    assert_array_equal(window_samples(("tukey", 0.3), 64),
-                       scipy.signal.get_window(("tukey", 0.3), 64))
-    with pytest.raises(ValueError):
-        window_samples("no-such-window", 64)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+import scipy.signal
+from numpy.testing import assert_allclose, assert_array_equal
 
 from hardware_mocks.benches import get_bench
 from processing.windows import (
@@ -13,6 +14,7 @@ from processing.windows import (
     exponential_tau,
     exponential_window,
     force_window,
+    window_samples,
 )
 
 
@@ -83,3 +85,18 @@ def test_a_windowed_fit_states_its_window_in_the_damping_note_not_as_a_warning()
     assert r.properties.mass == pytest.approx(inertia_properties(bench.model.theta).mass,
                                               rel=1e-4)
     assert_allclose(np.diag(r.C), np.diag(bench.model.C), rtol=0.01)
+
+
+@pytest.mark.parametrize("name", ["hann", "han", "hamming", "hamm", "ham", "blackman", "black",
+                                  "blk", "flattop", "flat", "flt", "boxcar", "box", "ones",
+                                  "rect", "rectangular"])
+@pytest.mark.parametrize("n", [1, 2, 7, 256, 2049])
+def test_cosine_windows_are_scipys_bit_for_bit(name, n):
+    assert_array_equal(window_samples(name, n), scipy.signal.get_window(name, n))
+
+
+def test_other_windows_come_from_scipy():
+    assert_array_equal(window_samples(("tukey", 0.3), 64),
+                       scipy.signal.get_window(("tukey", 0.3), 64))
+    with pytest.raises(ValueError):
+        window_samples("no-such-window", 64)
