@@ -448,4 +448,3 @@ def test_two_shakers_multi_reference_h1_and_multiple_coherence(engine):
     assert np.median(coherence(clean)[:, band]) > 0.9999
     # each force alone explains only part of each response
     assert ordinary_coherence(clean)[:, :, band].mean() < 0.95
-
