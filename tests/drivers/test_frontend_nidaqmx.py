@@ -26,7 +26,7 @@ from hardware_mocks.benches import get_bench
 from hardware_mocks.input_signals import FORCE
 from hardware_mocks.nidaqmx_api import constants
 from hardware_mocks.nidaqmx_sim import NI9234_RATES, SimModule, SimulatedNiDaqmx
-from hardware_mocks.physics import BenchPhysics, sampled_pulse
+from hardware_mocks.physics import TIP_DURATION, BenchPhysics, sampled_pulse
 
 MODULES = ["cDAQ1Mod1", "cDAQ1Mod2"]
 #: a1x 10.2 mV/(m/s^2) on Mod1/ai0, a2y (no IEPE) on Mod1/ai1, the force 2.25 mV/N on Mod2/ai0
@@ -102,7 +102,10 @@ def test_contiguous_blocks_carry_the_hit_exactly(fe: NiDaqFrontEnd,
     assert all(b.missing == 0 and not b.overloaded for b in blocks)
     force = np.concatenate([b.channel("F") for b in blocks])
     truth = sampled_pulse(clock.instants(0, force.size), 1 / 1024.0, [hit])
-    assert truth.max() > 250.0  # the pulse is in (320 N peak, its mean over each sample)
+    # the whole pulse is in: its impulse (a 320 N half-sine of 2.5 ms), and a peak that
+    # averaging over one sample lowers by at most 23 % whatever the hit's phase (245.9 N)
+    assert truth.sum() / 1024.0 == pytest.approx(2 * 320.0 * TIP_DURATION / np.pi, rel=1e-6)
+    assert truth.max() > 240.0
     assert_allclose(force, truth, rtol=1e-12, atol=1e-9)
     a1x = np.concatenate([b.channel("a1x") for b in blocks])
     assert np.abs(a1x).max() > 1.0  # the bench answered on the accelerometer
