@@ -59,6 +59,7 @@ from processing.selection import choose_bands as choose_automatic_bands
 from processing.stiffness import (
     DAMPING_MODELS,
     DampingModel,
+    LeakageMoments,
     LineOperators,
     Stiffening,
     StiffnessMoments,
@@ -411,8 +412,13 @@ class StiffnessStep:
         self.lines = problem.X[..., weights.stiffness_lines]
         self.weights = weights.stiffness
         self.mean = operators.mean_kc(stiff_in_band)
+        self._sel = weights.stiffness_lines
         self._moments: StiffnessMoments | None = None
         self._key: tuple[object, object] | None = None
+        #: the lines cleaned last (:meth:`cleaned`): that array, its leakage amplitudes and
+        #: shapes; and the leakage moments of the last shapes and stiffening
+        self._cleaned: tuple[object, NDArray[np.complex128], NDArray[np.complex128]] | None = None
+        self._leakage: tuple[bytes, object, LeakageMoments] | None = None
         self.model: DampingModel = "viscous"
         #: the mounts' stiffening (None: K constant), in the fit of K and in the mass line
         self.stiffening: Stiffening | None = None
@@ -421,14 +427,34 @@ class StiffnessStep:
         """``K(w) / K`` at w (rad/s); None for a constant K."""
         return stiffening_factor(self.stiffening, w)
 
+    def cleaned(self, amplitudes: NDArray[np.complex128], shapes: NDArray[np.complex128],
+                ) -> NDArray[np.complex128]:
+        """The stiffness lines cleaned of the leakage ``amplitudes`` (6, n_exc, n_s) on
+        ``shapes`` (n_s, all lines). Their moments, when asked for, follow from the lines'
+        own and the amplitudes (:class:`processing.stiffness.LeakageMoments`), not from a
+        new sum over the lines."""
+        Xcs = self.lines - np.einsum("iks,sl->ikl", amplitudes, shapes[:, self._sel])
+        self._cleaned = (Xcs, amplitudes, shapes)
+        return Xcs
+
     def moments(self, Xs: NDArray[np.complex128]) -> StiffnessMoments:
         """The stiffness moments of Xs (with the step's stiffening), kept while the same
         array and stiffening are passed."""
         if (self._key is None or self._key[0] is not Xs or self._key[1] is not self.stiffening
                 or self._moments is None):
             p = self.problem
-            self._moments = stiffness_moments(Xs, p.T, self.w, self.weights,
-                                              self.factor(self.w))
+            if self._cleaned is not None and self._cleaned[0] is Xs:
+                amplitudes, shapes = self._cleaned[1:]
+                key = shapes.tobytes()
+                if (self._leakage is None or self._leakage[0] != key
+                        or self._leakage[1] is not self.stiffening):
+                    self._leakage = (key, self.stiffening, LeakageMoments.of(
+                        self.lines, p.T, self.w, shapes[:, self._sel], self.weights,
+                        self.factor(self.w)))
+                self._moments = self._leakage[2].at(amplitudes)
+            else:
+                self._moments = stiffness_moments(Xs, p.T, self.w, self.weights,
+                                                  self.factor(self.w))
             self._key = (Xs, self.stiffening)
         return self._moments
 
@@ -521,13 +547,14 @@ def iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
     step there). Returns the last fit, theta, K, C, D, the cleaned stiffness-line X, the
     iterations and whether theta converged."""
     T, a = problem.T, problem.window_decay
-    msel, ssel = weights.mass_lines, weights.stiffness_lines
+    msel = weights.mass_lines
     Xm, wm = problem.X[..., msel], problem.w[msel]
     Xs = step.lines
     s_m = 1j * wm + a
     g = step.factor(wm)
     Xcm, Xcs = Xm, Xs
     K, C, D, theta = np.zeros((6, 6)), np.zeros((6, 6)), np.zeros((6, 6)), np.zeros(10)
+    S = np.array(shapes)[ml.shape_index] if shapes else np.zeros((0, problem.w.size), complex)
     if start is not None:
         theta = start[0]
         K, C, D = step(mass_matrix(theta), start[1])
@@ -543,8 +570,8 @@ def iterate(problem: Problem, weights: LineWeights, ml: MassLineProblem,
         M = mass_matrix(new)
         if fit_.leakage is not None:  # B - M X = -M Y b: clean X of the fitted leakage
             Yk = -np.einsum("ia,aks->iks", np.linalg.pinv(M), fit_.leakage)
-            leak = np.einsum("iks,sl->ikl", Yk, np.array(shapes)[ml.shape_index])
-            Xcm, Xcs = Xm - leak[..., msel], Xs - leak[..., ssel]
+            Xcm = Xm - np.einsum("iks,sl->ikl", Yk, S[:, msel])
+            Xcs = step.cleaned(Yk, S)
         K, C, D = step(M, Xcs)
         change = np.max(np.abs(new - theta) / np.maximum(np.abs(new), 1e-12 * abs(new[0])))
         theta = new

@@ -29,6 +29,7 @@ __all__ = [
     "DUPLICATION",
     "DampingChoice",
     "DampingModel",
+    "LeakageMoments",
     "LineOperators",
     "MeanStiffness",
     "Stiffening",
@@ -305,6 +306,53 @@ def stiffness_moments(
         Q.append(Xw @ Tf.T)
         Xw = Xw * wl
     return StiffnessMoments(G[0], G[1], G[2], G[3], Q[0], Q[1], Q[2], Q[3], n_eq)
+
+
+@dataclass(frozen=True)
+class LeakageMoments:
+    """The moments of ``X - Y S`` (:func:`stiffness_moments`) for any leakage amplitudes
+    ``Y`` (6, n_exc, n_s) on fixed line shapes ``S`` (n_s, n_lines): quadratic in Y, so the
+    sums over the lines are formed once (:meth:`of`) and each Y costs small sums over the
+    excitations (:meth:`at`).
+
+    With ``W_p`` the p-th moment's weight per excitation and line (real), ``G_p(Y) = G_p -
+    A_p Y^T - conj(A_p Y^T)^T + conj(Y) B_p Y^T`` and ``Q_p(Y) = Q_p - conj(Y) c_p T^T``,
+    ``A_p = sum_l conj(x) W_p S^T`` (per excitation), ``B_p = sum_l conj(S) W_p S^T``,
+    ``c_p = sum_l conj(S) W_p``.
+    """
+
+    base: StiffnessMoments
+    A: NDArray[np.complex128]  # (n_G, 6, n_exc, n_s)
+    B: NDArray[np.complex128]  # (n_G, n_exc, n_s, n_s)
+    c: NDArray[np.complex128]  # (4, n_exc, n_s)
+    T: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, X: NDArray[np.complex128], T: NDArray[np.float64], w: NDArray[np.float64],
+           S: NDArray[np.complex128], weights: NDArray[np.float64] | None = None,
+           stiffening: NDArray[np.float64] | None = None) -> LeakageMoments:
+        n_e, n_l = X.shape[1:]
+        wt = np.ones((n_e, n_l)) if weights is None else np.asarray(weights, float)
+        F = line_functions(w, stiffening)[: 4 if stiffening is None else 5]
+        W = wt[None] * F[:, None, :]  # (n_G, n_exc, n_lines)
+        St = np.ascontiguousarray(S.T)
+        A = (np.conj(X)[None] * W[:, None]) @ St
+        B = (np.conj(S)[None, None] * W[:, :, None, :]) @ St
+        c = (W[:4] @ np.conj(St)).astype(complex)
+        return cls(stiffness_moments(X, T, w, weights, stiffening), A, B, c, T)
+
+    def at(self, Y: NDArray[np.complex128]) -> StiffnessMoments:
+        """The moments of ``X - Y S``."""
+        Yc = np.conj(Y)
+        cross = np.einsum("pies,jes->pij", self.A, Y)
+        G = ([getattr(self.base, f"G{p}") for p in range(4)]
+             + ([] if self.base.G2c is None else [self.base.G2c]))
+        quad = np.einsum("iet,pejt->pij", Yc, np.einsum("pest,jet->pejs", self.B, Y))
+        Gy = np.asarray(G) - cross - np.conj(cross).transpose(0, 2, 1) + quad
+        Qy = (np.asarray([getattr(self.base, f"Q{p}") for p in range(4)])
+              - np.einsum("ies,pes,je->pij", Yc, self.c, self.T))
+        return StiffnessMoments(Gy[0], Gy[1], Gy[2], Gy[3], Qy[0], Qy[1], Qy[2], Qy[3],
+                                self.base.n_equations, None if self.base.G2c is None else Gy[4])
 
 
 def fit_stiffness(

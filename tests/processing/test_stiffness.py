@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from processing.stiffness import choose_damping, dynamic_stiffness, fit_stiffness
+from processing.stiffness import (
+    LeakageMoments,
+    choose_damping,
+    dynamic_stiffness,
+    fit_stiffness,
+    stiffness_moments,
+)
 
 _RNG = np.random.default_rng(7)
 _A, _B = _RNG.normal(size=(6, 6)), _RNG.normal(size=(6, 6))
@@ -108,3 +114,27 @@ def test_the_windowed_fit_weighs_lines_the_line_by_line_stiffness_cannot() -> No
 def test_a_window_with_structural_damping_is_refused() -> None:
     with pytest.raises(ValueError, match="viscous"):
         fit_stiffness(accelerances("viscous", W), T, W, M, model="hysteretic", decay=1.0)
+
+
+@pytest.mark.parametrize("stiffened", [False, True])
+def test_leakage_moments_equal_the_moments_of_the_cleaned_lines(stiffened: bool) -> None:
+    """The moments of ``X - Y S`` from the lines' own (formed once) and Y: the sums over the
+    lines of the cleaned X, for any amplitudes, with and without the mounts' stiffening."""
+    rng = np.random.default_rng(4710)
+    n_e, n_l, n_s = 5, 40, 2
+    X = rng.normal(size=(6, n_e, n_l)) + 1j * rng.normal(size=(6, n_e, n_l))
+    T, w = rng.normal(size=(6, n_e)), np.linspace(10.0, 100.0, n_l)
+    S = rng.normal(size=(n_s, n_l)) + 1j * rng.normal(size=(n_s, n_l))
+    wt = rng.random((n_e, n_l))
+    g = np.linspace(1.0, 1.2, n_l) if stiffened else None
+    moments = LeakageMoments.of(X, T, w, S, wt, g)
+    for _ in range(3):
+        Y = rng.normal(size=(6, n_e, n_s)) + 1j * rng.normal(size=(6, n_e, n_s))
+        want = stiffness_moments(X - np.einsum("ies,sl->iel", Y, S), T, w, wt, g)
+        got = moments.at(Y)
+        for name in ("G0", "G1", "G2", "G3", "Q0", "Q1", "Q2", "Q3"):
+            a = getattr(want, name)
+            assert_allclose(getattr(got, name), a, rtol=0, atol=1e-13 * np.abs(a).max())
+        assert got.stiffened == stiffened and got.n_equations == want.n_equations
+        if stiffened:
+            assert_allclose(got.G2c, want.G2c, rtol=0, atol=1e-13 * np.abs(want.G2c).max())
