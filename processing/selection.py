@@ -267,7 +267,12 @@ def choose_bands(
     the data hold at least 8 lines. The rigid-body modes are read from the lines under
     the first limit, or, when that puts the highest over twice the limit and the limit
     is under the elastic margin, from the lines up to twice the limit (at least 8) when
-    these give a lower one (the lines under the limit were too few or too noisy). The
+    these give a lower one (the lines under the limit were too few or too noisy); and
+    bottom-up, over the lines up to tops doubling from the eighth line until the top is
+    twice the highest mode read there (and within 15 % of the readings
+    at half and a quarter of that top), kept when the other reading's highest mode is more
+    than :data:`BOTTOM_UP_GAP` times above (lines far past the modes, where the body flexes,
+    decided it). The
     stiffness band runs from the first line (or ``stiffness_low``, Hz, when given: the
     lines given may leave out noisy ones the stiffness fit weighs down itself) to 1.5
     times the highest rigid-body mode (not into the mass line). ``line_weights`` (n_f,)
@@ -341,7 +346,45 @@ def _rigid_modes_for_bands(freq: NDArray[np.float64], X: NDArray[np.complex128],
                                None if line_weights is None else line_weights[wide])
         if 0 < fw[-1] < fr[-1]:
             fr = fw
+    # without a rigidity limit near the modes, the lines read run far past them, where the
+    # body's flexibility and the sensors' errors bend the apparent mass and, weighed by their
+    # signal, the lines far above the modes decide K (it is read as a higher mode than any):
+    # the modes read bottom-up instead, when they are well under that
+    fb = _rigid_modes_bottom_up(freq, X, T, top, line_weights)
+    if 0 < BOTTOM_UP_GAP * fb[-1] < fr[-1]:
+        fr = fb
     return fr
+
+
+#: the bottom-up reading of the rigid-body modes is kept when the one over every line puts
+#: the highest mode more than this many times above it
+BOTTOM_UP_GAP = 2.0
+#: the bottom-up reading's highest mode agrees with those at half and a quarter of the
+#: lines' top to this
+BOTTOM_UP_STABLE = 0.15
+
+
+def _rigid_modes_bottom_up(freq: NDArray[np.float64], X: NDArray[np.complex128],
+                           T: NDArray[np.float64], top: float,
+                           line_weights: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """Rigid-body modes (Hz) read on the lines up to tops doubling from the eighth line, at
+    the first top at least twice the highest mode read there (the lines then reach into the
+    mass line, which pins M) where the highest is within
+    :data:`BOTTOM_UP_STABLE` of the readings at half and a quarter of that top (not the
+    noise of the lowest lines); zeros when none is under ``top``."""
+    pos = freq[freq > 0]
+    if pos.size < 8:
+        return np.zeros(6)
+    upto, before = float(pos[7]), [0.0, 0.0]
+    while upto <= top:
+        sel = (freq > 0) & (freq <= upto)
+        fr = quick_rigid_modes(X[..., sel], T, 2 * np.pi * freq[sel],
+                               None if line_weights is None else line_weights[sel])
+        if (0 < 2 * fr[-1] <= upto
+                and all(abs(fr[-1] - b) <= BOTTOM_UP_STABLE * fr[-1] for b in before)):
+            return fr
+        upto, before = 2 * upto, [before[1], float(fr[-1])]
+    return np.zeros(6)
 
 
 def _mass_line(freq: NDArray[np.float64], f_rig: float, limits: list[tuple[float, str]],

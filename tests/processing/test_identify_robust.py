@@ -229,6 +229,60 @@ def test_rigid_modes_read_again_when_far_above_the_rigidity_limit(f_elastic: flo
     assert 1.3 * exact <= c.mass_band[0] <= 2.01 * exact
 
 
+@pytest.mark.parametrize(("f_elastic", "size"), [(110.0, 1.0), (110.0, 3.0), (130.0, 3.0)])
+def test_rigid_modes_read_bottom_up_without_a_rigidity_limit(f_elastic: float,
+                                                              size: float) -> None:
+    """No rigidity limit (the check failed from the lowest line, as time data's noisy first
+    lines make it): the rigid-body modes were read over every line to the end of the data,
+    where an elastic mode just above it bends the apparent mass and the lines' signal
+    weights make the top lines decide K: 94-295 Hz for 29 Hz, and a mass line among the
+    lines the mode bends. Read bottom-up (lines up to tops doubling from the eighth, until
+    the top is twice the modes read), they are the bench's."""
+    from processing.geometry import excitation_matrix, response_matrix
+    from processing.selection import ElasticPeak, choose_bands, mode_shape_basis
+
+    frf = get_bench("engine-rigid").frfset()
+    E = response_matrix(frf.resp_xyz, frf.resp_dirs)
+    T = excitation_matrix(frf.exc_xyz, frf.exc_dirs)
+    f = frf.freq
+    X = np.einsum("ir,ref->ief", np.linalg.pinv(E), frf.H)
+    keep = f > 0
+    exact = choose_bands(f[keep], X[..., keep], T, ()).rigid_mode_max
+    rng = np.random.default_rng(5)
+    A = rng.standard_normal(X.shape[:2]) * np.median(np.abs(X[..., f > 60])) * size
+    X = X + A[..., None] * mode_shape_basis(2 * np.pi * f, ElasticPeak(f_elastic, 0.02))
+    snr = np.linalg.norm(X.reshape(-1, f.size), axis=0)[keep]
+    c = choose_bands(f[keep], X[..., keep], T, (), line_weights=snr / snr.max())
+    assert c.rigid_mode_max == pytest.approx(exact, rel=0.03)
+    assert 1.3 * exact <= c.mass_band[0] <= 2.1 * exact
+
+
+@pytest.mark.parametrize(("n_noisy", "level"), [(16, 1.0), (32, 1.0), (32, 3.0), (64, 1.0)])
+def test_noisy_lowest_lines_do_not_pull_the_modes_down(n_noisy: int, level: float) -> None:
+    """The lowest lines under noise (``level`` times their signal, weighed down by their
+    signal-to-noise ratio): a bottom-up reading over them alone finds modes of 0.5-3 Hz,
+    self-consistent at one top; it is taken only where it agrees with the readings at half
+    and a quarter of the lines' top, so the modes stay the bench's (29 Hz)."""
+    from processing.geometry import excitation_matrix, response_matrix
+    from processing.selection import choose_bands
+
+    frf = get_bench("engine-rigid").frfset()
+    E = response_matrix(frf.resp_xyz, frf.resp_dirs)
+    T = excitation_matrix(frf.exc_xyz, frf.exc_dirs)
+    f = frf.freq
+    X = np.einsum("ir,ref->ief", np.linalg.pinv(E), frf.H)
+    exact = choose_bands(f, X, T, ()).rigid_mode_max
+    rng = np.random.default_rng(4711)
+    noisy = X[..., :n_noisy]
+    scale = level * np.abs(noisy).mean()
+    X[..., :n_noisy] += scale * (rng.standard_normal(noisy.shape)
+                                 + 1j * rng.standard_normal(noisy.shape))
+    signal = np.abs(frf.H).mean(axis=(0, 1))
+    snr = signal / np.where(np.arange(f.size) < n_noisy, scale, 1e-3 * signal.mean())
+    c = choose_bands(f, X, T, (), line_weights=snr)
+    assert c.rigid_mode_max == pytest.approx(exact, rel=0.02)
+
+
 def test_an_impossible_mass_is_refused_not_reported() -> None:
     """A fitted mass that is not finite, not positive or far from what the mass line reads
     by itself is refused with one line; the bench's own fit passes."""
