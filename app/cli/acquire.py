@@ -449,7 +449,12 @@ def run(args: argparse.Namespace) -> int:
             proc.add_listener(bars)
             proc.start()
             try:
-                while proc.wait(0.2) is not RunState.FINISHED and proc.running:
+                # until the worker ends: after the last record it still shuts the devices
+                # and tells the listeners (the operator detaches the shakers through the
+                # control channel this command closes when it returns)
+                while proc.running:
+                    if proc.wait(0.2) is RunState.FINISHED or not proc.running:
+                        continue
                     if ((operator is not None and operator.error) or (
                             proc.state is RunState.PAUSED
                             and (operator is not None or simulated))):
