@@ -269,8 +269,8 @@ def choose_bands(
     is under the elastic margin, from the lines up to twice the limit (at least 8) when
     these give a lower one (the lines under the limit were too few or too noisy); and
     bottom-up, over the lines up to tops doubling from the eighth line until the top is
-    twice the highest mode read there (and within 15 % of the readings
-    at half and a quarter of that top), kept when the other reading's highest mode is more
+    twice the highest mode read there (and within 15 % of the readings at half and a
+    quarter of that top, and at least 3x the first line), kept when the other reading's highest mode is more
     than :data:`BOTTOM_UP_GAP` times above (lines far past the modes, where the body flexes,
     decided it). The
     stiffness band runs from the first line (or ``stiffness_low``, Hz, when given: the
@@ -362,6 +362,9 @@ BOTTOM_UP_GAP = 2.0
 #: the bottom-up reading's highest mode agrees with those at half and a quarter of the
 #: lines' top to this
 BOTTOM_UP_STABLE = 0.15
+#: and is at least this many times the first line (a reading near the first line comes from
+#: lines that all lie under the modes, where K / w^2 swamps M: M, and the modes, unread)
+BOTTOM_UP_FIRST = 3.0
 
 
 def _rigid_modes_bottom_up(freq: NDArray[np.float64], X: NDArray[np.complex128],
@@ -371,7 +374,8 @@ def _rigid_modes_bottom_up(freq: NDArray[np.float64], X: NDArray[np.complex128],
     the first top at least twice the highest mode read there (the lines then reach into the
     mass line, which pins M) where the highest is within
     :data:`BOTTOM_UP_STABLE` of the readings at half and a quarter of that top (not the
-    noise of the lowest lines); zeros when none is under ``top``."""
+    noise of the lowest lines) and :data:`BOTTOM_UP_FIRST` times the first line or more;
+    zeros when none is under ``top``."""
     pos = freq[freq > 0]
     if pos.size < 8:
         return np.zeros(6)
@@ -380,7 +384,7 @@ def _rigid_modes_bottom_up(freq: NDArray[np.float64], X: NDArray[np.complex128],
         sel = (freq > 0) & (freq <= upto)
         fr = quick_rigid_modes(X[..., sel], T, 2 * np.pi * freq[sel],
                                None if line_weights is None else line_weights[sel])
-        if (0 < 2 * fr[-1] <= upto
+        if (BOTTOM_UP_FIRST * float(pos[0]) <= fr[-1] and 2 * fr[-1] <= upto
                 and all(abs(fr[-1] - b) <= BOTTOM_UP_STABLE * fr[-1] for b in before)):
             return fr
         upto, before = 2 * upto, [before[1], float(fr[-1])]
