@@ -270,9 +270,9 @@ def choose_bands(
     these give a lower one (the lines under the limit were too few or too noisy); and
     bottom-up, over the lines up to tops doubling from the eighth line until the top is
     twice the highest mode read there (and within 15 % of the readings at half and a
-    quarter of that top, and at least 3x the first line), kept when the other reading's highest mode is more
-    than :data:`BOTTOM_UP_GAP` times above (lines far past the modes, where the body flexes,
-    decided it). The
+    quarter of that top, and at least 3x the first line), kept when the other reading's
+    highest mode is more than :data:`BOTTOM_UP_GAP` times above (lines far past the modes,
+    where the body flexes, decided it). The
     stiffness band runs from the first line (or ``stiffness_low``, Hz, when given: the
     lines given may leave out noisy ones the stiffness fit weighs down itself) to 1.5
     times the highest rigid-body mode (not into the mass line). ``line_weights`` (n_f,)
