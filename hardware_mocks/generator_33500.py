@@ -210,6 +210,11 @@ class Generator33500(BenchDrive):
                     else:
                         self._receive(sel)
         finally:
+            # what the host sent before the end is read, as the instrument would have (its
+            # last commands wait in the socket when the shutdown comes first)
+            while (self._client is not None and not self.silent
+                   and any(key.fileobj is self._client for key, _ in sel.select(0))):
+                self._receive(sel)
             self._close_client(sel)
             sel.close()
             self._listener.close()
