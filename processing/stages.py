@@ -416,7 +416,8 @@ class StiffnessStep:
         self._moments: StiffnessMoments | None = None
         self._key: tuple[object, object] | None = None
         #: the lines cleaned last (:meth:`cleaned`): that array, its leakage amplitudes and
-        #: shapes; and the leakage moments of the last shapes and stiffening
+        #: shapes on the stiffness lines; and the leakage moments of the last shapes and
+        #: stiffening
         self._cleaned: tuple[object, NDArray[np.complex128], NDArray[np.complex128]] | None = None
         self._leakage: tuple[bytes, object, LeakageMoments] | None = None
         self.model: DampingModel = "viscous"
@@ -433,8 +434,9 @@ class StiffnessStep:
         ``shapes`` (n_s, all lines). Their moments, when asked for, follow from the lines'
         own and the amplitudes (:class:`processing.stiffness.LeakageMoments`), not from a
         new sum over the lines."""
-        Xcs = self.lines - np.einsum("iks,sl->ikl", amplitudes, shapes[:, self._sel])
-        self._cleaned = (Xcs, amplitudes, shapes)
+        on_lines = shapes[:, self._sel]
+        Xcs = self.lines - np.einsum("iks,sl->ikl", amplitudes, on_lines)
+        self._cleaned = (Xcs, amplitudes, on_lines)
         return Xcs
 
     def moments(self, Xs: NDArray[np.complex128]) -> StiffnessMoments:
@@ -449,8 +451,7 @@ class StiffnessStep:
                 if (self._leakage is None or self._leakage[0] != key
                         or self._leakage[1] is not self.stiffening):
                     self._leakage = (key, self.stiffening, LeakageMoments.of(
-                        self.lines, p.T, self.w, shapes[:, self._sel], self.weights,
-                        self.factor(self.w)))
+                        self.lines, p.T, self.w, shapes, self.weights, self.factor(self.w)))
                 self._moments = self._leakage[2].at(amplitudes)
             else:
                 self._moments = stiffness_moments(Xs, p.T, self.w, self.weights,
