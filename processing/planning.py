@@ -32,10 +32,14 @@ itself (:func:`predict`): the model's FRFs (:func:`processing.synthesis.synthesi
 forward model the fit assumes) with H1 noise at the stated level and averages, identified by
 :func:`processing.identify.fit` with the stated test uncertainties, whose uncertainty
 (the fit's covariance and the Monte Carlo of location, angle and gain) is the prediction.
+With an expected first elastic mode the FRFs also hold generic elastic modes
+(:class:`GenericElastic`: a free beam's first bending and torsion shapes on the model's
+box), whose bias on the mass line a real test has however many hits it averages.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -261,7 +265,7 @@ class TestConditions:
     averages : hits or blocks averaged per point
     stated : the test's location, angle and gain uncertainties (standard deviations)
     seed : of the simulated noise
-    realisations : noise realisations whose predicted variances are averaged
+    realisations : noise realisations; the prediction is their median variance
     """
 
     freq: NDArray[np.float64]
@@ -715,7 +719,7 @@ class Prediction:
     """Predicted standard deviations (SI) of the identified numbers for one layout.
 
     ``std`` holds ``mass``, ``cog`` (3,), ``inertia_cog`` and ``inertia_origin`` (3, 3),
-    ``principal_moments`` (3,), ``stiffness`` and ``damping`` (6, 6): the root mean of the
+    ``principal_moments`` (3,), ``stiffness`` and ``damping`` (6, 6): the root median of the
     identification's variances over the noise realisations. ``linearised`` holds the search's
     own first-order std of the ten parameters about O (``theta``, (10,)). ``sources`` says
     what the identification propagated; ``mass_band`` the mass line it chose (Hz).
@@ -825,6 +829,17 @@ class GenericElastic:
 MIN_HALF = 0.3
 
 
+def _elastic_part(model: ApproximateModel, first_hz: float, lines: NDArray[np.float64],
+                  r_xyz: NDArray[np.float64], r_dir: NDArray[np.float64],
+                  ex: NDArray[np.float64], ed: NDArray[np.float64],
+                  ) -> Callable[[np.random.Generator], NDArray[np.complex128]]:
+    """Draws of the generic elastic modes' accelerance between the layout's channels and
+    forces on ``lines`` (:class:`GenericElastic`)."""
+    gen = GenericElastic(model)
+    resp, exc = gen.at(r_xyz, r_dir), gen.at(ex, ed)
+    return lambda rng: gen.accelerance(lines, first_hz, resp, exc, rng)
+
+
 def predict(model: ApproximateModel, resp_xyz: ArrayLike, exc_xyz: ArrayLike,
             exc_dirs: ArrayLike, conditions: TestConditions, *,
             resp_nodes: ArrayLike | None = None, exc_nodes: ArrayLike | None = None,
@@ -851,9 +866,7 @@ def predict(model: ApproximateModel, resp_xyz: ArrayLike, exc_xyz: ArrayLike,
              else conditions.freq[conditions.freq <= ELASTIC_TOP * elastic])
     H0 = synthesise(lines, response_matrix(r_xyz, r_dir), excitation_matrix(ex, ed), model.M,
                     model.K, model.C, model.D)
-    gen = GenericElastic(model) if elastic is not None else None
-    at_r = gen.at(r_xyz, r_dir) if gen is not None else None
-    at_e = gen.at(ex, ed) if gen is not None else None
+    flex = None if elastic is None else _elastic_part(model, elastic, lines, r_xyz, r_dir, ex, ed)
     nodes: dict[int, NDArray[np.float64]] = {}
     for n, p in zip([*rn, *en], [*rx, *ex], strict=True):
         nodes.setdefault(int(n), p)
@@ -865,9 +878,8 @@ def predict(model: ApproximateModel, resp_xyz: ArrayLike, exc_xyz: ArrayLike,
     band = (0.0, 0.0)
     options = IdentifyOptions(stated=conditions.stated if conditions.stated.stated else None)
     for _ in range(conditions.realisations):
-        Hx = H0 if gen is None or elastic is None or at_r is None or at_e is None else (
-            H0 + gen.accelerance(lines, elastic, at_r, at_e, rng))
-        H, coh = _h1(Hx, conditions.noise, conditions.averages, rng)
+        H, coh = _h1(H0 if flex is None else H0 + flex(rng), conditions.noise,
+                     conditions.averages, rng)
         frf = FRFSet(lines, H, np.repeat(rn, 3), r_dir, en, ed, geometry, coherence=coh)
         try:
             result = fit(Measurement(frf, source="plan"), options)
