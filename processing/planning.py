@@ -762,6 +762,8 @@ def _h1(H: NDArray[np.complex128], noise: float, averages: int, rng: np.random.G
 ELASTIC_RATIOS = (1.0, 1.5, 2.0)
 ELASTIC_LOSS = 0.01
 ELASTIC_TOP = 3.0
+#: the generic box's shortest half size, over its longest (a model whose moments no box has)
+MIN_HALF = 0.3
 
 
 class GenericElastic:
@@ -802,10 +804,11 @@ class GenericElastic:
         return np.asarray(np.einsum("ck,nkj->ncj", self.V, local))
 
     def _rigid(self, xyz: NDArray[np.float64]) -> NDArray[np.float64]:
-        r = xyz - self.cog
+        """The six rigid-body motions about the CoG (n, 3, 6): translations, rotations."""
         out = np.zeros((xyz.shape[0], 3, 6))
         out[:, :, :3] = np.eye(3)
-        out[:, :, 3:] = -np.asarray([skew(v) for v in r])
+        # rotation k moves a point by e_k x r
+        out[:, :, 3:] = np.cross(np.eye(3)[None], (xyz - self.cog)[:, None]).transpose(0, 2, 1)
         return out
 
     def at(self, xyz: NDArray[np.float64], dirs: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -823,10 +826,6 @@ class GenericElastic:
         wr = 2 * np.pi * first_hz * np.asarray(ELASTIC_RATIOS)[rng.permutation(3)]
         g = -(w**2) / (wr[:, None] ** 2 - w**2 + 1j * ELASTIC_LOSS * wr[:, None] ** 2)
         return np.asarray(np.einsum("rk,ek,kf->ref", resp, exc, g))
-
-
-#: the generic box's shortest half size, over its longest (a model whose moments no box has)
-MIN_HALF = 0.3
 
 
 def _elastic_part(model: ApproximateModel, first_hz: float, lines: NDArray[np.float64],
@@ -862,8 +861,9 @@ def predict(model: ApproximateModel, resp_xyz: ArrayLike, exc_xyz: ArrayLike,
     if not geo.ok:
         raise PlanningError("; ".join(geo.messages))
     elastic = model.first_elastic_hz
-    lines = (conditions.lines(model) if elastic is None
-             else conditions.freq[conditions.freq <= ELASTIC_TOP * elastic])
+    lines = conditions.lines(model)
+    if elastic is not None:  # with the elastic modes: the test's lines up to ELASTIC_TOP x
+        lines = conditions.freq[conditions.freq <= ELASTIC_TOP * elastic]
     H0 = synthesise(lines, response_matrix(r_xyz, r_dir), excitation_matrix(ex, ed), model.M,
                     model.K, model.C, model.D)
     flex = None if elastic is None else _elastic_part(model, elastic, lines, r_xyz, r_dir, ex, ed)
