@@ -40,7 +40,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--with-stiffness", action="store_true",
                    help="the criterion covers K's 21 entries too")
     p.add_argument("--first-elastic", type=float, metavar="HZ",
-                   help="expected first elastic mode of the unit (the model file's)")
+                   help="expected first elastic mode of the unit (the model file's); the "
+                   "prediction then holds generic elastic modes there (docs/planning.md)")
     p.set_defaults(run=run)
 
 
