@@ -30,7 +30,8 @@ scenario's elastic-mode bias included); the achieved CoG and inertia errors
 (median over the scenarios); the planning time.
 
 Run: ``.venv/bin/python benchmarks/planning.py [--scenarios 50] [--draws 12] [--jobs 2]
-[--write-docs]`` (default: a quick 6 scenarios).
+[--write-docs] [--json FILE] [--seed N]`` (default: a quick 6 scenarios). The published
+table is seed 3107's; try changes on other seeds (``--seed 3108``), never on it.
 """
 
 from __future__ import annotations
