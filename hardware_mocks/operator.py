@@ -186,9 +186,16 @@ class MockOperator:
         if self.settle > 0 and self._last_t0 is not None:
             delay = max(delay, self._last_t0 + self.settle - now)
         self._last_t0 = now + delay
-        self.hammer.hit(exc=exc, peak=peak, duration=self.duration, double=double,
-                        delay=delay)
+        # the wait for the report is armed before the hit can land: on a loaded machine this
+        # thread may be held until the hit is reported (even the run finished), whose
+        # callbacks then find and cancel it; armed after, it would repeat a reported hit
         self._watch(point)
+        try:
+            self.hammer.hit(exc=exc, peak=peak, duration=self.duration, double=double,
+                            delay=delay)
+        except BaseException:  # no hit made: nothing to wait for
+            self._cancel()
+            raise
 
     # -- listener callbacks --------------------------------------------------------------------
     def on_next_point(self, point: Any) -> None:

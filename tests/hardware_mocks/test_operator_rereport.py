@@ -31,3 +31,32 @@ def test_rereported_hit_is_not_a_new_hit() -> None:
             assert op.hits_made == 3
         finally:
             op.shutdown()
+
+
+class _ReportingHammer:
+    """A hammer whose hit is reported, and the run finished, before ``hit`` returns: what a
+    loaded machine does when it holds the operator's thread while the hit lands."""
+
+    def __init__(self, op: list[MockOperator]) -> None:
+        self.op = op
+        self.physics = SimpleNamespace(bench=get_bench("engine-rigid"))
+
+    def hit(self, **_: object) -> None:
+        self.op[0].on_hit(SimpleNamespace(hit_id=0, override="", point_complete=True))
+        self.op[0].on_finished("finished")
+
+
+def test_a_hit_reported_before_the_operator_looks_up_is_not_repeated() -> None:
+    """The wait for the report is armed before the hammer lands, so the report (and the run's
+    end) cancel it; armed after, it would outlive the run and repeat the hit."""
+    plan = plan_for_bench("engine-rigid", points=[0], hits=1)
+    box: list[MockOperator] = []
+    op = MockOperator(_ReportingHammer(box), bench=get_bench("engine-rigid"),  # type: ignore[arg-type]
+                      patience=60.0)
+    box.append(op)
+    try:
+        op.on_next_point(plan.excitations[0])
+        assert op.hits_made == 1
+        assert op._timer is None  # nothing left to repeat the reported hit
+    finally:
+        op.shutdown()
