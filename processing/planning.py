@@ -786,7 +786,10 @@ class GenericElastic:
         axes = [h * (np.arange(8) * 2 - 7) / 8 for h in self.half]  # cell centres
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3) @ self.V.T
         grid += self.cog
-        Ug, Rg = self._fields(grid).reshape(-1, 3), self._rigid(grid).reshape(-1, 6)
+        # each grid point read along the three axes, by the fields and the rigid motions
+        Ug = self._fields(grid).reshape(-1, 3)
+        Rg = response_matrix(np.repeat(grid - self.cog, 3, axis=0),
+                             np.tile(np.eye(3), (grid.shape[0], 1)))
         self.coef = np.linalg.lstsq(Rg, Ug, rcond=None)[0]
         A = Ug - Rg @ self.coef
         # mass-normalised (the mean of |u|^2 over the box 1 / m) and orthogonal, each field
@@ -803,18 +806,11 @@ class GenericElastic:
         local[:, 1, 2], local[:, 2, 2] = -q[:, 0] * q[:, 2], q[:, 0] * q[:, 1]  # torsion
         return np.asarray(np.einsum("ck,nkj->ncj", self.V, local))
 
-    def _rigid(self, xyz: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The six rigid-body motions about the CoG (n, 3, 6): translations, rotations."""
-        out = np.zeros((xyz.shape[0], 3, 6))
-        out[:, :, :3] = np.eye(3)
-        # rotation k moves a point by e_k x r
-        out[:, :, 3:] = np.cross(np.eye(3)[None], (xyz - self.cog)[:, None]).transpose(0, 2, 1)
-        return out
-
     def at(self, xyz: NDArray[np.float64], dirs: NDArray[np.float64]) -> NDArray[np.float64]:
         """The mass-normalised shapes read along ``dirs`` at ``xyz``: (n, 3)."""
-        u = self._fields(xyz) - np.einsum("nck,kj->ncj", self._rigid(xyz), self.coef)
-        return np.asarray(np.einsum("ncj,nc->nj", u @ self.W, dirs))
+        u = (np.einsum("ncj,nc->nj", self._fields(xyz), dirs)
+             - response_matrix(xyz - self.cog, dirs) @ self.coef)  # less its rigid part
+        return np.asarray(u @ self.W)
 
     def accelerance(self, freq: NDArray[np.float64], first_hz: float,
                     resp: NDArray[np.float64], exc: NDArray[np.float64],
