@@ -116,7 +116,7 @@ def _reference_layout(spec: ScenarioSpec, first_elastic: float | None = None,
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A reference scenario, the planner's model (the truth perturbed by a few %), the
     chosen layout's Monte Carlo estimates (8 draws of noise and location errors) of mass,
-    CoG and the principal-axis moments (8, 7), their truth (7,) and predicted std (7,)."""
+    CoG and the tensor's diagonal about the CoG (8, 7), their truth (7,) and predicted std (7,)."""
     sc = build_scenario(spec)
     body, t = sc.system.body, sc.truth
     rng = np.random.default_rng(spec.seed)
@@ -203,7 +203,7 @@ def test_prediction_of_a_flexible_body_is_within_a_factor_of_its_errors() -> Non
     elastic modes bias every draw, so the achieved errors about the truth exceed the
     spread of the draws. Given the expected first elastic mode (10 % off), the prediction
     holds generic elastic modes and is within 0.3-3x the draws' RMS error about the truth
-    (median over each group); without them it is under a third of it for the mass."""
+    (median over each group); without them the mass's is under a third of that."""
     spec = ScenarioSpec(seed=9073, shape="block", noise=0.01, n_averages=10,
                         location_error=0.002, elastic_ratio=5.0, band_ratio=1.5, n_lines=800)
     fe = build_scenario(spec).first_elastic_hz
