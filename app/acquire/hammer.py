@@ -225,9 +225,10 @@ class HammerProcedure(RecordingProcedure):
         assert self._streams is not None
         self._start_streams()
         # points left incomplete by a later override (a hit rejected there) are visited again
-        while todo := [p for p in self.plan.excitations
-                       if self.analysis.n_used(p.index) < self.plan.hits]:
-            self._acquire_point(todo[0])
+        while (point := self.next_to_do(
+                self.plan.excitations,
+                lambda p: self.analysis.n_used(p.index) >= self.plan.hits)) is not None:
+            self._acquire_point(point)
         self._streams.stop()
         self._complete()
 

@@ -13,8 +13,8 @@ import logging
 import queue
 import threading
 import time
-from collections.abc import Iterable, Sequence
-from typing import Any
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,6 +24,8 @@ from app.acquire.events import RunState, SampleBlock, dispatch
 __all__ = ["Procedure", "StopRequestedError"]
 
 logger = logging.getLogger(__name__)
+
+T = TypeVar("T")
 
 
 class StopRequestedError(Exception):
@@ -140,6 +142,13 @@ class Procedure:
         """Send ``on_samples`` with the rows just read (skipped when no listener has it)."""
         if any(getattr(listener, "on_samples", None) for listener in self.listeners):
             self.emit("on_samples", SampleBlock(data, fs, tuple(names), time.monotonic()))
+
+    def next_to_do(self, items: Iterable[T], done: Callable[[T], bool]) -> T | None:
+        """The first of ``items`` not ``done``, or None, once the commands already sent are
+        handled: overrides sent together (one reopening a point, the next completing it
+        again) never make the run announce a point it no longer needs."""
+        self.poll()
+        return next((item for item in items if not done(item)), None)
 
     def poll(self) -> None:
         """Handle pending commands; pauses here when asked; raises StopRequestedError on stop."""

@@ -275,9 +275,10 @@ class ShakerProcedure(RecordingProcedure):
     def execute(self) -> None:
         assert self.stream is not None
         self.stream.start()
-        while todo := [d for d in range(len(self.plan.drives))
-                       if self.analysis.n_used(d) < self.plan.shaker.averages]:
-            self._acquire_drive(todo[0])
+        while (d := self.next_to_do(
+                range(len(self.plan.drives)),
+                lambda d: self.analysis.n_used(d) >= self.plan.shaker.averages)) is not None:
+            self._acquire_drive(d)
         self.stream.stop()
         self._complete()
 

@@ -15,7 +15,8 @@ from app.mockbench.bench import InProcessBench, plan_for_bench
 
 
 class Overrider(Listener):
-    """Accepts the rejected double hit 0, then rejects clean hit 1 once it is reported."""
+    """Accepts the rejected double hit 0, then rejects clean hit 1 once the run has moved on
+    to point 1."""
 
     def __init__(self) -> None:
         self.proc: HammerProcedure | None = None
@@ -29,7 +30,10 @@ class Overrider(Listener):
         if hit.hit_id == 0 and not hit.override and "accept" not in self.done:
             self.done.add("accept")
             self.proc.accept_hit(0)
-        elif hit.hit_id == 1 and not hit.override and "reject" not in self.done:
+
+    def on_next_point(self, point) -> None:
+        assert self.proc is not None
+        if point.index == 1 and "reject" not in self.done:
             self.done.add("reject")
             self.proc.reject_hit(1)
 
@@ -114,3 +118,40 @@ def test_accepting_a_record_with_lost_samples_is_refused(tmp_path: Path, capsys)
     err = capsys.readouterr().err
     assert "record 1 lost samples" in err and "cannot be used" in err
     assert read_run(tmp_path / "run.h5").records.override[0] == ""  # the file is unchanged
+
+
+class ReopenThenClose(Listener):
+    """Rejects hit 0 once point 1 is announced, and clears that reject when hit 1 is
+    reported: the two overrides reach the run together, as two quick clicks do."""
+
+    def __init__(self) -> None:
+        self.proc: HammerProcedure | None = None
+
+    def on_next_point(self, point) -> None:
+        assert self.proc is not None
+        if point.index == 1:
+            self.proc.reject_hit(0)
+
+    def on_hit(self, hit) -> None:
+        assert self.proc is not None
+        if hit.hit_id == 1 and not hit.override:
+            self.proc.clear_override(0)
+
+
+def test_an_override_undone_before_the_last_point_returns_asks_for_no_revisit(
+        tmp_path: Path) -> None:
+    path = tmp_path / "run.h5"
+    plan = plan_for_bench("engine-rigid", points=[0, 1], hits=1, length=0.5)
+    lis = ReopenThenClose()
+    with InProcessBench("engine-rigid") as bench:
+        proc = HammerProcedure(plan, bench.station, path, partial=True,
+                               listeners=[lis, bench.operator])
+        lis.proc = proc
+        proc.start()
+        assert proc.wait(300) is RunState.FINISHED, proc.message
+        visited, made = list(bench.operator.points), bench.operator.hits_made
+    # point 0 was short only while the clear waited in the queue: the run handled it
+    # before choosing what was left, so the operator was not sent back to hit in vain
+    assert visited == [0, 1] and made == 2
+    rec = read_run(path, with_data=False).records
+    assert rec.override == ("", "") and list(rec.accepted) == [True, True]
