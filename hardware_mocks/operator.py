@@ -3,8 +3,10 @@
 :class:`MockOperator` is a listener of a procedure (duck-typed: ``on_next_point``,
 ``on_hit``): on each new point it hits there, and after each hit it hits again
 until the procedure reports the point complete. A hit the procedure never
-reports (its trigger lost in corrupted frames) is repeated after ``patience``
-s, as an operator who saw nothing happen would. Faults can be scripted by hit
+reports (its trigger lost in corrupted frames) is repeated once the procedure has
+read ``patience`` s of data since, as an operator who saw nothing happen would: the
+wait runs on the data the run reads (``on_samples``), not on the wall clock, so a
+loaded machine that is slow to judge a hit does not get it twice. Faults can be scripted by hit
 number (double hits, overloads) for tests and demos. :class:`MockShakerOperator`
 attaches the mock shaker's stinger at each point the shaker procedure announces.
 
@@ -111,7 +113,8 @@ class MockOperator:
     overload_peak : float
         Peak force of an overloading hit, N.
     patience : float
-        Seconds without a reported hit after which the last hit is repeated (0: never).
+        Seconds of data the procedure reads after a hit without reporting it, after which
+        the hit is repeated (0: never).
     """
 
     def __init__(self, hammer: HammerDevice | Hammer, *, bench: Bench | None = None,
@@ -139,7 +142,9 @@ class MockOperator:
         self.patience = patience
         self.repeats = 0
         self._seen: set[int] = set()
-        self._timer: threading.Timer | None = None
+        self._waiting: Any = None  # the point of the hit not reported yet
+        self._data_seen = 0.0  # s of data the run read since that hit
+        self._overdue = False
 
     def exc_index(self, point: Any) -> int:
         """The bench excitation DOF of a plan point (by node, then closest direction)."""
@@ -147,27 +152,13 @@ class MockOperator:
 
     def _watch(self, point: Any) -> None:
         """(Re)start the wait for the procedure to report the hit just made."""
-        self._cancel()
-        if self.patience <= 0:
-            return
-        timer = threading.Timer(self.patience, self._repeat, (point,))
-        timer.daemon = True
         with self._lock:
-            if self._closed:
-                return
-            self._timer = timer
-        timer.start()
+            self._waiting = point if self.patience > 0 and not self._closed else None
+            self._data_seen, self._overdue = 0.0, False
 
     def _cancel(self) -> None:
         with self._lock:
-            timer, self._timer = self._timer, None
-        if timer is not None:
-            timer.cancel()
-
-    def _repeat(self, point: Any) -> None:
-        logger.info("operator: no hit reported for %.1f s; hitting again", self.patience)
-        self.repeats += 1
-        self.hit(point)
+            self._waiting = None
 
     def hit(self, point: Any) -> None:
         """Hit at ``point`` after :attr:`pause` s, with the fault scripted for this hit."""
@@ -214,6 +205,26 @@ class MockOperator:
         if not hit.point_complete and self._current is not None:
             self.hit(self._current)
 
+    def on_samples(self, block: Any) -> None:
+        """The run read ``block`` (a :class:`~app.acquire.events.SampleBlock`): past
+        :attr:`patience` s of data since a hit not reported, hit again. Not at the read that
+        crosses it, which may hold the hit (a machine slow to read reads much at once), but
+        at the next: the run judges what it read before it reads again."""
+        with self._lock:
+            point = self._waiting
+            if point is None:
+                return
+            self._data_seen += block.data.shape[-1] / block.fs
+            if self._data_seen < self.patience:
+                return
+            if not self._overdue:
+                self._overdue = True
+                return
+        logger.info("operator: no hit reported in %.1f s of data; hitting again",
+                    self._data_seen)
+        self.repeats += 1
+        self.hit(point)
+
     def on_paused(self, reason: str) -> None:
         self._cancel()  # no hitting while the run waits
 
@@ -224,11 +235,7 @@ class MockOperator:
         """Stop hitting (idempotent)."""
         with self._lock:
             self._closed = True
-            timer, self._timer = self._timer, None
-        if timer is not None:
-            timer.cancel()
-            if timer is not threading.current_thread():
-                timer.join(1.0)
+            self._waiting = None
 
 
 class MockShakerOperator:

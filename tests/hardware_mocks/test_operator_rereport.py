@@ -1,8 +1,11 @@
-"""The mock operator's arm hits once per reported hit, not again when a hit is re-reported."""
+"""The mock operator's arm hits once per reported hit, not again when a hit is re-reported, and
+again only when the run has read its patience of data without reporting the hit."""
 
 from __future__ import annotations
 
 from types import SimpleNamespace
+
+import numpy as np
 
 from app.mockbench.bench import plan_for_bench
 from hardware_mocks.benches import get_bench
@@ -57,6 +60,39 @@ def test_a_hit_reported_before_the_operator_looks_up_is_not_repeated() -> None:
     try:
         op.on_next_point(plan.excitations[0])
         assert op.hits_made == 1
-        assert op._timer is None  # nothing left to repeat the reported hit
+        for _ in range(3):  # the run reads on, past the patience: nothing to repeat
+            op.on_samples(_block(40.0))
+        assert op.hits_made == 1 and op.repeats == 0
     finally:
         op.shutdown()
+
+
+def _block(seconds: float, fs: float = 100.0) -> SimpleNamespace:
+    """What the run read: ``seconds`` of samples at ``fs`` (an on_samples block)."""
+    return SimpleNamespace(data=np.zeros((2, round(seconds * fs))), fs=fs)
+
+
+def test_a_hit_never_reported_is_repeated_after_the_patience_in_data() -> None:
+    plan = plan_for_bench("engine-rigid", points=[0], hits=2)
+    with HammerDevice(BenchPhysics(get_bench("engine-rigid"))) as hammer:
+        op = MockOperator(hammer, patience=1.0)
+        try:
+            op.on_next_point(plan.excitations[0])
+            for _ in range(3):  # 1.2 s read: the third read crossed the patience ...
+                op.on_samples(_block(0.4))
+            assert op.hits_made == 1  # ... and may hold the hit: the run judges it first
+            op.on_samples(_block(0.4))  # the next read: nothing reported, hit again
+            assert op.hits_made == 2 and op.repeats == 1
+            op.on_hit(_hit(0))  # the repeat reported: the point needs one more
+            assert op.hits_made == 3
+            op.on_samples(_block(0.9))
+            op.on_hit(_hit(1))  # reported within the patience: the next hit, no repeat
+            assert op.hits_made == 4 and op.repeats == 1
+            op.on_samples(_block(5.0))  # one long read past the patience: not yet
+            assert op.hits_made == 4
+            op.on_paused("the front end stopped")  # no hitting while the run waits
+            for _ in range(3):
+                op.on_samples(_block(5.0))
+            assert op.hits_made == 4 and op.repeats == 1
+        finally:
+            op.shutdown()
