@@ -272,7 +272,7 @@ def comparison_rows(prediction: Mapping[str, Any], u: Uncertainty | None
     rows = []
     for name, unit, key, index, scale in PLANNED:
         p, a = _std(prediction, key, index, scale), _std(achieved, key, index, scale)
-        ratio = f"{a / p:.2f}" if p is not None and a is not None and p > 0 else "—"
+        ratio = f"{a / p:.3g}" if p is not None and a is not None and p > 0 else "—"
         rows.append((name, unit, "—" if p is None else f"{p:.3g}",
                      "—" if a is None else f"{a:.3g}", ratio))
     return rows

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from app.cli.main import main
 from app.io.runfile import RunWriter
 from app.mockbench.bench import plan_for_bench
 from app.report.sources import plan_prediction
+from app.report.tables import comparison_rows
 from drivers.base import ChannelConfig
 from hardware_mocks.benches import get_bench
 from hardware_mocks.signals import half_sine, impulse_response, simulate
@@ -75,3 +77,13 @@ def test_no_prediction_no_table(tmp_path: Path, qapp, capsys: pytest.CaptureFixt
     assert plan_prediction(run) is None
     assert main(["identify", str(run)]) == 0
     assert "Predicted and achieved" not in capsys.readouterr().out
+
+
+def test_the_ratio_keeps_its_digits_when_the_test_beats_the_plan_by_far() -> None:
+    # exact data give an achieved std far under the prediction: the ratio keeps three
+    # significant digits (two decimals would show 0.00794 as 0.01)
+    u = SimpleNamespace(std={"mass": 0.00397, "cog": np.array([1e-3, 2e-3, 4e-3])})
+    rows = comparison_rows({"mass": 0.5, "cog": [4e-3, 4e-3, 4e-3]}, u)  # type: ignore[arg-type]
+    assert rows[0] == ("mass m", "kg", "0.5", "0.00397", "0.00794")
+    assert [r[4] for r in rows[1:4]] == ["0.25", "0.5", "1"]
+    assert rows[4][3:] == ("—", "—")  # no achieved std for the inertia: no ratio
