@@ -44,12 +44,16 @@ from processing.data import InputError
 if TYPE_CHECKING:
     from processing.units import TimeUnits
 
-__all__ = ["ChannelDelays", "estimate_delays"]
+__all__ = ["ChannelDelays", "estimate_delays", "realness_delays"]
 
 #: Huber's constant on the phase residual, in robust standard deviations
 HUBER = 2.0
 #: rounds of the robust weights
 ROBUST_ROUNDS = 4
+#: delays tried by :func:`realness_delays` in each of its rounds, and its rounds (each
+#: narrows the span to a few steps of the round before)
+REAL_GRID = 41
+REAL_ROUNDS = 4
 
 
 @dataclass(frozen=True)
@@ -145,6 +149,52 @@ def estimate_delays(freq: NDArray[np.float64], H: NDArray[np.complex128],
     std = np.sqrt(s2 / np.where(den > 0, den, np.inf))
     misfit = float(np.sqrt((W * phi**2).sum() / max(float(W.sum()), 1e-300)))
     return ChannelDelays(tau, std, int(w.size), misfit)
+
+
+def realness_delays(freq: NDArray[np.float64], H: NDArray[np.complex128],
+                    use: NDArray[np.bool_], most: float) -> ChannelDelays:
+    """Each channel's delay from the FRFs alone, with no model: the delay that brings its
+    values nearest the real axis.
+
+    Under its elastic modes a lightly damped body's accelerances are nearly real (sums over
+    real modes) but near its resonances, so a delay shows as each channel's values turning
+    off the real axis in proportion to ``w``. Each value counts once, whatever its modulus
+    (resonances, where damping turns the values, are a few lines among many): the delay
+    maximises the mean ``|cos(angle(H) + w tau)|`` over the values ``use`` keeps, searched
+    within ``+-most`` s on a grid narrowed round by round, then refined as a robust
+    line through the origin of the phase off the real axis (:func:`estimate_delays`
+    against the nearest real values), which also gives its std. Meant for FRFs a first fit
+    cannot read the delays against (their phase too far off for the bands it chooses).
+
+    Parameters
+    ----------
+    freq : (n_f,) Hz
+    H : (n_resp, n_exc, n_f) accelerances
+    use : (n_exc, n_f) the values to read (lines under the first elastic mode, columns
+        the fit would weigh)
+    most : largest delay searched, s (half a period of the top line is one sample or more)
+    """
+    w = 2 * np.pi * np.asarray(freq, dtype=float)
+    H = np.asarray(H)
+    if H.ndim != 3 or np.shape(use) != H.shape[1:] or w.size != H.shape[-1] or most <= 0:
+        raise InputError(f"channel delays: FRFs {H.shape}, values to read {np.shape(use)}, "
+                         f"{w.size} lines, span {most:g} s")
+    keep = np.asarray(use, bool)[None] & np.isfinite(H) & (np.abs(H) > 0)
+    if not np.any(keep):
+        raise InputError("channel delays: no value to read them on")
+    ph = np.where(keep, np.angle(np.where(keep, H, 1.0)), 0.0)
+    centre, half = np.zeros(H.shape[0]), float(most)
+    for _ in range(REAL_ROUNDS):
+        taus = centre[:, None] + np.linspace(-half, half, REAL_GRID)[None]  # (n_r, g)
+        turned = ph[:, None] + w[None, None, None, :] * taus[:, :, None, None]
+        score = np.sum(keep[:, None] * np.abs(np.cos(turned)), axis=(2, 3))  # (n_r, g)
+        centre = taus[np.arange(H.shape[0]), np.argmax(score, axis=1)]
+        half *= 4.0 / (REAL_GRID - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit = H / np.abs(H)  # each value counts once
+    nearest = np.sign(np.cos(ph + w * centre[:, None, None]))  # the real axis's side
+    return estimate_delays(freq, np.where(keep, unit, np.nan), nearest,
+                           np.asarray(use, dtype=float))
 
 
 def _slope(W: NDArray[np.float64], w: NDArray[np.float64],

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from processing.blas import one_blas_thread
 from processing.bootstrap import DEFAULT_RESAMPLES, Bootstrap, Progress, resample
 from processing.data import FRFSet, InputError
-from processing.delays import ChannelDelays, estimate_delays
+from processing.delays import ChannelDelays, estimate_delays, realness_delays
 from processing.geometry import excitation_matrix
 from processing.inertia import mass_matrix
 from processing.measurement import Measurement
@@ -167,12 +167,16 @@ FLOOR_ROUNDS = 3
 FLOOR_RISE = 1.05
 
 
-def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stages:
+def _problem(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Problem:
     frf = d.frf
-    problem = prepare(frf.freq, frf.H, d.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
-                      coherence=frf.coherence, options=options, solver=solver,
-                      exponential_tau=d.exponential_tau, coherence_floor=d.coherence_floor,
-                      elastic_top=d.elastic_top)
+    return prepare(frf.freq, frf.H, d.resp_xyz, frf.resp_dirs, frf.exc_xyz, frf.exc_dirs,
+                   coherence=frf.coherence, options=options, solver=solver,
+                   exponential_tau=d.exponential_tau, coherence_floor=d.coherence_floor,
+                   elastic_top=d.elastic_top)
+
+
+def _stages(d: _Data, options: IdentifyOptions, solver: SolverSettings) -> Stages:
+    problem = _problem(d, options, solver)
     fits = [_fit_in_bands(problem, choose_bands(problem, *d.rigid_tops))]
     floor = 0.0
     for _ in range(FLOOR_ROUNDS):
@@ -231,6 +235,14 @@ DELAY_MISFIT = 0.2
 DELAY_LINES_FROM = 1.25
 #: at least this many lines, else the mass line's
 DELAY_MIN_LINES = 8
+#: when the delays read against the first fit are not kept, they are read from the FRFs
+#: alone (:func:`processing.delays.realness_delays`) on the lines under this fraction of
+#: the first elastic mode seen (every line when fewer than DELAY_REAL_LINES are left)
+DELAY_REAL_BELOW = 0.8
+DELAY_REAL_LINES = 16
+#: ... and taken out only when one turns its channel by this much at the top of those lines,
+#: rad (delays too large for the first fit, not the small ones damping mimics there)
+DELAY_REAL_PHASE = 0.1
 
 
 def _delay_lines(st: Stages) -> NDArray[np.bool_]:
@@ -272,9 +284,29 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
     fit's phase shows them (:mod:`processing.delays`): the delays are read against the
     fitted model, taken out and the fit run again, until a round changes them no more. The
     round whose FRFs fit their own model best is kept, when it takes the phase misfit to at
-    most :data:`DELAY_GAIN` of the FRFs' as given and under :data:`DELAY_MISFIT`; else the
-    FRFs as given."""
-    st = _stages(d, options, solver)
+    most :data:`DELAY_GAIN` of the FRFs' as given and under :data:`DELAY_MISFIT`. Else the
+    delays are read from the FRFs alone (their values nearest the real axis under the first
+    elastic mode, :func:`_delays_alone`: a first fit whose bands were chosen on FRFs turned
+    by delays of a sample can be too far off to read them against) and the rounds run
+    from there, the best kept when it fits its model better than the FRFs as given on its
+    lines; else the FRFs as given. FRFs whose first fit has no usable mass get the delays
+    they show alone the same way (refused as before when those give none)."""
+    try:
+        st = _stages(d, options, solver)
+    except InputError:
+        if options.channel_delays == "off" or options.method != "improved":
+            raise
+        alone = _delays_alone(d, options, solver, None)
+        if alone is None:
+            raise
+        _, (misfit, st_k, kept, rounds), span = alone
+        assert kept is not None and st_k is not None
+        note = (f"channel delays read from the FRFs alone, then read on {kept.lines} lines "
+                f"{span[0]:.1f}-{span[1]:.1f} Hz and taken out (round {rounds}; the FRFs as "
+                f"given had no usable mass; phase misfit {misfit:.3f} rad): up to "
+                f"{1e3 * np.max(np.abs(kept.seconds)):.3g} ms")
+        return (dataclasses.replace(st_k, delays=kept, delays_note=note),
+                _without_delays(d, kept, options, solver))
     if options.channel_delays == "off":
         return dataclasses.replace(st, delays_note="channel delays not read: asked for"), d
     if not st.problem.improved:  # the article's plain method takes the FRFs as they are
@@ -293,8 +325,44 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
     # each round on the first fit's lines; the round whose data fit their own model best
     # is kept (the FRFs as given when none fits better)
     first = step.misfit
-    best: tuple[float, Stages, ChannelDelays | None, int] = (first, st, None, 0)
-    total, span = step, (float(st.problem.freq[sel][0]), float(st.problem.freq[sel][-1]))
+    misfit, st_k, kept, rounds = _delay_rounds(d, options, solver, st, step, st.problem.freq,
+                                               sel)
+    span = (float(st.problem.freq[sel][0]), float(st.problem.freq[sel][-1]))
+    how = ""
+    if kept is None or misfit > min(DELAY_GAIN * first, DELAY_MISFIT):
+        # the first fit's phase is too far off for the delays read against it (its bands
+        # chosen on the delayed FRFs): the delays the FRFs show alone, then the rounds
+        alone = _delays_alone(d, options, solver, st)
+        if alone is None:
+            return dataclasses.replace(
+                st, delays_note=(f"channel delays not taken out: they take the phase misfit "
+                                 f"from {first:.3f} rad only to {misfit:.3f} rad (at most "
+                                 f"{DELAY_GAIN:g}x and {DELAY_MISFIT} rad), and the FRFs "
+                                 "show none alone: the model does not fit for another "
+                                 "reason")), d
+        first, (misfit, st_k, kept, rounds), span = alone
+        how = "read from the FRFs alone, then "
+    assert kept is not None and st_k is not None
+    note = (f"channel delays {how}read on {kept.lines} lines {span[0]:.1f}-{span[1]:.1f} Hz "
+            f"and taken out (round {rounds}; phase misfit {first:.3f} -> {misfit:.3f} "
+            f"rad): up to {1e3 * np.max(np.abs(kept.seconds)):.3g} ms")
+    d_k = _without_delays(d, kept, options, solver)  # the FRFs of round k, and the units
+    return dataclasses.replace(st_k, delays=kept, delays_note=note), d_k
+
+
+_Round = tuple[float, "Stages | None", ChannelDelays | None, int]
+
+
+def _delay_rounds(d: _Data, options: IdentifyOptions, solver: SolverSettings,
+                  st: Stages | None, total: ChannelDelays, freq: NDArray[np.float64],
+                  sel: NDArray[np.bool_]) -> _Round:
+    """(misfit, stages, delays, round) of the round whose FRFs fit their own model best on
+    ``sel`` (of the lines ``freq``), the delays ``total`` taken out, then those read against
+    each round's fit (``st`` and no delays, round 0, when no round fits better than the FRFs
+    as given; ``st`` None: the FRFs as given have no fit)."""
+    w_top = 2 * np.pi * float(freq[sel][-1])
+    best: _Round = ((np.inf, st, None, 0) if st is None else
+                    (_delays_against_fit(st, sel).misfit, st, None, 0))
     for rounds in range(1, DELAY_ROUNDS + 1):
         d_k = _without_delays(d, total, options, solver, units=False)
         try:
@@ -307,18 +375,42 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
         if w_top * float(np.max(np.abs(step.seconds))) < DELAY_SETTLED:
             break
         total = total + step
-    misfit, st_k, kept, rounds = best
-    if kept is None or misfit > min(DELAY_GAIN * first, DELAY_MISFIT):
-        return dataclasses.replace(
-            st, delays_note=(f"channel delays not taken out: they take the phase misfit from "
-                             f"{first:.3f} rad only to {misfit:.3f} rad (at most "
-                             f"{DELAY_GAIN:g}x and {DELAY_MISFIT} rad): the model does not fit "
-                             "for another reason")), d
-    note = (f"channel delays read on {kept.lines} lines {span[0]:.1f}-{span[1]:.1f} Hz and "
-            f"taken out (round {rounds}; phase misfit {first:.3f} -> {misfit:.3f} "
-            f"rad): up to {1e3 * np.max(np.abs(kept.seconds)):.3g} ms")
-    d_k = _without_delays(d, kept, options, solver)  # the FRFs of round k, and the units
-    return dataclasses.replace(st_k, delays=kept, delays_note=note), d_k
+    return best
+
+
+def _delays_alone(d: _Data, options: IdentifyOptions, solver: SolverSettings,
+                  st: Stages | None) -> tuple[float, _Round, tuple[float, float]] | None:
+    """The rounds from the delays the FRFs show alone (:func:`realness_delays`), on the
+    lines the fit without them reads delays on: (the FRFs as given's misfit there, the best
+    round, the lines' span), or None when the FRFs show no delay, or no round fits its model
+    better than the FRFs as given. Read with no model, these delays need no fit to hold
+    (on the development suite they are the channels' skews to 0.1 ms), so a round is kept
+    even when something else leaves the misfit high. ``st`` None: the FRFs as given have no
+    fit (their misfit inf)."""
+    p = _problem(d, options, solver) if st is None else st.problem
+    under = p.line_ok.copy()
+    if p.peaks:
+        low = under & (p.freq < DELAY_REAL_BELOW * min(k.frequency for k in p.peaks))
+        under = low if np.count_nonzero(low) >= DELAY_REAL_LINES else under
+    if np.count_nonzero(under) < DELAY_MIN_LINES:
+        return None
+    alone = realness_delays(p.freq[under], p.H[..., under], p.col_weights[:, under] > 0,
+                            1.0 / (2 * float(p.freq[-1])))
+    w_top = 2 * np.pi * float(p.freq[under][-1])
+    z = np.abs(alone.seconds) / np.where(alone.std > 0, alone.std, np.inf)
+    if not np.any((z >= DELAY_Z) & (w_top * np.abs(alone.seconds) >= DELAY_REAL_PHASE)):
+        return None
+    try:
+        st_a = _stages(_without_delays(d, alone, options, solver, units=False), options,
+                       solver)
+    except InputError:
+        return None
+    sel = _delay_lines(st_a)
+    first = np.inf if st is None else _delays_against_fit(st, sel).misfit
+    best = _delay_rounds(d, options, solver, st, alone, p.freq, sel)
+    if best[2] is None:  # no round fits its model better than the FRFs as given
+        return None
+    return first, best, (float(p.freq[sel][0]), float(p.freq[sel][-1]))
 
 
 @one_blas_thread
