@@ -292,14 +292,15 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
     by delays of a sample can be too far off to read them against) and the rounds run
     from there, the best kept when it fits its model better than the FRFs as given on its
     lines; else the FRFs as given. FRFs whose first fit has no usable mass get the delays
-    they show alone the same way (refused as before when those give none)."""
+    they show alone the same way, kept when the round's phase misfit is under
+    :data:`DELAY_MISFIT` (there is no first fit to do better than); else refused as before."""
     try:
         st = _stages(d, options, solver)
     except InputError:
         if options.channel_delays == "off" or options.method != "improved":
             raise
         alone = _delays_alone(d, options, solver, None)
-        if alone is None:
+        if alone is None or alone[1][0] > DELAY_MISFIT:  # no first fit to do better than
             raise
         _, (misfit, st_k, kept, rounds), span = alone
         assert kept is not None and st_k is not None
