@@ -328,8 +328,8 @@ def _delayed_stages(d: _Data, options: IdentifyOptions, solver: SolverSettings,
     # each round on the first fit's lines; the round whose data fit their own model best
     # is kept (the FRFs as given when none fits better)
     first = step.misfit
-    misfit, st_k, kept, rounds = _delay_rounds(d, options, solver, st, step, st.problem.freq,
-                                               sel)
+    misfit, st_k, kept, rounds = _delay_rounds(d, options, solver, (first, st, None, 0), step,
+                                               st.problem.freq, sel)
     span = (float(st.problem.freq[sel][0]), float(st.problem.freq[sel][-1]))
     how = ""
     if kept is None or misfit > min(DELAY_GAIN * first, DELAY_MISFIT):
@@ -357,21 +357,24 @@ _Round = tuple[float, "Stages | None", ChannelDelays | None, int]
 
 
 def _delay_rounds(d: _Data, options: IdentifyOptions, solver: SolverSettings,
-                  st: Stages | None, total: ChannelDelays, freq: NDArray[np.float64],
-                  sel: NDArray[np.bool_]) -> _Round:
+                  given: _Round, total: ChannelDelays, freq: NDArray[np.float64],
+                  sel: NDArray[np.bool_], first: Stages | None = None) -> _Round:
     """(misfit, stages, delays, round) of the round whose FRFs fit their own model best on
     ``sel`` (of the lines ``freq``), the delays ``total`` taken out, then those read against
-    each round's fit (``st`` and no delays, round 0, when no round fits better than the FRFs
-    as given; ``st`` None: the FRFs as given have no fit)."""
+    each round's fit; ``given`` (the FRFs as given's misfit there, their stages, no delays,
+    round 0; misfit inf when they have no fit) when no round does better. ``first``: the
+    stages of the first round when they are already at hand."""
     w_top = 2 * np.pi * float(freq[sel][-1])
-    best: _Round = ((np.inf, st, None, 0) if st is None else
-                    (_delays_against_fit(st, sel).misfit, st, None, 0))
+    best = given
     for rounds in range(1, DELAY_ROUNDS + 1):
-        d_k = _without_delays(d, total, options, solver, units=False)
-        try:
-            st_k = _stages(d_k, options, solver)
-        except InputError:  # a round's fit refused: the best round so far stands
-            break
+        if rounds == 1 and first is not None:
+            st_k = first
+        else:
+            d_k = _without_delays(d, total, options, solver, units=False)
+            try:
+                st_k = _stages(d_k, options, solver)
+            except InputError:  # a round's fit refused: the best round so far stands
+                break
         step = _delays_against_fit(st_k, sel)
         if step.misfit < best[0]:
             best = (step.misfit, st_k, total, rounds)
@@ -410,7 +413,7 @@ def _delays_alone(d: _Data, options: IdentifyOptions, solver: SolverSettings,
         return None
     sel = _delay_lines(st_a)
     first = np.inf if st is None else _delays_against_fit(st, sel).misfit
-    best = _delay_rounds(d, options, solver, st, alone, p.freq, sel)
+    best = _delay_rounds(d, options, solver, (first, st, None, 0), alone, p.freq, sel, st_a)
     if best[2] is None:  # no round fits its model better than the FRFs as given
         return None
     return first, best, (float(p.freq[sel][0]), float(p.freq[sel][-1]))
