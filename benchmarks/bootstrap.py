@@ -54,6 +54,7 @@ from hardware_mocks.reference.timedata import (  # noqa: E402
 )
 from processing.bootstrap import (  # noqa: E402
     Bootstrap,
+    about_the_data,
     resample,
     resampled_frfs,
     weighted_accelerances,
@@ -217,11 +218,15 @@ def reference_resample(st: Stages, units: TimeUnits, boot: Bootstrap) -> tuple[
     stacked = np.array([stack_real(sh[msel]) for sh in shapes]) if shapes else None
     solver = dataclasses.replace(problem.solver, tol=max(problem.solver.tol, 1e-9))
     counts = np.split(boot.counts, np.cumsum(boot.units)[:-1], axis=1)
+    nominal = resampled_frfs(units, problem.freq[used], [np.ones((1, c.shape[1]))
+                                                          for c in counts])
+    assert nominal is not None
     out = []
     for r in range(boot.n):  # one resample at a time
         drawn = resampled_frfs(units, problem.freq[used], [c[r:r + 1] for c in counts])
         assert drawn is not None
-        X, colw = weighted_accelerances(problem, used, *drawn)
+        X, colw = weighted_accelerances(problem, used,
+                                        *about_the_data(problem, used, nominal, drawn))
         Xb = problem.X.copy()
         Xb[..., used] = np.transpose(X[0], (1, 2, 0))
         wb = dataclasses.replace(weights, mass=colw[0][..., mass] * (weights.mass > 0),

@@ -46,6 +46,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "QUANTITY_UNITS",
+    "TIMING_SCATTER",
     "AcquisitionFrontEnd",
     "ChannelConfig",
     "Device",
@@ -62,6 +63,9 @@ logger = logging.getLogger(__name__)
 Quantity = Literal["force", "acceleration"]
 #: SI unit of each measured quantity; sensitivities are in mV per this unit
 QUANTITY_UNITS: dict[str, str] = {"force": "N", "acceleration": "m/s^2"}
+#: largest scatter of a streaming device's frame arrival times, s, with which its clock is
+#: taken for measured (station option ``timing_scatter``)
+TIMING_SCATTER = 0.005
 
 
 @dataclass(frozen=True)
@@ -418,12 +422,17 @@ class StreamingFrontEnd(AcquisitionFrontEnd):
     name, channels, fs : as :class:`AcquisitionFrontEnd`
     stall_timeout : float
         Seconds without any sample after which a read raises DeviceTimeoutError.
+    timing_scatter : float
+        Largest scatter of the frames' host arrival times (s) with which the device's clock
+        is still taken for measured (:func:`drivers.sync.check_alignment`, ``max_residual``):
+        a hit whose streams are aligned by host timing needs it.
     """
 
     def __init__(self, name: str, channels: Sequence[ChannelConfig], fs: float, *,
-                 stall_timeout: float = 0.5) -> None:
+                 stall_timeout: float = 0.5, timing_scatter: float = TIMING_SCATTER) -> None:
         super().__init__(name, channels, fs)
         self.stall_timeout = stall_timeout
+        self.timing_scatter = timing_scatter
         self._buffer = SampleBuffer(len(self.channels), name)
 
     def clock_pairs(self) -> list[tuple[float, int]]:

@@ -41,7 +41,7 @@ import numpy as np
 from cantools.database.can import Database
 from cantools.database.namedsignalvalue import NamedSignalValue
 
-from drivers.base import ChannelConfig, StreamHealth, StreamingFrontEnd
+from drivers.base import TIMING_SCATTER, ChannelConfig, StreamHealth, StreamingFrontEnd
 from drivers.errors import (
     DeviceError,
     DeviceInitializationError,
@@ -117,6 +117,9 @@ class CanFrontEnd(StreamingFrontEnd):
     reply_timeout, stall_timeout : float
         Seconds to wait for a command's answer; seconds without any frame after
         which a read raises DeviceTimeoutError.
+    timing_scatter : float
+        Largest scatter of the frames' arrival times, s, with which the clock counts as
+        measured (:class:`~drivers.base.StreamingFrontEnd`).
     """
 
     supported_rates: ClassVar[tuple[float, ...]] = (256.0, 512.0, 1024.0, 2048.0, 4096.0)
@@ -126,8 +129,9 @@ class CanFrontEnd(StreamingFrontEnd):
     def __init__(self, name: str, channels: Sequence[ChannelConfig], fs: float, *,
                  bus: can.BusABC | None = None, bus_kwargs: dict[str, Any] | None = None,
                  frame: str = "fd", reply_timeout: float = 0.5,
-                 stall_timeout: float = 0.5) -> None:
-        super().__init__(name, channels, fs, stall_timeout=stall_timeout)
+                 stall_timeout: float = 0.5, timing_scatter: float = TIMING_SCATTER) -> None:
+        super().__init__(name, channels, fs, stall_timeout=stall_timeout,
+                         timing_scatter=timing_scatter)
         if frame not in ("fd", "classic"):
             raise ValueError(f"{name}: frame must be 'fd' or 'classic', got {frame!r}")
         for ch in self.channels:

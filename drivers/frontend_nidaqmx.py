@@ -35,6 +35,8 @@ teds                  true (every channel) or a list of channel names whose     
 samples_per_event     samples read at each every-N-samples event                  fs / 10
 buffer_seconds        NI-DAQmx's input buffer, s                                  10
 stall_timeout         s without samples before a read fails                       0.5
+timing_scatter        s of scatter in the reads' arrival times with which the     0.005
+                      clock counts as measured (a separate force device's hits)
 ====================  ==========================================================  =======
 
 Sensitivities stay in the station file's units, mV/N and mV/(m/s^2); NI-DAQmx takes an
@@ -65,7 +67,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from drivers import nidaqmx_common
-from drivers.base import ChannelConfig, StreamHealth, StreamingFrontEnd, TimeBlock
+from drivers.base import TIMING_SCATTER, ChannelConfig, StreamHealth, StreamingFrontEnd, TimeBlock
 from drivers.errors import (
     DeviceError,
     DeviceInitializationError,
@@ -87,7 +89,7 @@ OVERLOAD_FRACTION = 1.0 - 8.0 / 2**23
 SAMPLES_OVERWRITTEN = -200279
 
 OPTIONS = ("api", "channels_per_module", "coupling", "excitation_current", "teds",
-           "samples_per_event", "buffer_seconds", "stall_timeout")
+           "samples_per_event", "buffer_seconds", "stall_timeout", "timing_scatter")
 
 
 def accel_sensitivity_mv_per_g(mv_per_si: float) -> float:
@@ -140,6 +142,9 @@ class NiDaqFrontEnd(StreamingFrontEnd):
         NI-DAQmx input buffer, s.
     stall_timeout : float
         Seconds without samples after which a read raises.
+    timing_scatter : float
+        Largest scatter of the reads' arrival times, s, with which the clock counts as
+        measured (:class:`~drivers.base.StreamingFrontEnd`).
     """
 
     #: the module inputs are checked against ``devices`` and ``channels_per_module``
@@ -149,8 +154,10 @@ class NiDaqFrontEnd(StreamingFrontEnd):
                  devices: Sequence[str], api: Any = None, channels_per_module: int = 4,
                  coupling: str = "AC", excitation_current: float = 0.002,
                  teds: bool | Iterable[str] = False, samples_per_event: int | None = None,
-                 buffer_seconds: float = 10.0, stall_timeout: float = 0.5) -> None:
-        super().__init__(name, channels, fs, stall_timeout=stall_timeout)
+                 buffer_seconds: float = 10.0, stall_timeout: float = 0.5,
+                 timing_scatter: float = TIMING_SCATTER) -> None:
+        super().__init__(name, channels, fs, stall_timeout=stall_timeout,
+                         timing_scatter=timing_scatter)
         self.devices = tuple(devices)
         if not self.devices:
             raise ValueError(f"{name}: give the NI-DAQmx module names (transport nidaqmx)")

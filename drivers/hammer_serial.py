@@ -39,7 +39,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from drivers.base import ChannelConfig, StreamHealth, StreamingFrontEnd
+from drivers.base import TIMING_SCATTER, ChannelConfig, StreamHealth, StreamingFrontEnd
 from drivers.errors import (
     DeviceError,
     DeviceInitializationError,
@@ -149,6 +149,9 @@ class SerialHammer(StreamingFrontEnd):
         Seconds to wait for a command's reply.
     stall_timeout : float
         Seconds without any frame after which a read raises DeviceTimeoutError.
+    timing_scatter : float
+        Largest scatter of the frames' arrival times, s, with which the clock counts as
+        measured (:class:`~drivers.base.StreamingFrontEnd`).
     """
 
     supported_rates: ClassVar[tuple[float, ...]] = (1024.0, 2048.0, 4096.0, 8192.0, 16384.0)
@@ -157,8 +160,9 @@ class SerialHammer(StreamingFrontEnd):
 
     def __init__(self, name: str, url: str, channels: Sequence[ChannelConfig], fs: float, *,
                  baudrate: int = 921600, sample_width: int = 32, reply_timeout: float = 0.5,
-                 stall_timeout: float = 0.5) -> None:
-        super().__init__(name, channels, fs, stall_timeout=stall_timeout)
+                 stall_timeout: float = 0.5, timing_scatter: float = TIMING_SCATTER) -> None:
+        super().__init__(name, channels, fs, stall_timeout=stall_timeout,
+                         timing_scatter=timing_scatter)
         if sample_width not in (16, 32):
             raise ValueError(f"{name}: sample_width must be 16 or 32, got {sample_width}")
         range_mv = round(self.channels[0].range_v * 1000)

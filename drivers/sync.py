@@ -42,7 +42,7 @@ import scipy.interpolate
 import scipy.optimize
 import scipy.signal
 
-from drivers.base import TimeBlock
+from drivers.base import TIMING_SCATTER, TimeBlock
 from drivers.errors import SyncError
 
 __all__ = ["ClockFit", "align", "check_alignment", "fit_clock", "signal_delay"]
@@ -135,7 +135,7 @@ def fit_clock(pairs: Sequence[tuple[float, int]], nominal_fs: float,
 
 
 def check_alignment(fits: Mapping[str, ClockFit], *, max_ppm: float = 10000.0,
-                    max_residual: float = 0.005, min_span: float = 0.5) -> None:
+                    max_residual: float = TIMING_SCATTER, min_span: float = 0.5) -> None:
     """Refuse (raise :class:`SyncError`) when any stream's clock cannot be trusted."""
     for name, fit in fits.items():
         if fit.span < min_span:

@@ -38,6 +38,7 @@ from hardware_mocks.physics import (
     HEARTBEAT,
     REPLY_TIMEOUT,
     STALL_TIMEOUT,
+    TIMING_SCATTER,
     TIP_DURATION,
     TIP_PEAK,
     BenchPhysics,
@@ -156,7 +157,8 @@ class MockBench:
             'backend = "hammer-serial"',
             f"fs = {self.hammer_rate:g}",
             f'transport = {{ url = "{self.hammer.path}", baudrate = 921600 }}',
-            f"options = {{ stall_timeout = {STALL_TIMEOUT:g}, reply_timeout = {REPLY_TIMEOUT:g} }}",
+            f"options = {{ stall_timeout = {STALL_TIMEOUT:g}, reply_timeout = {REPLY_TIMEOUT:g}, "
+            f"timing_scatter = {TIMING_SCATTER:g} }}",
             "",
             "[[devices.hammer.channels]]",
             'name = "hammer"',
@@ -180,7 +182,7 @@ class MockBench:
             f'transport = {{ interface = "socketcand", host = "127.0.0.1", '
             f'port = {self.socketcand.port}, channel = "{self.can_channel}", fd = false }}',
             f'options = {{ frame = "classic", stall_timeout = {STALL_TIMEOUT:g}, '
-            f"reply_timeout = {REPLY_TIMEOUT:g} }}"
+            f"reply_timeout = {REPLY_TIMEOUT:g}, timing_scatter = {TIMING_SCATTER:g} }}"
             "  # python-can's socketcand client has no CAN FD",
         ]
         names = response_channel_names(b)

@@ -33,7 +33,8 @@ from numpy.typing import ArrayLike, NDArray
 from hardware_mocks.benches import Bench
 from hardware_mocks.signals import ImpulseResponse, impulse_response, simulate
 
-__all__ = ["HEARTBEAT", "REPLY_TIMEOUT", "STALL_TIMEOUT", "TIP_DURATION", "TIP_PEAK",
+__all__ = ["HEARTBEAT", "REPLY_TIMEOUT", "STALL_TIMEOUT", "TIMING_SCATTER", "TIP_DURATION",
+           "TIP_PEAK",
            "BenchPhysics", "DeviceClock", "ForceSource", "Hit", "pulse_band", "sampled_pulse"]
 
 # The mock devices are threads on the host the acquisition shares with other work: on a
@@ -45,6 +46,11 @@ __all__ = ["HEARTBEAT", "REPLY_TIMEOUT", "STALL_TIMEOUT", "TIP_DURATION", "TIP_P
 STALL_TIMEOUT = 2.0
 #: seconds a driver waits for a mock device's answer to a command (``reply_timeout``)
 REPLY_TIMEOUT = 2.0
+#: scatter of a mock device's frame arrival times, s, with which a driver still takes its
+#: clock for measured (``timing_scatter``; a real device's 5 ms): a mock's frames leave late
+#: at the source when the host is loaded, which a real device's never do (at load 7 on 2
+#: cores a mock front end scattered by 25 ms and a hammer run paused)
+TIMING_SCATTER = 0.1
 #: the watchdog armed on a mock shaker, s (``heartbeat``): its output goes off when nobody
 #: has fed it for this long
 HEARTBEAT = 2.0

@@ -62,8 +62,8 @@ from processing.stiffness import (
 from processing.uncertainty import derived_of_draws, draw_covariance
 from processing.units import TimeUnits, UnitKind
 
-__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "Progress", "resample", "resampled_frfs",
-           "weighted_accelerances"]
+__all__ = ["DEFAULT_RESAMPLES", "Bootstrap", "Progress", "about_the_data", "resample",
+           "resampled_frfs", "weighted_accelerances"]
 
 #: resamples when none are asked for
 DEFAULT_RESAMPLES = 200
@@ -272,6 +272,23 @@ def resampled_frfs(units: TimeUnits, lines: NDArray[np.float64], counts: list[
                                   tuple(range(1, n_r + 1)))
                 H[k] = np.moveaxis(frf(sp, units.estimator)[0][:, 0].reshape(n_r, n_l, n), 0, 1)
     return H, G
+
+
+def about_the_data(problem: Problem, used: NDArray[np.bool_], nominal: tuple[
+        NDArray[np.complex128], NDArray[np.float64]], drawn: tuple[
+        NDArray[np.complex128], NDArray[np.float64]]) -> tuple[NDArray[np.complex128],
+                                                            NDArray[np.float64]]:
+    """Resamples' FRFs and coherence (:func:`resampled_frfs`, ``drawn``) moved onto the
+    data: the FRFs (coherence) the fit used on the lines ``used`` plus each resample's
+    deviation from ``nominal``, the units' own mean (every unit once). The units are kept in
+    single precision (:mod:`processing.units`); their rounding then reaches a resample only
+    through its deviation, and the resample of every unit once is the data to the last
+    digit."""
+    H = drawn[0] + (np.transpose(problem.H[..., used], (1, 2, 0))[..., None] - nominal[0])
+    if problem.coherence is None:
+        return H, drawn[1]
+    G0 = np.transpose(problem.coherence[..., used], (1, 2, 0))[..., None]
+    return H, np.clip(drawn[1] + (G0 - nominal[1]), 0.0, 1.0)
 
 
 Triple = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
@@ -684,8 +701,11 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
     if nominal is None:
         return f"no bootstrap over {units.kind}s: their lines differ from the FRFs'"
     ref = problem.H[..., used]
-    if not np.allclose(np.transpose(nominal[0][..., 0], (2, 0, 1)), ref, rtol=1e-6,
-                       atol=1e-9 * float(np.max(np.abs(ref)))):
+    # the units are kept in single precision (processing.units): their sums are exact to
+    # a few of its rounding steps, the FRFs to the last digit
+    eps = float(np.finfo(units.columns[0].Sff.dtype).eps)
+    if not np.allclose(np.transpose(nominal[0][..., 0], (2, 0, 1)), ref, rtol=100 * eps,
+                       atol=10 * eps * float(np.max(np.abs(ref)))):
         return f"no bootstrap over {units.kind}s: their spectra do not give the FRFs identified"
     idx = np.flatnonzero(used)
     mass = np.isin(idx, np.flatnonzero(weights.mass_lines))
@@ -700,7 +720,8 @@ def resample(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit,
             progress(lo, n)
         drawn = resampled_frfs(units, lines, [c[lo:lo + step] for c in counts])
         assert drawn is not None
-        X, colw = weighted_accelerances(problem, used, *drawn)  # (m, l, 6, e), (m, e, l)
+        X, colw = weighted_accelerances(problem, used, *about_the_data(problem, used, nominal,
+                                                                       drawn))
         wm_ = colw[..., mass] * (weights.mass > 0)  # a column the main fit dropped stays out
         ws_ = colw[..., stiff] * (weights.stiffness > 0)
         if shapes:

@@ -183,11 +183,14 @@ def realness_delays(freq: NDArray[np.float64], H: NDArray[np.complex128],
     if not np.any(keep):
         raise InputError("channel delays: no value to read them on")
     ph = np.where(keep, np.angle(np.where(keep, H, 1.0)), 0.0)
+    sel = np.asarray(use, bool)  # the grid search on the values read only, in one array
+    ph_u, k_u, w_u = ph[:, sel], keep[:, sel].astype(float), np.broadcast_to(w, sel.shape)[sel]
     centre, half = np.zeros(H.shape[0]), float(most)
     for _ in range(REAL_ROUNDS):
         taus = centre[:, None] + np.linspace(-half, half, REAL_GRID)[None]  # (n_r, g)
-        turned = ph[:, None] + w[None, None, None, :] * taus[:, :, None, None]
-        score = np.sum(keep[:, None] * np.abs(np.cos(turned)), axis=(2, 3))  # (n_r, g)
+        turned = ph_u[:, None, :] + taus[:, :, None] * w_u  # (n_r, g, n_values)
+        np.abs(np.cos(turned, out=turned), out=turned)
+        score = np.einsum("rgm,rm->rg", turned, k_u)
         centre = taus[np.arange(H.shape[0]), np.argmax(score, axis=1)]
         half *= 4.0 / (REAL_GRID - 1)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -34,7 +34,6 @@ from app.cli.common import (
 from app.cli.frf import add_processing_arguments, load_and_show, settings_from
 from app.cli.summary import print_comparison, print_mount_system, print_result
 from app.io.mounts import MountsFile, load_mounts
-from app.io.runfile import run_mounts
 from app.pipeline import RUN_FILE, TIME_FORMATS, detect_format
 from app.pipeline.settings import MAX_FMAX, TestUncertaintySettings
 from app.report.mount_system import mount_system
@@ -220,7 +219,11 @@ def run(args: argparse.Namespace) -> int:
         how = f"{args.excitation} excitation" if args.excitation else "settings from the data"
         print(f"{args.file}: time records; computing FRFs ({how})")
     m = load_and_show(args.file, args, settings, fmt)
-    stored = run_mounts(args.file) if fmt == RUN_FILE and mounts.table is None else None
+    stored = None
+    if fmt == RUN_FILE and mounts.table is None:
+        from app.io.runfile import run_mounts  # HDF5: for run files only
+
+        stored = run_mounts(args.file)
     if stored is not None:
         print(f"{args.file}: using the run file's mounts table ({len(stored.mounts)} mounts)")
         check_mounts(stored.mounts)

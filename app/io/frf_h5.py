@@ -21,8 +21,6 @@ import os
 from pathlib import Path
 from typing import Any
 
-import h5py
-
 from app.io.replace import replacing
 from processing.data import FRFSet, Geometry
 from processing.measurement import Measurement, Provenance
@@ -56,6 +54,8 @@ def h5_format(path: str | Path) -> str:
     Returns ``""`` when the file cannot be opened plainly (not HDF5, missing, or a run
     file whose writer is still active) or has no such attribute.
     """
+    import h5py  # HDF5 loads for HDF5 files only (11 MB a UFF's identification never needs)
+
     try:
         with h5py.File(Path(path), "r") as f:
             return _str(f.attrs.get("format", ""))
@@ -81,6 +81,8 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
         The file cannot be written.
     """
     p = Path(path)
+    import h5py
+
     prov = frf.provenance if isinstance(frf, Measurement) else Provenance()
     frf = frf.frf if isinstance(frf, Measurement) else frf
     try:
@@ -120,6 +122,8 @@ def read_frf_measurement(path: str | Path) -> Measurement:
     p = Path(path)
     if not p.is_file():
         raise FRFFileError(f"{p}: no such FRF file")
+    import h5py
+
     try:
         f = h5py.File(p, "r")
     except OSError as err:

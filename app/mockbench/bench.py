@@ -32,7 +32,13 @@ from hardware_mocks.frontend_device import FrontEndDevice, shaker_force_inputs
 from hardware_mocks.generator_33500 import Generator33500
 from hardware_mocks.hammer_device import HammerDevice
 from hardware_mocks.operator import MockOperator, MockShakerOperator
-from hardware_mocks.physics import HEARTBEAT, REPLY_TIMEOUT, STALL_TIMEOUT, BenchPhysics
+from hardware_mocks.physics import (
+    HEARTBEAT,
+    REPLY_TIMEOUT,
+    STALL_TIMEOUT,
+    TIMING_SCATTER,
+    BenchPhysics,
+)
 from hardware_mocks.shaker_device import ShakerDevice, bench_shakers, shaker_name
 
 __all__ = ["InProcessBench", "plan_for_bench"]
@@ -167,7 +173,8 @@ class InProcessBench:
         for k, (force, _) in enumerate(forces):
             chans.append({"name": force, "input": n_resp + k, "quantity": "force",
                           "sensitivity": 2.25, "range": 5.0})
-        patient = {"stall_timeout": STALL_TIMEOUT, "reply_timeout": REPLY_TIMEOUT}
+        patient = {"stall_timeout": STALL_TIMEOUT, "reply_timeout": REPLY_TIMEOUT,
+                   "timing_scatter": TIMING_SCATTER}
         shaker_devices = {shaker_name(k): _shaker_entry(dev)
                           for k, dev in enumerate(self.shakers)}
         self.station: StationConfig = parse_station({

@@ -50,7 +50,7 @@ from hardware_mocks.input_signals import FORCE
 from hardware_mocks.nidaqmx_ao import AmplifiedShaker
 from hardware_mocks.nidaqmx_sim import NI9234_RATES, SimModule, SimulatedNiDaqmx
 from hardware_mocks.operator import MockOperator, MockShakerOperator
-from hardware_mocks.physics import REPLY_TIMEOUT, STALL_TIMEOUT, BenchPhysics
+from hardware_mocks.physics import REPLY_TIMEOUT, STALL_TIMEOUT, TIMING_SCATTER, BenchPhysics
 
 __all__ = ["SIMULATED_BACKENDS", "SimulatedStation", "SimulationError"]
 
@@ -116,7 +116,7 @@ def simulated_nidaqmx(sim: SimulatedStation, dev: DeviceConfig) -> dict[str, Any
                          teds=teds_by_module[n]) for n in names]
     api = nidaqmx_system(sim)
     api.add(modules, wiring=wiring, sensors=sensors)
-    return {"api": api, "stall_timeout": STALL_TIMEOUT}
+    return {"api": api, "stall_timeout": STALL_TIMEOUT, "timing_scatter": TIMING_SCATTER}
 
 
 def nidaqmx_system(sim: SimulatedStation) -> SimulatedNiDaqmx:

@@ -11,7 +11,6 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from app.io.runfile import read_run
 from app.pipeline import RUN_FILE, SUFFIXES, Settings, detect_format, load
 from processing.data import FRFSet, InputError
 from processing.measurement import Measurement
@@ -58,6 +57,7 @@ def plan_prediction(path: str | Path, fmt: str | None = None) -> dict[str, Any] 
     if (fmt or detect_format(p)) != RUN_FILE:
         return None
     from app.acquire.plan import parse_plan  # a run file's: not for an FRF file (start-up)
+    from app.io.runfile import read_run  # HDF5 loads for HDF5 files only
 
     run = read_run(p, with_data=False)
     return parse_plan(run.plan_data, f"{p}:/plan").prediction

@@ -103,3 +103,32 @@ def test_device_that_stops_answering_pauses_and_keeps_the_hits(tmp_path: Path) -
         assert proc.wait(120) is RunState.FINISHED, proc.message
     run = read_run(tmp_path / "run.h5")
     assert run.state == "finished" and int(run.records.accepted.sum()) == 3
+
+
+def test_mock_devices_clocks_are_judged_with_the_mock_benchs_timing_scatter(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Beside five busy processes a mock front end's frames scattered by 25 ms and the run
+    paused: its clock is judged with the mock benches' 0.1 s, a real device's with 5 ms."""
+    import app.acquire.streams as st
+    from drivers.base import TIMING_SCATTER, StreamingFrontEnd
+    from drivers.errors import SyncError
+    from drivers.registry import create_device
+    from drivers.sync import ClockFit
+    from hardware_mocks.physics import TIMING_SCATTER as MOCK_SCATTER
+
+    with InProcessBench("engine-rigid") as bench:
+        devices = {name: create_device(cfg) for name, cfg in bench.station.devices.items()}
+        streaming = {n: d for n, d in devices.items() if isinstance(d, StreamingFrontEnd)}
+        assert set(streaming) == {"frontend", "hammer"}
+        assert all(d.timing_scatter == MOCK_SCATTER for d in streaming.values())
+        real = create_device(bench.station.devices["hammer"], timing_scatter=TIMING_SCATTER)
+        assert isinstance(real, StreamingFrontEnd) and real.timing_scatter == 0.005
+    fe, hammer = streaming["frontend"], streaming["hammer"]
+    streams = st.HitStreams(fe, [0], hammer, 0, 10, 100, 5.0)
+    scattered = ClockFit(rate=4096.0, t0=0.0, nominal=4096.0, residual=0.025, n_pairs=100,
+                         span=10.0)
+    monkeypatch.setattr(st, "fit_clock", lambda pairs, fs: scattered)
+    streams._fits()  # 25 ms: within the mock bench's limit
+    hammer.timing_scatter = TIMING_SCATTER
+    with pytest.raises(SyncError, match=r"hammer: frame timing scatters by 25\.0 ms"):
+        streams._fits()
