@@ -80,9 +80,9 @@ def write_frf_h5(path: str | Path, frf: FRFSet | Measurement, *, source: str = "
     FRFFileError
         The file cannot be written.
     """
-    p = Path(path)
     import h5py
 
+    p = Path(path)
     prov = frf.provenance if isinstance(frf, Measurement) else Provenance()
     frf = frf.frf if isinstance(frf, Measurement) else frf
     try:

@@ -45,13 +45,14 @@ def test_identify_of_frfs_loads_no_spectra(tmp_path: Path) -> None:
 
     path = tmp_path / "engine.uff"
     write_frf_uff(path, get_bench("engine-rigid").frfset(noise=0.01, seed=3), binary=True)
-    code = _HELP.replace('m.split(".")[0] in (', 'm.split(".")[0] in ("numba", ').replace(
+    code = _HELP.replace('m.split(".")[0] in (', 'm.split(".")[0] in ("numba", "h5py", ').replace(
         'm.startswith("app.cli.")', 'm.startswith(("app.cli.", "app.acquire"))')
     out = subprocess.run([sys.executable, "-c", code, "identify", str(path)], capture_output=True,
                          text=True, timeout=300, cwd=Path(__file__).parents[2], check=True)
     loaded = set(out.stdout.split())
     assert "processing.identify" in loaded  # it did identify
     assert not {"numba", "processing.spectral", "app.acquire"} & loaded, loaded
+    assert "h5py" not in loaded  # HDF5 (11 MB) for HDF5 files only
     # scipy.signal and scipy.stats take 0.3 s to import; scipy.optimize 0.1 s, needed only
     # for a residual peak's fit or a non-physical estimate (neither on this rigid bench)
     assert not {"scipy.signal", "scipy.stats", "scipy.optimize"} & loaded, loaded
