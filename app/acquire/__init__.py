@@ -19,22 +19,50 @@ Public API (stable; the GUI builds on it):
   :func:`override_run`.
 """
 
-from app.acquire.analysis import run_measurement
-from app.acquire.events import HitRecord, Listener, PointFRF, Progress, RunState, SampleBlock
-from app.acquire.hammer import HammerProcedure
-from app.acquire.overrides import OverrideOutcome, override_run
-from app.acquire.plan import (
-    ExcitationPoint,
-    PlanError,
-    RecordSettings,
-    ResponsePoint,
-    ShakerSettings,
-    TestPlan,
-    load_plan,
-    parse_plan,
-)
-from app.acquire.procedure import Procedure
-from app.acquire.shaker import ShakerProcedure
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from app.acquire.analysis import run_measurement
+    from app.acquire.events import HitRecord, Listener, PointFRF, Progress, RunState, SampleBlock
+    from app.acquire.hammer import HammerProcedure
+    from app.acquire.overrides import OverrideOutcome, override_run
+    from app.acquire.plan import (
+        ExcitationPoint,
+        PlanError,
+        RecordSettings,
+        ResponsePoint,
+        ShakerSettings,
+        TestPlan,
+        load_plan,
+        parse_plan,
+    )
+    from app.acquire.procedure import Procedure
+    from app.acquire.shaker import ShakerProcedure
+
+# Each name loads its module when first used: reading a stored run (replay, identify,
+# report) needs the analysis, not the procedures and their device drivers.
+_WHERE = {
+    "run_measurement": "analysis",
+    "HitRecord": "events", "Listener": "events", "PointFRF": "events", "Progress": "events",
+    "RunState": "events", "SampleBlock": "events",
+    "HammerProcedure": "hammer",
+    "OverrideOutcome": "overrides", "override_run": "overrides",
+    "ExcitationPoint": "plan", "PlanError": "plan", "RecordSettings": "plan",
+    "ResponsePoint": "plan", "ShakerSettings": "plan", "TestPlan": "plan", "load_plan": "plan",
+    "parse_plan": "plan",
+    "Procedure": "procedure",
+    "ShakerProcedure": "shaker",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+
 
 __all__ = [
     "ExcitationPoint",

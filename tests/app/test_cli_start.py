@@ -56,3 +56,18 @@ def test_identify_of_frfs_loads_no_spectra(tmp_path: Path) -> None:
     # scipy.signal and scipy.stats take 0.3 s to import; scipy.optimize 0.1 s, needed only
     # for a residual peak's fit or a non-physical estimate (neither on this rigid bench)
     assert not {"scipy.signal", "scipy.stats", "scipy.optimize"} & loaded, loaded
+
+
+def test_reading_a_run_file_loads_no_device_drivers() -> None:
+    """Replay, identify and report of a run file read it through ``app.pipeline``: the
+    procedures and their drivers (python-can pulls asammdf and pandas when they are
+    installed: half a second) stay unloaded."""
+    code = ("import sys, app.cli.replay, app.pipeline.runs\n"
+            "from app.pipeline import load\n"
+            "print(' '.join(sorted(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, cwd=Path(__file__).parents[2], check=True)
+    loaded = set(out.stdout.split())
+    assert "app.acquire.analysis" in loaded  # the run's records are analysed
+    assert not {"can", "serial", "drivers.transports", "app.acquire.hammer",
+                "app.acquire.shaker", "pandas"} & loaded, loaded
