@@ -70,6 +70,9 @@ class Report:
     rss_mb_peak: list[float] = field(default_factory=list)
     rss_mb_acquiring: list[float] = field(default_factory=list)
     rss_growth_mb: float = 0.0
+    #: the segment of the largest growth: (s from its start, MB) samples, its first record's s
+    rss_growth_trace: list[tuple[float, float]] = field(default_factory=list)
+    rss_growth_first_record_s: float = -1.0
     rss_mb_max: float = 0.0
     rss_growth_hour_mb: float = 0.0
     stop_s: list[float] = field(default_factory=list)
@@ -247,7 +250,10 @@ def soak(minutes: float, seed: int, folder: Path, console: Console, hits: int = 
                      and np.isfinite(m)]
             if after:
                 report.rss_mb_acquiring.append(after[0])
-                report.rss_growth_mb = max(report.rss_growth_mb, max(after) - after[0])
+                if max(after) - after[0] >= report.rss_growth_mb:
+                    report.rss_growth_mb = max(after) - after[0]
+                    report.rss_growth_trace = [(round(t, 2), round(m, 1)) for t, m in rss]
+                    report.rss_growth_first_record_s = t_first
             now = _counts(out)
             if now[1] < kept[1] or now[0] < kept[0]:
                 report.accepted_lost += kept[1] - now[1]

@@ -36,5 +36,6 @@ def test_soak_until_the_run_is_complete(tmp_path: Path) -> None:
     assert report["accepted"] == 9 * HITS
     assert sum(report["faults"].values()) >= 3  # faults were injected
     assert report["segments"] >= 2  # at least one pause or kill, then a resume
-    assert report["rss_growth_mb"] < 50
+    assert report["rss_growth_mb"] < 50, (report["rss_growth_first_record_s"],
+                                          report["rss_growth_trace"])
     assert proc.returncode == 0
