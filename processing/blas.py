@@ -7,6 +7,10 @@ another busy process its spinning made a hammer run's fit 30 times slower (155 s
 on 2 cores. The public entry points that do this work (:func:`processing.identify.fit`,
 ``app.pipeline.load``, the acquisition's analysis) run under :func:`one_blas_thread`; the
 caller's own setting is restored after.
+
+The BLAS libraries are found once, at the first call (numpy's and scipy's, both loaded
+then): finding them reads the process's memory map, 1-2 ms a call, and the entry points nest
+and run per hit.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import functools
 from collections.abc import Callable
 from typing import ParamSpec, TypeVar
 
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 __all__ = ["BLAS_THREADS", "one_blas_thread"]
 
@@ -25,13 +29,23 @@ BLAS_THREADS = 1
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
 
+_controller: list[ThreadpoolController] = []  # the process's, made at the first call
+
+
+def _blas() -> ThreadpoolController:
+    if not _controller:
+        import scipy.linalg  # noqa: F401  (its BLAS loaded before the libraries are listed)
+
+        _controller.append(ThreadpoolController())
+    return _controller[0]
+
 
 def one_blas_thread(fn: Callable[_P, _R]) -> Callable[_P, _R]:
     """``fn`` run with :data:`BLAS_THREADS` BLAS threads (the caller's count restored)."""
 
     @functools.wraps(fn)
     def limited(*args: _P.args, **kwargs: _P.kwargs) -> _R:
-        with threadpool_limits(BLAS_THREADS, user_api="blas"):
+        with _blas().limit(limits=BLAS_THREADS, user_api="blas"):
             return fn(*args, **kwargs)
 
     return limited
