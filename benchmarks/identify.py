@@ -426,10 +426,20 @@ def main() -> int:
     p.add_argument("--work", type=Path, help="keep the generated inputs here and reuse them")
     p.add_argument("--write-docs", action="store_true", help="write its docs/benchmarks.md part")
     p.add_argument("--live-runs", type=int, default=2, help="live runs on the mock bench")
+    p.add_argument("--make-inputs", action="store_true", help="only make the inputs in --work")
     args = p.parse_args()
     console = Console(width=200)
+    if args.make_inputs:
+        if args.work is None:
+            p.error("--make-inputs needs --work")
+        make_inputs(args.work, console)
+        return 0
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
+        # made in a process of their own: a child's peak memory (wait4's ru_maxrss) counts
+        # the pages of this process at the fork, which making them would have swollen
+        subprocess.run([sys.executable, __file__, "--make-inputs", "--work", str(work)],
+                       check=True, cwd=ROOT)
         cases = make_inputs(work, console)
         tables = [start_table(args.repeat), end_to_end(cases, args.repeat, work),
                   stage_table(cases, args.repeat), core_table(args.repeat),
