@@ -183,14 +183,19 @@ def realness_delays(freq: NDArray[np.float64], H: NDArray[np.complex128],
     if not np.any(keep):
         raise InputError("channel delays: no value to read them on")
     ph = np.where(keep, np.angle(np.where(keep, H, 1.0)), 0.0)
-    sel = np.asarray(use, bool)  # the grid search on the values read only, in one array
-    ph_u, k_u, w_u = ph[:, sel], keep[:, sel].astype(float), np.broadcast_to(w, sel.shape)[sel]
+    # the grid search on the lines with a value read: cos(angle + w tau) from the values'
+    # cos and sin and each line's turn, one delay of the grid at a time (n_r, n_e, n_l)
+    lines = np.asarray(use, bool).any(axis=0)
+    cp, sp, k_l = np.cos(ph[..., lines]), np.sin(ph[..., lines]), keep[..., lines].astype(float)
+    w_l = w[lines]
     centre, half = np.zeros(H.shape[0]), float(most)
+    score = np.empty((H.shape[0], REAL_GRID))
     for _ in range(REAL_ROUNDS):
         taus = centre[:, None] + np.linspace(-half, half, REAL_GRID)[None]  # (n_r, g)
-        turned = ph_u[:, None, :] + taus[:, :, None] * w_u  # (n_r, g, n_values)
-        np.abs(np.cos(turned, out=turned), out=turned)
-        score = np.einsum("rgm,rm->rg", turned, k_u)
+        for j in range(REAL_GRID):
+            turn = taus[:, j, None] * w_l  # (n_r, n_l)
+            score[:, j] = np.einsum("rel,rel->r", np.abs(
+                cp * np.cos(turn)[:, None] - sp * np.sin(turn)[:, None]), k_l)
         centre = taus[np.arange(H.shape[0]), np.argmax(score, axis=1)]
         half *= 4.0 / (REAL_GRID - 1)
     with np.errstate(divide="ignore", invalid="ignore"):
