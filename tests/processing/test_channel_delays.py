@@ -177,3 +177,37 @@ def test_the_command_line_reads_or_leaves_the_delays(tmp_path) -> None:
     assert out["auto"]["channel_delays_choice"].startswith("channel delays read on")
     assert out["off"]["channel_delays"] is None
     assert out["off"]["channel_delays_choice"].endswith("asked for")
+
+
+def test_realness_grid_search_is_the_direct_one() -> None:
+    """The realness delays' grid search (cos and sin of each line's turn) picks the delays
+    the plain search picks: the mean |cos(angle(H) + w tau)| over the values read, each
+    grid delay evaluated directly, then the same refinement."""
+    from processing.delays import REAL_GRID, REAL_ROUNDS
+
+    rng = np.random.default_rng(7201)
+    freq = np.linspace(5.0, 300.0, 120)
+    w = 2 * np.pi * freq
+    true = np.array([2e-4, -5e-4, 0.0, 9e-4])
+    H = (rng.standard_normal((4, 5, 120)) + 0.05j * rng.standard_normal((4, 5, 120))) * np.exp(
+        -1j * w * true[:, None, None])
+    use = rng.random((5, 120)) > 0.3
+    use[:, 100:] = False
+    H[1, 2, 7] = np.nan
+    got = realness_delays(freq, H, use, 2e-3)
+
+    keep = use[None] & np.isfinite(H) & (np.abs(H) > 0)
+    ph = np.where(keep, np.angle(np.where(keep, H, 1.0)), 0.0)
+    centre, half = np.zeros(4), 2e-3
+    for _ in range(REAL_ROUNDS):
+        taus = centre[:, None] + np.linspace(-half, half, REAL_GRID)[None]
+        score = np.array([[np.sum(np.abs(np.cos(ph[r] + t * w))[keep[r]]) for t in taus[r]]
+                          for r in range(4)])
+        centre = taus[np.arange(4), np.argmax(score, axis=1)]
+        half *= 4.0 / (REAL_GRID - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit = H / np.abs(H)
+    want = estimate_delays(freq, np.where(keep, unit, np.nan),
+                           np.sign(np.cos(ph + w * centre[:, None, None])), use.astype(float))
+    assert_allclose(got.seconds, want.seconds, rtol=1e-12, atol=1e-15)
+    assert_allclose(got.seconds, true, atol=5e-5)  # and it finds them
