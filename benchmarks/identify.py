@@ -82,8 +82,19 @@ class Case:
     what: str
 
 
-def make_inputs(work: Path, console: Console) -> list[Case]:
-    """The four inputs in ``work`` (made when missing)."""
+def cases_in(work: Path) -> list[Case]:
+    """The four inputs, at their places in ``work``."""
+    return [Case("FRF file", work / "engine.uff", "engine bench, 12 x 18 FRFs, 2 % noise"),
+            Case("hammer time UFF", work / "hammer.uff", "12 points x 2 hits"),
+            Case("shaker time UFF", work / "shaker.uff", "12 points x 32 s at 2048 Hz, random"),
+            Case("run file", work / "run.h5", "18 points x 3 hits, mock bench")]
+
+
+def make_inputs(work: Path, console: Console) -> None:
+    """Make the inputs missing in ``work``."""
+    missing = [c for c in cases_in(work) if not c.path.exists()]
+    if not missing:
+        return
     from app.io.uff import write_frf_uff
     from hardware_mocks.reference.scenarios import ScenarioSpec, build_scenario
     from hardware_mocks.reference.timedata import (
@@ -95,10 +106,6 @@ def make_inputs(work: Path, console: Console) -> list[Case]:
     )
 
     work.mkdir(parents=True, exist_ok=True)
-    cases = [Case("FRF file", work / "engine.uff", "engine bench, 12 x 18 FRFs, 2 % noise"),
-             Case("hammer time UFF", work / "hammer.uff", "12 points x 2 hits"),
-             Case("shaker time UFF", work / "shaker.uff", "12 points x 32 s at 2048 Hz, random"),
-             Case("run file", work / "run.h5", "18 points x 3 hits, mock bench")]
     scenario = build_scenario(ScenarioSpec(seed=SEED, n_forces=12))
     makers: dict[str, Callable[[Path], None]] = {
         "FRF file": lambda p: write_frf_uff(p, get_bench("engine").frfset(noise=0.02, seed=SEED),
@@ -110,11 +117,9 @@ def make_inputs(work: Path, console: Console) -> list[Case]:
                                               "--out", str(p)], check=True, cwd=ROOT,
                                              stdout=subprocess.DEVNULL),
     }
-    for c in cases:
-        if not c.path.exists():
-            console.print(f"making {c.path.name} ({c.what})", style="dim")
-            makers[c.name](c.path)
-    return cases
+    for c in missing:
+        console.print(f"making {c.path.name} ({c.what})", style="dim")
+        makers[c.name](c.path)
 
 
 #: a table: title, columns, rows
@@ -440,7 +445,7 @@ def main() -> int:
         # the pages of this process at the fork, which making them would have swollen
         subprocess.run([sys.executable, __file__, "--make-inputs", "--work", str(work)],
                        check=True, cwd=ROOT)
-        cases = make_inputs(work, console)
+        cases = cases_in(work)
         tables = [start_table(args.repeat), end_to_end(cases, args.repeat, work),
                   stage_table(cases, args.repeat), core_table(args.repeat),
                   live_table(args.live_runs, work)]

@@ -250,8 +250,9 @@ def soak(minutes: float, seed: int, folder: Path, console: Console, hits: int = 
                      and np.isfinite(m)]
             if after:
                 report.rss_mb_acquiring.append(after[0])
-                if max(after) - after[0] >= report.rss_growth_mb:
-                    report.rss_growth_mb = max(after) - after[0]
+                growth = max(after) - after[0]
+                if growth >= report.rss_growth_mb:
+                    report.rss_growth_mb = growth
                     report.rss_growth_trace = [(round(t, 2), round(m, 1)) for t, m in rss]
                     report.rss_growth_first_record_s = t_first
             now = _counts(out)

@@ -29,15 +29,12 @@ BLAS_THREADS = 1
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
 
-_controller: list[ThreadpoolController] = []  # the process's, made at the first call
-
-
+@functools.cache
 def _blas() -> ThreadpoolController:
-    if not _controller:
-        import scipy.linalg  # noqa: F401  (its BLAS loaded before the libraries are listed)
+    """The process's BLAS libraries, listed at the first call."""
+    import scipy.linalg  # noqa: F401  (its BLAS loaded before the libraries are listed)
 
-        _controller.append(ThreadpoolController())
-    return _controller[0]
+    return ThreadpoolController()
 
 
 def one_blas_thread(fn: Callable[_P, _R]) -> Callable[_P, _R]:

@@ -71,3 +71,14 @@ def test_reading_a_run_file_loads_no_device_drivers() -> None:
     assert "app.acquire.analysis" in loaded  # the run's records are analysed
     assert not {"can", "serial", "drivers.transports", "app.acquire.hammer",
                 "app.acquire.shaker", "pandas"} & loaded, loaded
+
+
+def test_the_acquisition_api_names_are_the_lazy_ones() -> None:
+    """``app.acquire``'s public names, its lazy table and what each resolves to agree (the
+    names are listed three times there: for mypy, for the lazy loading and in __all__)."""
+    import app.acquire as acquire
+
+    where = acquire._WHERE
+    assert sorted(acquire.__all__) == sorted(where)
+    for name, module in where.items():
+        assert getattr(acquire, name).__module__ == f"app.acquire.{module}", name
