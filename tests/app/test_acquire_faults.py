@@ -108,7 +108,7 @@ def test_device_that_stops_answering_pauses_and_keeps_the_hits(tmp_path: Path) -
 def test_mock_devices_clocks_are_judged_with_the_mock_benchs_timing_scatter(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Beside five busy processes a mock front end's frames scattered by 25 ms and the run
-    paused: its clock is judged with the mock benches' 0.1 s, a real device's with 5 ms."""
+    paused: its clock is judged with the mock benches' 0.5 s, a real device's with 5 ms."""
     import app.acquire.streams as st
     from drivers.base import TIMING_SCATTER, StreamingFrontEnd
     from drivers.errors import SyncError
