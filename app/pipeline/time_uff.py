@@ -15,7 +15,7 @@ import contextlib
 import dataclasses
 import os
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from app.io.uff_time import TimeRun, TimeSource, read_time_file
 from app.pipeline.assemble import assemble, check_reports
 from app.pipeline.settings import OpenError, RunReport, Settings, n_skipped
-from processing.data import FRFSet, InputError
+from processing.data import FRFSet, Geometry, InputError
 from processing.excitation import (
     ShakerSignal,
     burst_onsets,
@@ -36,9 +36,11 @@ from processing.excitation import (
     shaker_signal,
     steady_periods,
 )
+from processing.geometry import characteristic_length, excitation_matrix, scaling
 from processing.impact import (
     MIN_PRETRIGGER,
     ExcitationGuess,
+    HitVerdict,
     ImpactDefaults,
     ImpactResult,
     ImpactSettings,
@@ -176,8 +178,41 @@ def _impact(r: TimeRun, s: Settings, levels: dict[int, float],
                          "--level or check the force channel")
     if res.H is None:
         why = "; ".join(f"hit {v.index + 1}: {v.reason}" for v in res.verdicts)
-        raise InputError(f"{lc}: every hit rejected ({why}): measure the point again")
+        message = f"{lc}: every hit rejected ({why}): measure the point again"
+        if _only_double_hits(res.verdicts):
+            raise _DoubleHitsOnlyError(message, _double_hits_kept(process_impacts(
+                np.vstack([r.force[None], r.responses]), r.fs, settings, channel_names=names,
+                estimator=s.estimator, force_accept=True, max_averages=max_averages,
+                keep_units=True)))
+        raise InputError(message)
     return res
+
+
+class _DoubleHitsOnlyError(InputError):
+    """Every hit of a run rejected for a double hit and nothing else; ``result`` holds the
+    run's hits accepted all the same (used when the point is needed: :func:`_columns`)."""
+
+    def __init__(self, message: str, result: ImpactResult) -> None:
+        super().__init__(message)
+        self.result = result
+
+
+def _only_double_hits(verdicts: Sequence[HitVerdict]) -> bool:
+    """Whether every complete hit was rejected for a double hit and nothing else (a record
+    cut by the data's ends stays rejected whatever its point's other hits)."""
+    complete = [v for v in verdicts if not np.isnan(v.peak_force)]
+    return bool(complete) and all(v.reason.startswith("double hit (") and ";" not in v.reason
+                                  for v in complete)
+
+
+def _double_hits_kept(res: ImpactResult) -> ImpactResult:
+    """``res`` (its hits accepted by :func:`process_impacts`' ``force_accept``) with its
+    verdicts saying why."""
+    return dataclasses.replace(res, verdicts=tuple(
+        dataclasses.replace(v, reason=(
+            f"accepted: {v.reason.removeprefix('accepted by override: ')}, the point's only "
+            "hits, needed for the excitation geometry (its force window spans the rebound)"))
+        if v.accepted else v for v in res.verdicts))
 
 
 @dataclass(frozen=True)
@@ -291,6 +326,8 @@ class _ImpactColumn:
         self.key = key
         self.results: list[ImpactResult] = []
         self.reports: list[RunReport] = []
+        #: a run whose every hit is a double hit: its hits accepted, and its load case
+        self.spare: tuple[ImpactResult, int] | None = None
 
     def add(self, r: TimeRun, s: Settings, levels: dict[int, float]) -> None:
         left = None
@@ -303,15 +340,33 @@ class _ImpactColumn:
                 return
         try:
             one = _impact(r, s, levels, left)
+        except _DoubleHitsOnlyError as err:
+            self.spare = (err.result, r.load_case)
+            self.reports.append(RunReport(str(err), skipped=True))
+            return
         except InputError as err:
             self.reports.append(RunReport(str(err), skipped=True))
             return
+        self._add(one, r.load_case, s)
+
+    def use_spare(self, s: Settings) -> None:
+        """The point's double hits used after all (its only hits; the excitation geometry
+        needs it): they replace the run's 'every hit rejected' line."""
+        assert self.spare is not None and not self.results
+        one, load_case = self.spare
+        self.spare = None
+        self.reports = [rep for rep in self.reports
+                        if not rep.message.startswith(f"load case {load_case}: every hit")]
+        self._add(one, load_case, s, " (double hits, the point's only hits: without them "
+                  "the excitations do not span the six rigid-body motions)")
+
+    def _add(self, one: ImpactResult, load_case: int, s: Settings, note: str = "") -> None:
         self.results.append(one)
         bad = [v for v in one.rejected if not v.reason.startswith("not used")]
         n_unused = len(one.rejected) - len(bad)
         without = ", ".join(f"response {i + 1}" for i in one.left_out)
         self.reports.append(RunReport(
-            f"load case {r.load_case} (node {self.key[0]}): {one.n_accepted} hits accepted"
+            f"load case {load_case} (node {self.key[0]}): {one.n_accepted} hits accepted{note}"
             + (f" without {without} (every hit overloads it: left out of this point's FRFs)"
                if without else "")
             + (", rejected: " + "; ".join(f"hit {v.index + 1}: {v.reason}" for v in bad)
@@ -606,14 +661,18 @@ def _attempt(path: Path, file: TimeSource, runs: _Passes, s: Settings,
             return None
         raise OpenError(f"the longest run has {longest} samples, fewer than --nperseg "
                         f"{s.nperseg}: lower --nperseg", chosen + runs.problems())
-    cols, first, more = _columns(runs, s, levels)
+    try:
+        geometry: Geometry | None = file.geometry()
+    except InputError:  # said below, once the runs are read
+        geometry = None
+    cols, first, more = _columns(runs, s, levels, geometry)
     if runs.late:
         return None
     reports = chosen + runs.problems() + more
     if not cols or first is None:
         raise OpenError(f"{path}: no usable time run ({n_skipped(reports)} bad run(s), see "
                         "above)", reports)
-    geometry = file.geometry()
+    geometry = geometry or file.geometry()
     keys = list(cols)
     fmax = s.fmax if s.fmax is not None else first.fs / 2.56
     out, _ = assemble(cols[keys[0]][2], [cols[k][0] for k in keys],
@@ -639,7 +698,38 @@ def _attempt(path: Path, file: TimeSource, runs: _Passes, s: Settings,
         Path(path).name)
 
 
+def _spares_needed(groups: dict[DofKey, _ImpactColumn | _RandomColumn], geometry: Geometry,
+                   s: Settings) -> None:
+    """The points whose every hit is a double hit, used when the excitations without them do
+    not span the six rigid-body motions (the identification would refuse the file): one at a
+    time, in the file's order, each while it raises the rank. A recorded point cannot be hit
+    again, and a double hit's FRF is the structure's all the same; where the rank does not
+    need them they stay out (on the reference model's tests they cost more than the point
+    gives)."""
+    impact = {k: g for k, g in groups.items() if isinstance(g, _ImpactColumn)}
+    spares = [g for g in impact.values() if g.spare is not None and not g.results]
+    if not spares:
+        return
+    used = [k for k, g in impact.items() if g.results]
+
+    def rank(keys: list[DofKey]) -> int:
+        if not keys:
+            return 0
+        xyz = geometry.coordinates(np.array([k[0] for k in keys]), "excitation")
+        T = excitation_matrix(xyz, np.array([k[1] for k in keys], dtype=float))
+        return int(np.linalg.matrix_rank(T / scaling(characteristic_length(xyz))[:, None]))
+
+    with contextlib.suppress(InputError):  # a node without coordinates: assemble says so
+        have = rank(used)
+        for g in spares:
+            if have < 6 and (more := rank([*used, g.key])) > have:
+                g.use_spare(s)
+                used.append(g.key)
+                have = more
+
+
 def _columns(runs: _Passes, s: Settings, levels: dict[int, float],
+             geometry: Geometry | None = None,
              ) -> tuple[dict[DofKey, Column], _Layout | None, list[RunReport]]:
     """One FRF column per excitation DOF (in order of first appearance; a DOF without a
     usable run has none), each run read whole once and added to its DOF's column; the first
@@ -659,6 +749,8 @@ def _columns(runs: _Passes, s: Settings, levels: dict[int, float],
             key = (int(r.exc_node), tuple(np.round(r.exc_dir, 6)))
             groups.setdefault(key, make(key)).add(r, s, levels)
         del r  # before the next run is read
+    if geometry is not None:
+        _spares_needed(groups, geometry, s)
     cols = {key: col for key, g in groups.items() if (col := g.column(s)) is not None}
     return cols, first, left_out + [line for g in groups.values() for line in g.reports]
 
