@@ -58,6 +58,8 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # imported as benchmarks.timedata too
 from accuracy import stated_for  # noqa: E402  (benchmarks/, the script's folder)
 
 from app.cli.main import main as insitu_main  # noqa: E402

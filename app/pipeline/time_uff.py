@@ -700,9 +700,9 @@ def _attempt(path: Path, file: TimeSource, runs: _Passes, s: Settings,
 
 def _spares_needed(groups: dict[DofKey, _ImpactColumn | _RandomColumn], geometry: Geometry,
                    s: Settings) -> None:
-    """The points whose every hit is a double hit, used when the excitations without them do
-    not span the six rigid-body motions (the identification would refuse the file): one at a
-    time, in the file's order, each while it raises the rank. A recorded point cannot be hit
+    """The points whose every hit is a double hit, used when the excitations do not span the
+    six rigid-body motions without them and do with them (the identification would refuse
+    the file): in the file's order, those that raise the rank. A recorded point cannot be hit
     again, and a double hit's FRF is the structure's all the same; where the rank does not
     need them they stay out (on the reference model's tests they cost more than the point
     gives)."""
@@ -719,13 +719,17 @@ def _spares_needed(groups: dict[DofKey, _ImpactColumn | _RandomColumn], geometry
         T = excitation_matrix(xyz, np.array([k[1] for k in keys], dtype=float))
         return int(np.linalg.matrix_rank(T / scaling(characteristic_length(xyz))[:, None]))
 
+    chosen: list[_ImpactColumn] = []
     with contextlib.suppress(InputError):  # a node without coordinates: assemble says so
         have = rank(used)
         for g in spares:
             if have < 6 and (more := rank([*used, g.key])) > have:
-                g.use_spare(s)
+                chosen.append(g)
                 used.append(g.key)
                 have = more
+        if have >= 6:
+            for g in chosen:
+                g.use_spare(s)
 
 
 def _columns(runs: _Passes, s: Settings, levels: dict[int, float],
