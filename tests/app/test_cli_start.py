@@ -82,3 +82,20 @@ def test_the_acquisition_api_names_are_the_lazy_ones() -> None:
     assert sorted(acquire.__all__) == sorted(where)
     for name, module in where.items():
         assert getattr(acquire, name).__module__ == f"app.acquire.{module}", name
+
+
+def test_acquiring_imports_python_can_without_asammdf() -> None:
+    """The procedures and the mock bench import python-can; with asammdf installed (the
+    ``mdf`` extra) python-can would import it and pandas at once (app/can_import.py). They
+    stay out, CAN frames still pass, and asammdf is importable afterwards (MDF files)."""
+    code = ("import sys, app.acquire.hammer, app.mockbench.bench, can\n"
+            "print('asammdf' in sys.modules, 'pandas' in sys.modules)\n"
+            "with can.Bus(interface='virtual', channel='t') as a, "
+            "can.Bus(interface='virtual', channel='t') as b:\n"
+            "    a.send(can.Message(arbitration_id=0x123, data=b'\\x01\\x02'))\n"
+            "    print(b.recv(5).data.hex())\n"
+            "import asammdf\n"
+            "print(asammdf.MDF is not None)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, cwd=Path(__file__).parents[2], check=True)
+    assert out.stdout.split() == ["False", "False", "0102", "True"], out.stdout + out.stderr
