@@ -946,8 +946,10 @@ def check(problem: Problem, bands: Bands, weights: LineWeights, fitted: Fit) -> 
     except (np.linalg.LinAlgError, ValueError):
         used = weights.stiffness_lines | weights.mass_lines
         rigid_hz = quick_rigid_modes(problem.X[..., used], problem.T, problem.w[used])
+    # the measured FRFs as the exponential window left them: the model at s = j w + a
     H_syn = synthesise(freq, problem.E, problem.T, M, K, fitted.C, fitted.D,
-                       stiffening_factor(fitted.stiffening, 2 * np.pi * freq))
+                       stiffening_factor(fitted.stiffening, 2 * np.pi * freq),
+                       decay=problem.window_decay)
     syn = synthesis_error(freq, problem.H, H_syn, (float(freq[0]), bands.mass_band[1]))
     Ks_line = fitted.operators.stiffness(M)
     if tau:

@@ -26,6 +26,7 @@ def synthesise(
     C: NDArray[np.float64],
     D: NDArray[np.float64] | None = None,
     stiffening: NDArray[np.float64] | None = None,
+    decay: float = 0.0,
 ) -> NDArray[np.complex128]:
     """Accelerance FRFs (n_resp, n_exc, n_f) of the identified rigid-body model.
 
@@ -35,20 +36,23 @@ def synthesise(
     exactly, a complex stiffness included); falls back to one 6x6 solve per line when the
     modes are nearly defective. ``D`` is the structural damping (none when omitted);
     ``stiffening`` the mounts' ``K(w) / K`` on the lines (K and D stiffen: one 6x6 solve per
-    line, ``g (K + j D) + j w C - w^2 M``).
+    line, ``g (K + j D) + j w C - w^2 M``). ``decay`` (1/s): the FRFs as an exponential
+    window ``exp(-decay t)`` on force and responses leaves them, the model's at
+    ``s = j w + decay`` (the Laplace shift the identification's windowed fit uses).
     """
     w = 2 * np.pi * np.asarray(freq, dtype=float)
+    s = 1j * w + decay
     Kc: NDArray[np.float64] | NDArray[np.complex128] = (
         K if D is None or not np.any(D) else K + 1j * D)
     modal = None if stiffening is not None else _modal_receptance(E, T, M, Kc, C)
     if modal is None:
         g = np.ones_like(w) if stiffening is None else np.asarray(stiffening, dtype=float)
-        Z = (g[:, None, None] * Kc[None] + 1j * w[:, None, None] * C[None]
-             - (w**2)[:, None, None] * M[None])
-        A = -(w**2)[:, None, None] * np.linalg.solve(Z, np.broadcast_to(T, (len(w), *T.shape)))
+        Z = (g[:, None, None] * Kc[None] + s[:, None, None] * C[None]
+             + (s**2)[:, None, None] * M[None])
+        A = (s**2)[:, None, None] * np.linalg.solve(Z, np.broadcast_to(T, (len(w), *T.shape)))
         return np.einsum("ra,fae->ref", E, A)
     R, lam = modal  # (n_r * n_e, 12), (12,)
-    G = -(w**2)[None, :] / (1j * w[None, :] - lam[:, None])  # (12, n_f)
+    G = (s**2)[None, :] / (s[None, :] - lam[:, None])  # (12, n_f)
     return (R @ G).reshape(E.shape[0], T.shape[1], w.size)
 
 

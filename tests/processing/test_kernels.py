@@ -45,18 +45,23 @@ def test_reconstruction_error_identity_matches_residual() -> None:
 
 
 @pytest.mark.parametrize("name", ["engine", "block"])
-def test_modal_synthesis_matches_direct_solve(name: str) -> None:
+@pytest.mark.parametrize("decay", [0.0, 2.5])
+def test_modal_synthesis_matches_direct_solve(name: str, decay: float) -> None:
+    """Both paths of the synthesis, without and with an exponential window's decay (the
+    model at s = j w + a; the direct solve is taken when the mounts stiffen)."""
     m = get_bench(name).model
     frf = get_bench(name).frfset()
     E = response_matrix(frf.resp_xyz, frf.resp_dirs)
     T = excitation_matrix(frf.exc_xyz, frf.exc_dirs)
     f = frf.freq[frf.freq > 0]
-    w = 2 * np.pi * f
-    Z = m.K[None] + 1j * w[:, None, None] * m.C[None] - (w**2)[:, None, None] * m.M[None]
-    A = -(w**2)[:, None, None] * np.linalg.solve(Z, np.broadcast_to(T, (w.size, *T.shape)))
+    s = 2j * np.pi * f + decay
+    Z = m.K[None] + s[:, None, None] * m.C[None] + (s**2)[:, None, None] * m.M[None]
+    A = (s**2)[:, None, None] * np.linalg.solve(Z, np.broadcast_to(T, (s.size, *T.shape)))
     direct = np.einsum("ra,fae->ref", E, A)
-    np.testing.assert_allclose(synthesise(f, E, T, m.M, m.K, m.C), direct, rtol=1e-8,
-                               atol=1e-10 * np.abs(direct).max())
+    for stiffening in (None, np.ones(f.size)):
+        np.testing.assert_allclose(synthesise(f, E, T, m.M, m.K, m.C, stiffening=stiffening,
+                                              decay=decay), direct, rtol=1e-8,
+                                   atol=1e-10 * np.abs(direct).max())
 
 
 def test_line_operators_match_eq14() -> None:
