@@ -19,6 +19,7 @@ __all__ = [
     "GeometryReport",
     "check_geometry",
     "excitation_matrix",
+    "excitation_rank",
     "response_matrix",
     "skew",
 ]
@@ -106,6 +107,14 @@ def _scaled_cond(A: NDArray[np.float64], length: float) -> tuple[int, float]:
     rank = int(np.sum(s > tol))
     cond = float(s[0] / s[5]) if rank >= 6 else float("inf")
     return rank, cond
+
+
+def excitation_rank(xyz: ArrayLike, dirs: ArrayLike) -> int:
+    """Rank of the excitations' T (rotations scaled by the points' characteristic length),
+    by the rule :func:`check_geometry` refuses a geometry with."""
+    T = excitation_matrix(xyz, dirs)
+    L = characteristic_length(xyz)
+    return _scaled_cond(T / scaling(L)[:, None], L)[0]
 
 
 @dataclass(frozen=True)

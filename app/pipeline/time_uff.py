@@ -36,7 +36,7 @@ from processing.excitation import (
     shaker_signal,
     steady_periods,
 )
-from processing.geometry import characteristic_length, excitation_matrix, scaling
+from processing.geometry import excitation_rank
 from processing.impact import (
     MIN_PRETRIGGER,
     ExcitationGuess,
@@ -326,8 +326,9 @@ class _ImpactColumn:
         self.key = key
         self.results: list[ImpactResult] = []
         self.reports: list[RunReport] = []
-        #: a run whose every hit is a double hit: its hits accepted, and its load case
-        self.spare: tuple[ImpactResult, int] | None = None
+        #: a run whose every hit is a double hit: its hits accepted, its load case and the
+        #: line that reports it skipped
+        self.spare: tuple[ImpactResult, int, RunReport] | None = None
 
     def add(self, r: TimeRun, s: Settings, levels: dict[int, float]) -> None:
         left = None
@@ -341,8 +342,8 @@ class _ImpactColumn:
         try:
             one = _impact(r, s, levels, left)
         except _DoubleHitsOnlyError as err:
-            self.spare = (err.result, r.load_case)
-            self.reports.append(RunReport(str(err), skipped=True))
+            self.spare = (err.result, r.load_case, RunReport(str(err), skipped=True))
+            self.reports.append(self.spare[2])
             return
         except InputError as err:
             self.reports.append(RunReport(str(err), skipped=True))
@@ -353,10 +354,9 @@ class _ImpactColumn:
         """The point's double hits used after all (its only hits; the excitation geometry
         needs it): they replace the run's 'every hit rejected' line."""
         assert self.spare is not None and not self.results
-        one, load_case = self.spare
+        one, load_case, skipped = self.spare
         self.spare = None
-        self.reports = [rep for rep in self.reports
-                        if not rep.message.startswith(f"load case {load_case}: every hit")]
+        self.reports = [rep for rep in self.reports if rep is not skipped]
         self._add(one, load_case, s, " (double hits, the point's only hits: without them "
                   "the excitations do not span the six rigid-body motions)")
 
@@ -712,12 +712,12 @@ def _spares_needed(groups: dict[DofKey, _ImpactColumn | _RandomColumn], geometry
         return
     used = [k for k, g in impact.items() if g.results]
 
-    def rank(keys: list[DofKey]) -> int:
+    def rank(keys: list[DofKey]) -> int:  # as the identification's geometry check counts it
         if not keys:
             return 0
-        xyz = geometry.coordinates(np.array([k[0] for k in keys]), "excitation")
-        T = excitation_matrix(xyz, np.array([k[1] for k in keys], dtype=float))
-        return int(np.linalg.matrix_rank(T / scaling(characteristic_length(xyz))[:, None]))
+        return excitation_rank(geometry.coordinates(np.array([k[0] for k in keys]),
+                                                    "excitation"),
+                               np.array([k[1] for k in keys], dtype=float))
 
     chosen: list[_ImpactColumn] = []
     with contextlib.suppress(InputError):  # a node without coordinates: assemble says so
