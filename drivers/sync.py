@@ -38,9 +38,6 @@ from fractions import Fraction
 
 import numpy as np
 import scipy.fft
-import scipy.interpolate
-import scipy.optimize
-import scipy.signal
 
 from drivers.base import TIMING_SCATTER, TimeBlock
 from drivers.errors import SyncError
@@ -116,6 +113,8 @@ def fit_clock(pairs: Sequence[tuple[float, int]], nominal_fs: float,
     kc, ks = 0.5 * (k.max() + k.min()), 0.5 * np.ptp(k)
     u, y = (k - kc) / ks, (t - icpt0 - slope0 * k) * 1e3
     # the height a + b u at the pairs' mean u, as high as every pair allows
+    import scipy.optimize  # 0.1 s: loaded when a clock is fitted, not by every process
+
     lp = scipy.optimize.linprog(c=[-1.0, -u.mean()], A_ub=np.column_stack([np.ones_like(u), u]),
                                 b_ub=y, bounds=[(None, None), (None, None)], method="highs")
     if lp.status != 0:
@@ -159,6 +158,11 @@ def align(reference: TimeBlock, ref_fit: ClockFit, other: TimeBlock, other_fit: 
     """
     if other.missing:
         raise SyncError(f"{name}: {other.missing} samples lost; cannot align", name)
+    # 0.4 s and 40 MB to import, paid by every acquiring process that imports this module:
+    # loaded when streams are aligned
+    import scipy.interpolate
+    import scipy.signal
+
     data = other.data
     ratio = Fraction(reference.fs / other.fs).limit_denominator(1000)  # nominal rates
     if ratio != 1:

@@ -280,12 +280,21 @@ def _weighted_accelerances(
     """
     var = h1_variances(H, coherence, floor * typical_rms(H))  # (n_r, n_e, n_f)
     typical = np.median(var, axis=-1, keepdims=True) if time_records_floor(floor) else var
-    W = np.broadcast_to(1.0 / typical, var.shape)
+    W = 1.0 / typical  # (n_r, n_e, n_f), or (n_r, n_e, 1) the same on every line
     W = W / np.max(W, axis=0, keepdims=True)  # per column: only the ratios matter
-    A = np.einsum("ri,ref,rj->efij", E, W, E)  # (n_e, n_f, 6, 6)
-    P = np.einsum("efij,rj,ref->efir", np.linalg.inv(A), E, W)  # X = P H, (n_e, n_f, 6, n_r)
-    X = np.einsum("efir,ref->ief", P, H)
-    dvar = np.einsum("efir,ref->efi", P**2, var)  # X's variance on each line, (n_e, n_f, 6)
+    # per column and line: A = E' W E, P = A^-1 E' W, as stacked matrix products (once a
+    # column when W is the same on every line)
+    n_r = E.shape[0]
+    Wt = np.moveaxis(W, 0, -1)  # (n_e, n_f or 1, n_r)
+    A = (Wt @ (E[:, :, None] * E[:, None, :]).reshape(n_r, 36)).reshape(*Wt.shape[:2], 6, 6)
+    Ainv = np.linalg.inv(A)
+    X = (Ainv @ ((Wt * np.moveaxis(H, 0, -1)) @ E)[..., None])[..., 0]  # (n_e, n_f, 6)
+    X = np.moveaxis(X, -1, 0)  # (6, n_e, n_f)
+    # X's variance on each line (n_e, n_f, 6): X = A^-1 E' W H, so sum_r P_ir^2 var_r with
+    # P = A^-1 E' W, formed as (A^-1 E')^2 against W^2 var
+    P2 = Ainv @ E.T
+    P2 **= 2
+    dvar = (P2 @ (Wt**2 * np.moveaxis(var, 0, -1))[..., None])[..., 0]
     v = dvar[..., :3].sum(-1) + length**2 * dvar[..., 3:].sum(-1)
     return X, np.median(v) / v
 

@@ -261,7 +261,7 @@ class StiffnessMoments:
                                      self.G2 if self.G2c is None else self.G2c, s2, model)
             if symmetric:  # unknowns [vech K; vech C; ...] through the duplication matrix
                 back = vech_index(n)[3]
-                S = np.asarray(np.linalg.solve(vech_normal(Nfull), _dup_t(n))[back],
+                S = np.asarray(np.linalg.solve(vech_normal(Nfull), _dup_t(n))[..., back, :],
                                dtype=float)
             else:
                 S = np.asarray(np.linalg.inv(Nfull), dtype=float)
@@ -277,8 +277,8 @@ def line_functions(w: NDArray[np.float64], stiffening: NDArray[np.float64] | Non
     w = np.asarray(w, dtype=float)
     if stiffening is None:
         return np.stack([np.ones_like(w), w, w**2, w**3, w**2])
-    g = np.asarray(stiffening, dtype=float)
-    return np.stack([g**2, g * w, g * w**2, w**3, w**2])
+    g = np.asarray(stiffening, dtype=float)  # (..., n_l): one row per stiffening tried
+    return np.stack(np.broadcast_arrays(g**2, g * w, g * w**2, w**3, w**2))
 
 
 def stiffness_moments(
@@ -306,6 +306,19 @@ def stiffness_moments(
         Q.append(Xw @ Tf.T)
         Xw = Xw * wl
     return StiffnessMoments(G[0], G[1], G[2], G[3], Q[0], Q[1], Q[2], Q[3], n_eq)
+
+
+def _line_sums(X: NDArray[np.complex128], T: NDArray[np.float64],
+               weights: NDArray[np.float64] | None) -> tuple[NDArray[np.complex128], ...]:
+    """The moments' terms summed over the excitations, per line: ``sum wt conj(x) x^T`` and
+    ``sum wt conj(x) t^T``, each (n_lines, 36) (row-major 6x6): the moments of any per-line
+    factors f (:func:`line_functions`) are then ``f @`` them."""
+    n_e, n_l = X.shape[1:]
+    wt = np.ones((n_e, n_l)) if weights is None else np.asarray(weights, float)
+    Xw = np.conj(X) * wt  # (6, n_e, n_l)
+    G = np.einsum("iel,jel->lij", Xw, X).reshape(n_l, 36)
+    Q = np.einsum("iel,je->lij", Xw, T + 0j).reshape(n_l, 36)
+    return G, Q
 
 
 @dataclass(frozen=True)
@@ -402,11 +415,13 @@ def fit_stiffness(
               - (Q[q + 2] - a**2 * Q[q] - 2j * a * Q[q + 1]) for q in (0, 1))
     s2 = np.ones(6) if row_scale is None else np.asarray(row_scale, float) ** 2
     rhs = (R0.real, R1.imag, R0.imag)  # right-hand sides of K, C, D: Re of conj(regressor) y
-    r = np.concatenate([(rhs[b] * s2[None, :]).T.ravel() for b in DAMPING_BLOCKS[model]])
-    v = mom.solver(s2, symmetric, model) @ r
-    parts = [np.zeros((6, 6))] * 3
+    lead = R0.shape[:-2]  # moments of several stiffenings at once: one fit each
+    r = np.concatenate([np.swapaxes(rhs[b] * s2[None, :], -1, -2).reshape(*lead, 36)
+                        for b in DAMPING_BLOCKS[model]], axis=-1)
+    v = (mom.solver(s2, symmetric, model) @ r[..., None])[..., 0]
+    parts = [np.zeros((*lead, 6, 6))] * 3
     for k, b in enumerate(DAMPING_BLOCKS[model]):
-        parts[b] = v[36 * k:36 * (k + 1)].reshape(6, 6)
+        parts[b] = v[..., 36 * k:36 * (k + 1)].reshape(*lead, 6, 6)
     K = parts[0] - a * parts[1]  # the fit's K is K + a C with a window
     return StiffnessFit(K, parts[1], mom.n_equations, parts[2], model)
 
@@ -540,15 +555,17 @@ STIFFENING_MIN = 0.05
 STIFFENING_MIN_LINES, STIFFENING_MIN_SPAN = 8, 3.0
 
 
-def _minimise(f: Callable[[float], float], bound: float) -> tuple[float, float]:
+def _minimise(f: Callable[[NDArray[np.float64]], NDArray[np.float64]], bound: float,
+              ) -> tuple[float, float]:
     """The minimum of a smooth f over [0, bound]: a grid of 31, a finer one of 11 around its
     least point, then the vertex of the parabola through the least point and its two
-    neighbours (numpy only: scipy.optimize costs the command line 0.1 s to import)."""
+    neighbours (numpy only: scipy.optimize costs the command line 0.1 s to import). f
+    takes the points of a grid at once and returns its values there."""
     coarse = np.linspace(0.0, bound, 31)
-    k = int(np.argmin([f(float(a)) for a in coarse]))
+    k = int(np.argmin(f(coarse)))
     h = coarse[1] - coarse[0]
     x = np.linspace(max(coarse[k] - h, 0.0), min(coarse[k] + h, bound), 11)
-    y = np.array([f(float(a)) for a in x])
+    y = f(x)
     k = int(np.argmin(y))
     h = x[1] - x[0]
     if 0 < k < x.size - 1:
@@ -556,7 +573,7 @@ def _minimise(f: Callable[[float], float], bound: float) -> tuple[float, float]:
         den = a - 2 * b + c
         if den > 0:
             v = float(x[k] + 0.5 * h * (a - c) / den)
-            fv = f(v)
+            fv = float(f(np.array([v]))[0])
             if fv < b:
                 return v, fv
     return float(x[k]), float(y[k])
@@ -600,19 +617,30 @@ def choose_stiffening(
     w_k = float(np.exp(np.sum(line[used] * np.log(w[used])) / np.sum(line[used])))
     f_k = w_k / (2 * np.pi)
 
-    def rss(alpha: float) -> float:
-        g = (w / w_k) ** alpha
-        mom = stiffness_moments(X, T, w, weights, g)
+    # the moments' sums over the excitations, per line: each stiffening tried then weighs
+    # the lines only
+    per_line = _line_sums(X, T, weights)
+
+    def rss(alpha: NDArray[np.float64]) -> NDArray[np.float64]:
+        g = (w / w_k) ** alpha[:, None]  # (n_alpha, n_lines)
+        F = line_functions(w, g)  # (5, n_alpha, n_lines)
+        G, Q = F @ per_line[0], F[:4] @ per_line[1]  # (5, n_alpha, 36), (4, ...)
+        G6, Q6 = G.reshape(5, -1, 6, 6), Q.reshape(4, -1, 6, 6)
+        mom = StiffnessMoments(G6[0], G6[1], G6[2], G6[3], Q6[0], Q6[1], Q6[2], Q6[3],
+                               2 * 6 * X.shape[1] * X.shape[2], G6[4])
         sf = fit_stiffness(mom, T, w, M, row_scale=row_scale, symmetric=symmetric, model=model)
-        r, y = stiffness_residual(X, T, w, M, sf, weights=weights, row_scale=row_scale,
-                                  stiffening=g)
-        return max(r, _RSS_FLOOR * y, 1e-300)
+        # the residuals one stiffening at a time: all at once would hold n_alpha copies of X
+        r = [stiffness_residual(X, T, w, M, StiffnessFit(sf.K[k], sf.C[k], sf.n_equations,
+                                                         sf.D[k], model),
+                                weights=weights, row_scale=row_scale, stiffening=g[k])
+             for k in range(alpha.size)]
+        return np.array([max(rk, _RSS_FLOOR * yk, 1e-300) for rk, yk in r])
 
     bound = float(np.log10(1.0 + STIFFENING_MAX))
     alpha, best_rss = _minimise(rss, bound)
     n = 2 * 6 * int(np.count_nonzero(wt))
     p = (21 if symmetric else 36) * len(DAMPING_BLOCKS[model])
-    bic = {"constant": n * float(np.log(rss(0.0) / n)) + p * np.log(n),
+    bic = {"constant": n * float(np.log(rss(np.zeros(1))[0] / n)) + p * np.log(n),
            "rising": n * float(np.log(best_rss / n)) + (p + 1) * np.log(n)}
     rise = 10.0**alpha - 1.0
     gain = bic["rising"] - bic["constant"]

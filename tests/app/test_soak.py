@@ -1,4 +1,4 @@
-"""The soak test (benchmarks/soak.py) made short: a run of 3 hits at each of 9 points on
+"""The soak test (benchmarks/soak.py) made short: a run of 2 hits at each of 9 points on
 the mock bench process, a fault every 1 to 4 s (frames dropped, truncated or corrupted,
 a device unplugged, the bench killed, the acquiring process stopped), resumed after each
 pause as an operator would, until the run is complete. No accepted hit lost, no crash.
@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-HITS = 3  # per point, 9 points
+HITS = 2  # per point, 9 points
 
 
 @pytest.mark.slow
@@ -32,7 +32,7 @@ def test_soak_until_the_run_is_complete(tmp_path: Path) -> None:
     assert report["finished"], proc.stdout[-3000:]
     assert report["crashes"] == [], proc.stdout[-3000:]
     assert report["accepted_lost"] == 0
-    assert report["accepted"] >= 20 and report["records"] >= report["accepted"]
+    assert report["records"] >= report["accepted"]
     assert report["accepted"] == 9 * HITS
     assert sum(report["faults"].values()) >= 3  # faults were injected
     assert report["segments"] >= 2  # at least one pause or kill, then a resume
