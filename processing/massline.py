@@ -118,6 +118,9 @@ class MassLineProblem:
         except np.linalg.LinAlgError:  # singular: the minimum-norm solution
             self._solver = np.linalg.pinv(self.normal) @ self._MBs
         self._kc_key: tuple[object, object] | None = None
+        #: the leakage fit's stacked X, line weights and per-column normal (:meth:`_leakage`)
+        self._leak_ops: tuple[NDArray[np.float64], NDArray[np.float64] | None,
+                              NDArray[np.float64]] | None = None
         self._kc: tuple[NDArray[np.float64], ...] | None = None
 
     def _weighted(self, Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
@@ -141,17 +144,18 @@ class MassLineProblem:
         assert self.shapes is not None
         n_e = self.shape[1]
         M = mass_matrix(theta)
-        Xs = stack_real(self.X)
+        Sh = self.shapes
+        if self._leak_ops is None:  # the same for every theta: formed on the first call
+            wf = (np.concatenate([self.weights, self.weights], axis=-1)  # (n_e, 2 n_l)
+                  if self.weights is not None else None)
+            A = (np.einsum("sl,kl,tl->kst", Sh, wf, Sh) if wf is not None
+                 else np.broadcast_to(Sh @ Sh.T, (n_e, Sh.shape[0], Sh.shape[0])))
+            self._leak_ops = (stack_real(self.X), wf, A)
+        Xs, wf, A = self._leak_ops
         Bs = stack_real(np.broadcast_to(B, self.shape))
         R = Bs - (M @ Xs.reshape(6, -1)).reshape(Xs.shape)  # (6, n_e, 2 n_l) unweighted
-        Sh = self.shapes
-        if self.weights is not None:
-            wf = np.concatenate([self.weights, self.weights], axis=-1)  # (n_e, 2 n_l)
-            A = np.einsum("sl,kl,tl->kst", Sh, wf, Sh)
-            r = np.einsum("ikl,kl,sl->iks", R, wf, Sh)
-        else:
-            A = np.broadcast_to(Sh @ Sh.T, (n_e, Sh.shape[0], Sh.shape[0]))
-            r = np.einsum("ikl,sl->iks", R, Sh)
+        r = (np.einsum("ikl,kl,sl->iks", R, wf, Sh) if wf is not None
+             else np.einsum("ikl,sl->iks", R, Sh))
         return np.asarray(np.linalg.solve(A[None], r[..., None])[..., 0])
 
     def residual_ss(self, theta: NDArray[np.float64], B: NDArray[np.complexfloating]) -> float:
