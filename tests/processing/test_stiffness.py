@@ -9,6 +9,7 @@ from numpy.testing import assert_allclose
 
 from processing.stiffness import (
     LeakageMoments,
+    StiffnessMoments,
     choose_damping,
     dynamic_stiffness,
     fit_stiffness,
@@ -138,3 +139,23 @@ def test_leakage_moments_equal_the_moments_of_the_cleaned_lines(stiffened: bool)
         assert got.stiffened == stiffened and got.n_equations == want.n_equations
         if stiffened:
             assert_allclose(got.G2c, want.G2c, rtol=0, atol=1e-13 * np.abs(want.G2c).max())
+
+
+@pytest.mark.parametrize("model", ["viscous", "both"])
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_stacked_moments_give_each_stiffenings_own_fit(model: str, symmetric: bool) -> None:
+    """The moments of several stiffenings stacked on a leading axis (the stiffening's search
+    fits its trial rises at once) give, for each, the fit of its moments alone."""
+    X = accelerances(model, W, noise=0.01, seed=3)
+    wt = np.random.default_rng(11).random(X.shape[1:])
+    rows = np.linspace(0.5, 2.0, 6)
+    one = [stiffness_moments(X, T, W, wt, (W / 30.0) ** a) for a in (0.0, 0.05, 0.2)]
+    names = ("G0", "G1", "G2", "G3", "Q0", "Q1", "Q2", "Q3")
+    stacked = StiffnessMoments(*(np.stack([getattr(m, n) for m in one]) for n in names),
+                               one[0].n_equations, np.stack([m.G2c for m in one]))
+    got = fit_stiffness(stacked, T, W, M, row_scale=rows, symmetric=symmetric, model=model)
+    assert got.K.shape == (3, 6, 6)
+    for k, m in enumerate(one):
+        want = fit_stiffness(m, T, W, M, row_scale=rows, symmetric=symmetric, model=model)
+        for a, b in ((got.K[k], want.K), (got.C[k], want.C), (got.D[k], want.D)):
+            assert_allclose(a, b, rtol=0, atol=1e-9 * max(np.abs(b).max(), 1.0))
