@@ -15,6 +15,7 @@ projection before the moments are formed (variable projection).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -118,9 +119,6 @@ class MassLineProblem:
         except np.linalg.LinAlgError:  # singular: the minimum-norm solution
             self._solver = np.linalg.pinv(self.normal) @ self._MBs
         self._kc_key: tuple[object, object] | None = None
-        #: the leakage fit's stacked X, line weights and per-column normal (:meth:`_leakage`)
-        self._leak_ops: tuple[NDArray[np.float64], NDArray[np.float64] | None,
-                              NDArray[np.float64]] | None = None
         self._kc: tuple[NDArray[np.float64], ...] | None = None
 
     def _weighted(self, Z: NDArray[np.complexfloating]) -> NDArray[np.float64]:
@@ -137,21 +135,27 @@ class MassLineProblem:
             leakage = self._leakage(theta, B)
         return MassLineFit(theta, self.normal, self.n_equations, leakage)
 
+    @functools.cached_property
+    def _leakage_operators(self) -> tuple[NDArray[np.float64], NDArray[np.float64] | None,
+                                          NDArray[np.float64]]:
+        """What :meth:`_leakage` needs that does not depend on theta: the stacked X, the
+        line weights (n_e, 2 n_l) and each column's normal matrix of the shapes."""
+        assert self.shapes is not None
+        Sh, n_e = self.shapes, self.shape[1]
+        wf = (np.concatenate([self.weights, self.weights], axis=-1)
+              if self.weights is not None else None)
+        A = (np.einsum("sl,kl,tl->kst", Sh, wf, Sh) if wf is not None
+             else np.broadcast_to(Sh @ Sh.T, (n_e, Sh.shape[0], Sh.shape[0])))
+        return stack_real(self.X), wf, A
+
     def _leakage(self, theta: NDArray[np.float64], B: NDArray[np.complexfloating]) -> (
         NDArray[np.float64]
     ):
         """Leakage coefficients: ``Z b`` = projection of ``B - M X`` on the shapes, per column."""
         assert self.shapes is not None
-        n_e = self.shape[1]
         M = mass_matrix(theta)
         Sh = self.shapes
-        if self._leak_ops is None:  # the same for every theta: formed on the first call
-            wf = (np.concatenate([self.weights, self.weights], axis=-1)  # (n_e, 2 n_l)
-                  if self.weights is not None else None)
-            A = (np.einsum("sl,kl,tl->kst", Sh, wf, Sh) if wf is not None
-                 else np.broadcast_to(Sh @ Sh.T, (n_e, Sh.shape[0], Sh.shape[0])))
-            self._leak_ops = (stack_real(self.X), wf, A)
-        Xs, wf, A = self._leak_ops
+        Xs, wf, A = self._leakage_operators
         Bs = stack_real(np.broadcast_to(B, self.shape))
         R = Bs - (M @ Xs.reshape(6, -1)).reshape(Xs.shape)  # (6, n_e, 2 n_l) unweighted
         r = (np.einsum("ikl,kl,sl->iks", R, wf, Sh) if wf is not None
