@@ -26,8 +26,11 @@ CoG), predicted std / std of the achieved estimates over the draws (median over 
 entries, then median, 5th and 95th percentile over the scenarios, and the share of the
 scenario x entry cases within 0.5-2x); the same against the RMS error about the truth (the
 scenario's elastic-mode bias included); the achieved CoG and inertia errors
-(``hardware_mocks/reference/metrics.py``, RMS over the draws) of random over chosen layouts
-(median over the scenarios); the planning time.
+(``hardware_mocks/reference/metrics.py``, median over the draws) of random over chosen
+layouts (median over the scenarios), for the whole error and for its two parts on the same
+layouts: the rigid-body part (the scenario's rigid-body truth with its test errors and
+noise: what the search's criterion models) and the elastic modes' bias alone (the elastic
+body without test errors or noise); the planning time.
 
 Run: ``.venv/bin/python benchmarks/planning.py [--scenarios 50] [--draws 12] [--jobs 2]
 [--write-docs] [--json FILE] [--seed N]`` (default: a quick 6 scenarios). The published
@@ -82,6 +85,10 @@ MARK = "<!-- written by benchmarks/planning.py -->"
 N_CANDIDATES = 40
 N_SENSORS, N_POINTS = 4, 9
 GROUPS = {"mass": [0], "cog": [1, 2, 3], "inertia": [4, 5, 6, 7, 8, 9]}
+GAIN_METRICS = ("cog", "inertia")
+#: the error's parts the random / chosen table compares (:func:`measure`)
+PARTS = {"whole": "whole error", "rigid": "rigid-body part (test errors, noise)",
+         "elastic": "elastic modes' bias alone"}
 IU3 = np.triu_indices(3)
 
 
@@ -161,16 +168,27 @@ def approximate(sc: Scenario, rng: np.random.Generator) -> ApproximateModel:
 
 
 def measure(sc: Scenario, s_nodes: np.ndarray, f_nodes: np.ndarray, f_dirs: np.ndarray,
-            rng: np.random.Generator) -> dict[str, Any]:
-    """One test of a layout on the reference model, identified with default options."""
+            rng: np.random.Generator, part: str = "whole") -> dict[str, Any]:
+    """One test of a layout on the reference model, identified with default options.
+
+    ``part``: ``whole`` (the scenario's elastic body, test errors and noise), ``rigid`` (its
+    rigid-body truth's FRFs, test errors and noise: what the search's criterion sees) or
+    ``elastic`` (the elastic body without test errors or noise: its elastic modes' bias
+    alone)."""
     spec = sc.spec
     xyz = sc.system.body.xyz
-    sens = sensor_channels(xyz, s_nodes, rng, location_error=spec.location_error,
-                           misalignment_deg=spec.misalignment_deg, gain_error=spec.gain_error,
-                           transverse=spec.transverse)
-    forces = force_channels(xyz, f_nodes, f_dirs, rng, location_error=spec.location_error)
-    H = sc.system.accelerance(sc.freq, sens.nodes, sens.vectors, forces.nodes, forces.vectors)
-    H1, coh = h1_with_noise(H, spec.noise, spec.n_averages, rng)
+    k = 0.0 if part == "elastic" else 1.0
+    sens = sensor_channels(xyz, s_nodes, rng, location_error=k * spec.location_error,
+                           misalignment_deg=k * spec.misalignment_deg,
+                           gain_error=k * spec.gain_error, transverse=k * spec.transverse)
+    forces = force_channels(xyz, f_nodes, f_dirs, rng, location_error=k * spec.location_error)
+    if part == "rigid":
+        H = sc.truth.accelerance(sc.freq, xyz[sens.nodes], sens.vectors, xyz[forces.nodes],
+                                 forces.vectors)
+    else:
+        H = sc.system.accelerance(sc.freq, sens.nodes, sens.vectors, forces.nodes,
+                                  forces.vectors)
+    H1, coh = h1_with_noise(H, k * spec.noise, spec.n_averages, rng)
     ids = np.concatenate([sens.ids, forces.ids])
     pts = np.concatenate([sens.reported_xyz, forces.reported_xyz])
     uniq, first = np.unique(ids, return_index=True)
@@ -223,15 +241,24 @@ def evaluate(spec: ScenarioSpec, draws: int, randoms: int, criterion: str = "D"
     S, P = list(design.layout.sensors), list(design.layout.excitations)
     f_nodes = p_nodes[cand.exc_point[P]]
     chosen = [measure(sc, s_nodes[S], f_nodes, cand.exc_dirs[P], rng) for _ in range(draws)]
+    # the error's two parts on the same layouts: the rigid body with the test errors and
+    # noise (what the criterion sees) and the elastic modes' bias alone
+    parts: dict[str, dict[str, list[dict[str, Any]]]] = {
+        "rigid": {"chosen": [measure(sc, s_nodes[S], f_nodes, cand.exc_dirs[P], rng, "rigid")
+                             for _ in range(max(1, draws // 2))], "random": []},
+        "elastic": {"chosen": [measure(sc, s_nodes[S], f_nodes, cand.exc_dirs[P], rng,
+                                       "elastic")], "random": []}}
     rand = []
     per = max(1, draws // randoms)
     for _ in range(randoms):
         RS, RP = random_layout(cand, rng)
-        rand += [measure(sc, s_nodes[RS], p_nodes[cand.exc_point[RP]], cand.exc_dirs[RP], rng)
-                 for _ in range(per)]
+        layout = (s_nodes[RS], p_nodes[cand.exc_point[RP]], cand.exc_dirs[RP])
+        rand += [measure(sc, *layout, rng) for _ in range(per)]
+        for part in parts:
+            parts[part]["random"].append(measure(sc, *layout, rng, part))
     truth = sc.truth
     row["truth"] = np.concatenate([[truth.mass], truth.cog, truth.inertia_cog[IU3]]).tolist()
-    row["chosen"], row["random"] = chosen, rand
+    row["chosen"], row["random"], row["parts"] = chosen, rand, parts
     return row
 
 
@@ -246,7 +273,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     kinds = ("std", "robust", "rms")
     ratio: dict[str, dict[str, list[float]]] = {k: {g: [] for g in GROUPS} for k in kinds}
     cases: dict[str, list[float]] = {g: [] for g in GROUPS}
-    gain: dict[str, list[float]] = {"cog": [], "inertia": []}
+    gain: dict[str, dict[str, list[float]]] = {}
+    share: dict[str, list[float]] = {}
     refused = {"chosen": 0, "random": 0, "draws": 0}
     planned = [r for r in rows if "plan_refused" not in r]
     for row in planned:
@@ -266,14 +294,20 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
                     r = pred[idx] / np.maximum(spread[k][idx], 1e-300)
                     ratio[k][g].append(float(np.median(r)))
                 cases[g] += (pred[idx] / np.maximum(spread["std"][idx], 1e-300)).tolist()
-        rnd = _ok(row["random"])
-        if ok and rnd:
-            for m in gain:
-                a = np.median([r["errors"][m] for r in ok])
-                b = np.median([r["errors"][m] for r in rnd])
-                gain[m].append(float(b / max(a, 1e-300)))
+        runs = {"whole": (ok, _ok(row["random"]))}
+        runs |= {part: (_ok(v["chosen"]), _ok(v["random"]))
+                 for part, v in row.get("parts", {}).items()}
+        for part, (a_runs, b_runs) in runs.items():
+            if a_runs and b_runs:
+                for m in GAIN_METRICS:
+                    a = np.median([r["errors"][m] for r in a_runs])
+                    b = np.median([r["errors"][m] for r in b_runs])
+                    gain.setdefault(part, {}).setdefault(m, []).append(float(b / max(a, 1e-300)))
+                    if part == "elastic" and ok:  # the elastic bias over the whole error
+                        whole = np.median([r["errors"][m] for r in ok])
+                        share.setdefault(m, []).append(float(a / max(whole, 1e-300)))
     secs = np.array([r["seconds"] for r in rows])
-    return {"ratio": ratio, "cases": cases, "gain": gain, "refused": refused,
+    return {"ratio": ratio, "cases": cases, "gain": gain, "share": share, "refused": refused,
             "seconds": secs, "cond_T": np.array([r["cond_T"] for r in planned]),
             "plan_refused": [r["plan_refused"] for r in rows if "plan_refused" in r]}
 
@@ -293,12 +327,20 @@ def tables(s: dict[str, Any]) -> list[str]:
         out.append(f"| {g} | {len(r['std'][g])} | {q(r['std'][g])} | {q(r['robust'][g])} | "
                    f"{within} | {q(r['rms'][g])} |")
     out += ["", "Each ratio cell: median (5th-95th percentile) over the scenarios.", "",
-            "| achieved error, random / chosen layouts | scenarios | median (5th-95th "
+            "| achieved error, random / chosen layouts | error | scenarios | median (5th-95th "
             "percentile) | scenarios where the chosen layout is better |",
-            "| --- | ---: | ---: | ---: |"]
-    for m, v in s["gain"].items():
-        better = f"{np.mean(np.array(v) > 1) * 100:.0f} %" if v else "-"
-        out.append(f"| {m} | {len(v)} | {q(v)} | {better} |")
+            "| --- | --- | ---: | ---: | ---: |"]
+    for m in GAIN_METRICS:
+        for part, what in PARTS.items():
+            v = s["gain"].get(part, {}).get(m, [])
+            better = f"{np.mean(np.array(v) > 1) * 100:.0f} %" if v else "-"
+            out.append(f"| {m} | {what} | {len(v)} | {q(v)} | {better} |")
+    out += ["", "The rigid-body part: the same layouts measured on the scenario's rigid-body "
+            "truth (no elastic modes) with its test errors and noise; the elastic bias: on its "
+            "elastic body without test errors or noise (one test a layout). The elastic bias "
+            "on the chosen layout over its whole error, median (5th-95th percentile): "
+            + ", ".join(f"{m} {q(s['share'][m])}" for m in GAIN_METRICS if s["share"].get(m))
+            + "."]
     secs = s["seconds"]
     rf = s["refused"]
     out += ["", f"Planning {N_SENSORS} sensors and {N_POINTS} excitations from {N_CANDIDATES} "

@@ -1,13 +1,15 @@
 """Soak test: a long acquisition on the mock bench process, with faults injected at random.
 
     .venv/bin/python benchmarks/soak.py [--minutes 60] [--seed 1] [--json out.json]
-                                        [--hits N] [--fault-every LOW HIGH] [--write-docs]
+                                        [--hits N] [--fault-every LOW HIGH]
+                                        [--first-fault FAULT] [--write-docs]
 
 The mock bench (``insitu mock-bench``) runs in its own process; ``insitu acquire
 --mock-operator`` acquires one long hammer run from it (the mock-bench plan with short
 records and many hits per point: an accelerated test). ``--hits N`` gives each point N
 hits instead: the soak then ends when the run is complete, or after ``--minutes`` at the
-latest (``tests/app/test_soak.py``: 3 hits at each of the 9 points, a fault every 1 to 4 s).
+latest (``tests/app/test_soak.py``: one hit at each of the 9 points, a fault every 2 to 5 s,
+the first one the bench killed).
 At random moments (every ``--fault-every`` 5 to 25 s by default) this script:
 
 - sets a fault of the bench's devices for a while through its control channel: front-end
@@ -169,9 +171,10 @@ def _finished(path: Path) -> bool:
 
 
 def soak(minutes: float, seed: int, folder: Path, console: Console, hits: int = 100000,
-         fault_every: tuple[float, float] = (5.0, 25.0)) -> Report:
+         fault_every: tuple[float, float] = (5.0, 25.0), first: str | None = None) -> Report:
     """Acquire for ``minutes`` (or until the run of ``hits`` per point is complete), a
-    fault every ``fault_every`` s (uniform between the two)."""
+    fault every ``fault_every`` s (uniform between the two); the first one ``first`` when
+    given (a short run then surely holds it), the others drawn."""
     rng = random.Random(seed)
     report = Report(minutes, seed)
     plan = folder / "plan.toml"
@@ -209,6 +212,8 @@ def soak(minutes: float, seed: int, folder: Path, console: Console, hits: int = 
                     continue
                 next_fault = time.monotonic() + rng.uniform(*fault_every)
                 what = rng.choice([*FAULTS, "bench killed", "host stall"])
+                if first is not None and not report.faults:
+                    what = first
                 report.faults[what] = report.faults.get(what, 0) + 1
                 console.log(f"fault: {what}")
                 if what == "bench killed":
@@ -310,6 +315,8 @@ def main() -> int:
                     help="hits per point: the soak ends when the run is complete")
     ap.add_argument("--fault-every", type=float, nargs=2, default=(5.0, 25.0),
                     metavar=("LOW", "HIGH"), help="seconds between faults (uniform)")
+    ap.add_argument("--first-fault", choices=(*FAULTS, "bench killed", "host stall"),
+                    help="the first fault injected (the others drawn)")
     ap.add_argument("--json", type=Path, help="write the report as JSON here")
     ap.add_argument("--write-docs", action="store_true",
                     help="append the table to docs/reliability.md")
@@ -317,7 +324,7 @@ def main() -> int:
     console = Console()
     with tempfile.TemporaryDirectory() as d:
         report = soak(args.minutes, args.seed, Path(d), console, args.hits,
-                      tuple(args.fault_every))
+                      tuple(args.fault_every), args.first_fault)
     console.print(table(report))
     for p in report.pauses:
         console.print(f"segment ended: {p}")
