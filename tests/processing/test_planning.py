@@ -112,6 +112,21 @@ def test_chosen_directions_are_allowed_ones_and_the_layout_has_rank_6() -> None:
     assert design.prediction.geometry.rank_T == 6 and design.prediction.geometry.rank_E == 6
 
 
+def test_prediction_does_not_search_the_models_frfs_for_channel_delays(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The model's FRFs have no channel delay: the prediction's identification reads none
+    (the search for them cost 3-4x the prediction's time on flexible units)."""
+    import processing.identify as identify
+
+    def searched(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the prediction searched the model's FRFs for channel delays")
+
+    monkeypatch.setattr(identify, "_delays_against_fit", searched)
+    monkeypatch.setattr(identify, "_delays_alone", searched)
+    design = plan_test(_model(first_elastic=150.0), _candidates(), 4, 8, COND)
+    assert design.prediction is not None and design.prediction.std["mass"] > 0
+
+
 def _reference_layout(spec: ScenarioSpec, first_elastic: float | None = None,
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A reference scenario, the planner's model (the truth perturbed by a few %), the
