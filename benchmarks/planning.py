@@ -320,15 +320,17 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         runs = {"whole": (ok, _ok(row["random"]))}
         runs |= {part: (_ok(v["chosen"]), _ok(v["random"]))
                  for part, v in row.get("parts", {}).items()}
-        for part, (a_runs, b_runs) in runs.items():
-            if a_runs and b_runs:
-                for m in GAIN_METRICS:
-                    a = np.median([r["errors"][m] for r in a_runs])
-                    b = np.median([r["errors"][m] for r in b_runs])
-                    gain.setdefault(part, {}).setdefault(m, []).append(float(b / max(a, 1e-300)))
-                    if part == "elastic" and ok:  # the elastic bias over the whole error
-                        whole = np.median([r["errors"][m] for r in ok])
-                        share.setdefault(m, []).append(float(a / max(whole, 1e-300)))
+        # each part's median errors (chosen, random) per metric, where both were measured
+        med = {part: {m: [float(np.median([r["errors"][m] for r in runs_k])) for runs_k in ab]
+                      for m in GAIN_METRICS}
+               for part, ab in runs.items() if all(ab)}
+        for part, by_metric in med.items():
+            for m, (a, b) in by_metric.items():
+                gain.setdefault(part, {}).setdefault(m, []).append(b / max(a, 1e-300))
+        if "whole" in med and "elastic" in med:  # the elastic bias over the whole error
+            for m in GAIN_METRICS:
+                share.setdefault(m, []).append(med["elastic"][m][0]
+                                               / max(med["whole"][m][0], 1e-300))
     secs = np.array([r["seconds"] for r in rows])
     return {"ratio": ratio, "cases": cases, "gain": gain, "share": share, "refused": refused,
             "seconds": secs, "cond_T": np.array([r["cond_T"] for r in planned]),
