@@ -53,9 +53,11 @@ class UnitSpectra:
     weight : (n_u,) segments each unit averages (the weight of its spectra in the mean)
 
     All spectra of one column share one scaling; only their ratios matter. They are kept
-    in single precision (:data:`UNIT_DTYPE`): a resample's FRFs need no more, and a long
-    shaker test's units are then half the size (12 runs x 20 blocks x 13 channels x 1025
-    lines: 34 MB, not 68). The FRFs themselves come from the spectra in full precision.
+    in single precision (:data:`UNIT_DTYPE`), on the FRFs' lines only (up to fs / 2.56 by
+    default): a resample's FRFs need no more, and a long shaker test's units are then less
+    than half the size (12 runs x 20 blocks x 13 channels x 800 lines: 27 MB, not 68 in
+    double precision on all 1025 lines). The FRFs themselves come from the spectra in full
+    precision.
     """
 
     freq: NDArray[np.float64]
@@ -80,6 +82,15 @@ class UnitSpectra:
     @property
     def n_units(self) -> int:
         return int(self.Sff.shape[0])
+
+    def below(self, fmax: float | None) -> UnitSpectra:
+        """The units on the lines up to ``fmax`` Hz (all when None), copied: the lines an
+        FRF set cut there can use (:meth:`processing.data.FRFSet.select_lines`)."""
+        k = self.freq.size if fmax is None else int(np.searchsorted(self.freq, fmax, "right"))
+        if k == self.freq.size:
+            return self
+        return UnitSpectra(self.freq[:k].copy(), self.Sff[:, :k].copy(),
+                           self.Sfx[..., :k].copy(), self.Sxx[..., :k].copy(), self.weight)
 
     @classmethod
     def of(cls, spectra: Sequence[CrossSpectra]) -> UnitSpectra:
@@ -182,42 +193,57 @@ def record_units(records: ArrayLike, fs: float, windows: ArrayLike | None = None
                        np.ones(rec.shape[0]))
 
 
-def welch_units(acc: SpectralAccumulator, data: NDArray[np.floating],
-                n_blocks: int = WELCH_BLOCKS) -> tuple[CrossSpectra, UnitSpectra | None]:
+def welch_units(acc: SpectralAccumulator,
+                data: NDArray[np.floating] | Sequence[NDArray[np.floating]],
+                n_blocks: int = WELCH_BLOCKS, fmax: float | None = None,
+                ) -> tuple[CrossSpectra, UnitSpectra | None]:
     """Feed ``data`` (n_ch, n) to ``acc`` in pieces and return its spectra and the blocks of
     contiguous segments as units (None under ``MIN_UNITS`` blocks of
-    ``WELCH_MIN_SEGMENTS``).
+    ``WELCH_MIN_SEGMENTS``), on the lines up to ``fmax`` Hz (all when None).
 
-    The accumulator's result is the same, bit for bit, as one update with all of ``data``
+    ``data`` may come as parts, each (k, n) or (n,), their rows in order: the pieces are
+    joined as they are fed, so the whole recording is never copied. The accumulator's
+    result is the same, bit for bit, as one update with all of ``data``
     (:class:`~processing.spectral.SpectralAccumulator`); a block's spectra are the
-    difference of the running sums before and after its segments. ``acc`` must be new.
+    difference of the running sums before and after its segments, kept in
+    :data:`UNIT_DTYPE` as soon as formed. ``acc`` must be new.
     """
-    from processing.spectral import CrossSpectra
+    parts = [data] if isinstance(data, np.ndarray) else [np.atleast_2d(p) for p in data]
+
+    def piece(a: int, b: int) -> NDArray[np.floating]:
+        return parts[0][:, a:b] if len(parts) == 1 else np.vstack([p[:, a:b] for p in parts])
 
     N, step = acc.nperseg, acc.step
-    n = data.shape[-1]
+    n = parts[0].shape[-1]
     n_seg = 0 if n < N else (n - N) // step + 1
     g = min(n_blocks, n_seg // WELCH_MIN_SEGMENTS)
     if g < MIN_UNITS:
-        acc.update(data)
+        acc.update(piece(0, n))
         return acc.spectra(), None
     ends = [round(n_seg * (j + 1) / g) for j in range(g)]  # segments done after block j
-    blocks: list[CrossSpectra] = []
+    Sff, Sfx, Sxx, weight = [], [], [], []
     fed, prev = 0, None
     for e in ends:
         stop = n if e == n_seg else (e - 1) * step + N
-        acc.update(data[:, fed:stop])
+        acc.update(piece(fed, stop))
         fed = stop
         now = acc.spectra()
+        keep = (slice(None) if fmax is None
+                else slice(0, int(np.searchsorted(now.freq, fmax, side="right"))))
         if prev is None:
-            blocks.append(now)
+            ff, fx, xx = now.Sff[0, 0, keep], now.Sfx[0, :, keep], now.Sxx[:, keep]
+            k = now.n_averages
         else:
             k0, k1 = prev.n_averages, now.n_averages
-            blocks.append(CrossSpectra(
-                now.freq, (now.Sff * k1 - prev.Sff * k0) / (k1 - k0),
-                (now.Sfx * k1 - prev.Sfx * k0) / (k1 - k0),
-                (now.Sxx * k1 - prev.Sxx * k0) / (k1 - k0), k1 - k0,
-                now.ref_channels, now.resp_channels))
+            ff = (now.Sff[0, 0, keep] * k1 - prev.Sff[0, 0, keep] * k0) / (k1 - k0)
+            fx = (now.Sfx[0, :, keep] * k1 - prev.Sfx[0, :, keep] * k0) / (k1 - k0)
+            xx = (now.Sxx[:, keep] * k1 - prev.Sxx[:, keep] * k0) / (k1 - k0)
+            k = k1 - k0
+        Sff.append(np.asarray(ff.real, dtype=UNIT_DTYPE))
+        Sfx.append(np.asarray(fx, dtype=UNIT_CDTYPE))
+        Sxx.append(np.asarray(xx, dtype=UNIT_DTYPE))
+        weight.append(float(k))
         prev = now
     assert prev is not None
-    return prev, UnitSpectra.of(blocks)
+    return prev, UnitSpectra(prev.freq[keep], np.stack(Sff), np.stack(Sfx), np.stack(Sxx),
+                             np.array(weight))

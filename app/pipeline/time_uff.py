@@ -118,7 +118,8 @@ def _record_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
     if records.shape[0] == 0:
         raise InputError(f"load case {r.load_case}: no whole {what}: record longer or give "
                          "--nperseg")
-    units = record_units(records, r.fs) if records.shape[0] >= MIN_UNITS else None
+    units = (record_units(records, r.fs).below(_fmax(s, r.fs)) if records.shape[0] >= MIN_UNITS
+             else None)
     return record_spectra(records, r.fs), units, note
 
 
@@ -137,7 +138,13 @@ def _random_spectra(r: TimeRun, s: Settings) -> tuple[CrossSpectra, UnitSpectra 
     n = r.n_samples
     if s.averages is not None:  # the samples of the first N segments
         n = min(n, (s.averages - 1) * (nperseg - noverlap) + nperseg)
-    return (*welch_units(acc, np.vstack([r.force[None, :n], r.responses[:, :n]])), "")
+    return (*welch_units(acc, (r.force[:n], r.responses[:, :n]), fmax=_fmax(s, r.fs)), "")
+
+
+def _fmax(s: Settings, fs: float) -> float:
+    """The highest line of the FRFs of runs sampled at ``fs`` Hz (``s.fmax``, default
+    fs / 2.56): the units keep no line above it."""
+    return s.fmax if s.fmax is not None else fs / 2.56
 
 
 #: the earlier hits' (bursts') ringing is taken off each record by default when the
@@ -674,7 +681,7 @@ def _attempt(path: Path, file: TimeSource, runs: _Passes, s: Settings,
                         "above)", reports)
     geometry = geometry or file.geometry()
     keys = list(cols)
-    fmax = s.fmax if s.fmax is not None else first.fs / 2.56
+    fmax = _fmax(s, first.fs)
     out, _ = assemble(cols[keys[0]][2], [cols[k][0] for k in keys],
                       [cols[k][1] for k in keys], first.resp_nodes, first.resp_dirs,
                       np.array([k[0] for k in keys]), np.array([k[1] for k in keys]), geometry,

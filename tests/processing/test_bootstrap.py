@@ -63,6 +63,24 @@ def test_welch_units_leave_the_spectra_unchanged_and_sum_to_them() -> None:
     assert few is None  # 4 segments: under 3 blocks of 2
 
 
+def test_welch_units_of_parts_up_to_fmax_are_the_whole_units_cut_there() -> None:
+    rng = np.random.default_rng(12)
+    data = rng.normal(size=(4, 30_000))
+    sp, whole = welch_units(SpectralAccumulator(1000.0, 512), data)
+    sp_p, cut = welch_units(SpectralAccumulator(1000.0, 512), (data[0], data[1:]), fmax=390.625)
+    for name in ("Sff", "Sfx", "Sxx"):  # the spectra whole, bit for bit, from the parts
+        assert_array_equal(getattr(sp_p, name), getattr(sp, name))
+    assert whole is not None and cut is not None
+    assert cut.freq[-1] == 390.625 and cut.freq.size == 201  # the line at fmax kept
+    for name in ("Sff", "Sfx", "Sxx"):  # the same units, their lines above fmax not kept
+        assert_array_equal(getattr(cut, name), getattr(whole, name)[..., :201])
+        assert getattr(cut, name).base is None  # not views holding the whole lines
+    assert_array_equal(cut.weight, whole.weight)
+    below = whole.below(390.625)
+    assert_array_equal(below.Sfx, cut.Sfx)
+    assert below.Sfx.base is None and whole.below(None) is whole
+
+
 def test_kept_hits_give_the_averaged_column() -> None:
     fs, n = 512.0, 6000
     t = np.arange(n) / fs
