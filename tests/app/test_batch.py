@@ -149,15 +149,17 @@ def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         if address:  # the cluster closed by its scheduler: a SIGTERM'd worker takes 8 s
             with suppress(OSError), Client(address, timeout=10) as c:
                 c.shutdown()
-        for p in reversed(procs):
+        for p in reversed(procs):  # the workers first, while their scheduler still answers
+            if p is not procs[0]:
+                with suppress(subprocess.TimeoutExpired):
+                    p.wait(timeout=15)  # gone of themselves once the scheduler closed them
             if p.poll() is None:
                 p.terminate()
-        for p in reversed(procs):
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+                try:
+                    p.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
 
 
 def test_batch_on_a_running_scheduler(files: list[Path], scheduler: str,
