@@ -1,10 +1,12 @@
-"""Session-wide settings: the command line's log file goes to a temporary folder, one
-OpenBLAS thread a process, and SIGINT is Python's own handler again when the suite was
-started with it ignored."""
+"""Session-wide settings: the command line's log file goes to a temporary folder (removed
+when the process ends), one OpenBLAS thread a process, and SIGINT is Python's own handler
+again when the suite was started with it ignored."""
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import signal
 import tempfile
 from pathlib import Path
@@ -12,6 +14,7 @@ from pathlib import Path
 import pytest
 
 _LOGS = Path(tempfile.mkdtemp(prefix="insitu-log-"))
+atexit.register(shutil.rmtree, _LOGS, ignore_errors=True)  # one a worker: none left behind
 os.environ.setdefault("INSITU_LOG", str(_LOGS / "insitu.log"))
 
 # One OpenBLAS thread in every worker (and every process a test starts; set before the
