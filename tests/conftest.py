@@ -32,11 +32,22 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The ``slow`` tests (the real-time runs on the mock benches, tens of seconds each) first,
-    each group in its own order: with ``--maxschedchunk 1`` the workers take the tests one
-    or two at a time, so the long ones run side by side from the start instead of one
-    worker finishing them alone at the end."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    """The ``slow`` tests (the real-time runs on the mock benches, tens of seconds each, most
+    of it waiting on the bench's clock) spread evenly over the first three quarters of the
+    others, each group in its own order. With ``--maxschedchunk 1`` the workers take the
+    tests one or two at a time, so about as many workers wait on a bench as compute beside
+    them, from the start to near the end: the cores stay busy, and no long test is left for
+    one worker to finish alone at the end (all of them first left the cores half idle while
+    the benches ran, then all busy)."""
+    slow = [item for item in items if item.get_closest_marker("slow") is not None]
+    rest = [item for item in items if item.get_closest_marker("slow") is None]
+    step = 0.75 * len(rest) / max(len(slow), 1)
+    out: list[pytest.Item] = []
+    for k, item in enumerate(slow):
+        out.extend(rest[len(out) - k : round(k * step)])
+        out.append(item)
+    out.extend(rest[len(out) - len(slow) :])
+    items[:] = out
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
