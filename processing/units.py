@@ -86,7 +86,7 @@ class UnitSpectra:
     def below(self, fmax: float | None) -> UnitSpectra:
         """The units on the lines up to ``fmax`` Hz (all when None), copied: the lines an
         FRF set cut there can use (:meth:`processing.data.FRFSet.select_lines`)."""
-        k = self.freq.size if fmax is None else int(np.searchsorted(self.freq, fmax, "right"))
+        k = _lines_upto(self.freq, fmax)
         if k == self.freq.size:
             return self
         return UnitSpectra(self.freq[:k].copy(), self.Sff[:, :k].copy(),
@@ -221,6 +221,7 @@ def welch_units(acc: SpectralAccumulator,
         acc.update(piece(0, n))
         return acc.spectra(), None
     ends = [round(n_seg * (j + 1) / g) for j in range(g)]  # segments done after block j
+    keep = slice(0, _lines_upto(acc.freq, fmax))
     Sff, Sfx, Sxx, weight = [], [], [], []
     fed, prev = 0, None
     for e in ends:
@@ -228,8 +229,6 @@ def welch_units(acc: SpectralAccumulator,
         acc.update(piece(fed, stop))
         fed = stop
         now = acc.spectra()
-        keep = (slice(None) if fmax is None
-                else slice(0, int(np.searchsorted(now.freq, fmax, side="right"))))
         if prev is None:
             ff, fx, xx = now.Sff[0, 0, keep], now.Sfx[0, :, keep], now.Sxx[:, keep]
             k = now.n_averages
@@ -247,3 +246,8 @@ def welch_units(acc: SpectralAccumulator,
     assert prev is not None
     return prev, UnitSpectra(prev.freq[keep], np.stack(Sff), np.stack(Sfx), np.stack(Sxx),
                              np.array(weight))
+
+
+def _lines_upto(freq: NDArray[np.float64], fmax: float | None) -> int:
+    """How many of the ascending lines ``freq`` lie at or below ``fmax`` Hz (all when None)."""
+    return freq.size if fmax is None else int(np.searchsorted(freq, fmax, side="right"))

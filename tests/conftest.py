@@ -43,10 +43,13 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     rest = [item for item in items if item.get_closest_marker("slow") is None]
     step = 0.75 * len(rest) / max(len(slow), 1)
     out: list[pytest.Item] = []
+    taken = 0  # of the others, placed so far
     for k, item in enumerate(slow):
-        out.extend(rest[len(out) - k : round(k * step)])
+        upto = max(taken, round(k * step))
+        out.extend(rest[taken:upto])
         out.append(item)
-    out.extend(rest[len(out) - len(slow) :])
+        taken = upto
+    out.extend(rest[taken:])
     items[:] = out
 
 
