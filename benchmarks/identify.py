@@ -134,7 +134,8 @@ CHILD_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECOD
 
 
 def run_process(argv: Sequence[str]) -> tuple[float, float, str]:
-    """Wall time (s), peak resident memory (MB) and stdout of one process."""
+    """Wall time (s), peak resident memory (MB, 10^6 bytes: the unit of the file sizes it is
+    divided by) and stdout of one process."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                             text=True, env=CHILD_ENV)
@@ -144,7 +145,7 @@ def run_process(argv: Sequence[str]) -> tuple[float, float, str]:
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(argv)} exited with {proc.returncode}")
-    return wall, usage.ru_maxrss / 1024, out
+    return wall, usage.ru_maxrss * 1024 / 1e6, out  # ru_maxrss: KiB
 
 
 def taking_turns(commands: dict[str, list[str]], repeat: int) -> dict[str, list[tuple[float,
