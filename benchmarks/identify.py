@@ -14,7 +14,10 @@ Measured in one run, each pair taking turns (medians over ``--repeat`` runs):
      model (``hardware_mocks/reference/timedata.py``);
    - a run file of 18 points x 3 hits (``insitu acquire --mock --hits 3``), and its
      ``insitu replay``;
-   wall time and the process's peak resident memory;
+   wall time and the process's peak resident memory; for the shaker time UFF, its peak
+   beside the peaks of a process with numpy and scipy only and of one that has also loaded
+   and called the spectra's compiled kernels (numba and LLVM: a fixed cost of any process
+   that computes spectra);
 3. per stage, in this process (warm): load (reading and parsing), FRFs (spectra and hit
    processing), prepare (the problem: rigid-body accelerances, elastic peaks), bands (band
    choice, line weights, the mass band settled), fit (solve, checks, result), uncertainty
@@ -133,19 +136,27 @@ Section = tuple[str, tuple[str, ...], list[list[str]]]
 CHILD_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
+#: a small process that starts ``argv`` and reports its wall time (s) and peak resident
+#: memory (KiB) on the last line of its stderr: a child started by a large process counts
+#: that process's peak as its own (Linux carries the memory's high-water mark over at the
+#: exec of a child that shares it, as spawned children do), and this one is small (no site)
+LAUNCHER = ("import os, sys, time; t = time.perf_counter(); "
+            "pid = os.posix_spawnp(sys.argv[1], sys.argv[1:], os.environ); "
+            "_, status, usage = os.wait4(pid, 0); t = time.perf_counter() - t; "
+            "print(f'\\n{t} {usage.ru_maxrss}', file=sys.stderr); "
+            "sys.exit(os.waitstatus_to_exitcode(status))")
+
+
 def run_process(argv: Sequence[str]) -> tuple[float, float, str]:
     """Wall time (s), peak resident memory (MB, 10^6 bytes: the unit of the file sizes it is
-    divided by) and stdout of one process."""
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                            text=True, env=CHILD_ENV)
-    out = proc.stdout.read() if proc.stdout else ""
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t0
-    proc.returncode = os.waitstatus_to_exitcode(status)
+    divided by) and stdout of one process, as measured by :data:`LAUNCHER` (its own start
+    not counted)."""
+    proc = subprocess.run([PY, "-S", "-c", LAUNCHER, *argv], cwd=ROOT, capture_output=True,
+                          text=True, env=CHILD_ENV)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(argv)} exited with {proc.returncode}")
-    return wall, usage.ru_maxrss * 1024 / 1e6, out  # ru_maxrss: KiB
+    wall, kib = proc.stderr.strip().splitlines()[-1].split()
+    return float(wall), int(kib) * 1024 / 1e6, proc.stdout
 
 
 def taking_turns(commands: dict[str, list[str]], repeat: int) -> dict[str, list[tuple[float,
@@ -175,6 +186,32 @@ def start_table(repeat: int) -> Section:
             ["`python -c \"import numpy, scipy.linalg\"`", f"{median(runs['bare']):.3f}",
              "1.00"]]
     return "Start", ("command", "s (median)", "ratio (median of pairs)"), rows
+
+
+#: a process that loads the spectra's compiled kernels (numba, LLVM) and calls them once
+KERNELS = ("import numpy as np; from processing.spectral import SpectralAccumulator; "
+           "SpectralAccumulator(1024.0, 256).update(np.zeros((2, 1024)))")
+
+
+def memory_table(cases: list[Case], repeat: int) -> Section:
+    """The shaker time UFF's peak memory against what a process holds before any data: the
+    interpreter with numpy and scipy, and that with the spectra's compiled kernels loaded
+    and called once (numba's import and LLVM, which every spectra computation pays)."""
+    shaker = next(c for c in cases if c.name == "shaker time UFF")
+    size = shaker.path.stat().st_size / 1e6
+    runs = taking_turns({"bare": [PY, "-c", "import numpy, scipy.linalg"],
+                         "kernels": [PY, "-c", KERNELS],
+                         "ours": [*INSITU, "identify", str(shaker.path)]}, repeat)
+    peak = {k: median(r, 1) for k, r in runs.items()}
+    rows = [["`python -c \"import numpy, scipy.linalg\"`", f"{peak['bare']:.0f}", "", ""],
+            ["the same with the spectra's kernels loaded and called once",
+             f"{peak['kernels']:.0f}", f"{peak['kernels'] - peak['bare']:.0f}", ""],
+            [f"`insitu identify {shaker.path.name}` ({size:.1f} MB)", f"{peak['ours']:.0f}",
+             f"{peak['ours'] - peak['kernels']:.0f}",
+             f"{peak['ours'] / size:.2f} / {(peak['ours'] - peak['kernels']) / size:.2f}"]]
+    return ("Peak memory of the shaker time UFF, and what a process holds before the data",
+            ("process", "peak MB (median)", "MB above the row before",
+             "peak / file: whole / above the kernels' process"), rows)
 
 
 def end_to_end(cases: list[Case], repeat: int, work: Path) -> Section:
@@ -448,7 +485,8 @@ def main() -> int:
                        check=True, cwd=ROOT)
         cases = cases_in(work)
         tables = [start_table(args.repeat), end_to_end(cases, args.repeat, work),
-                  stage_table(cases, args.repeat), core_table(args.repeat),
+                  memory_table(cases, args.repeat), stage_table(cases, args.repeat),
+                  core_table(args.repeat),
                   live_table(args.live_runs, work)]
     for t in tables:
         console.print(rich_table(t))
