@@ -354,6 +354,23 @@ def _delays(budget: Budget, n_resp: int, fs: float, rng: np.random.Generator) ->
     return np.asarray(rng.uniform(-budget.skew, budget.skew, n_resp) / fs, dtype=np.float64)
 
 
+#: samples before a hit's start that its recorded responses already reach: the zero-phase
+#: anti-alias filter's precursor (:func:`_anti_alias`) and up to a sample of channel skew
+HIT_LEAD = 8
+
+
+def _clipped_hits(hits: tuple[Hit, ...], full: NDArray[np.bool_], fs: float,
+                  ) -> tuple[Hit, ...]:
+    """``hits`` with those labelled clipped whose own samples reach a range (``full``, per
+    sample): from :data:`HIT_LEAD` samples before the hit's start to as many before the
+    next hit's (a sample at a range just before a hit is that hit's, not the last one's)."""
+    if not hits:
+        return hits
+    at = [max(round(h.time * fs) - HIT_LEAD, 0) for h in hits] + [full.size]
+    return tuple(replace(h, clipped=h.clipped or bool(np.any(full[a:z])))
+                 for h, a, z in zip(hits, at[:-1], at[1:], strict=True))
+
+
 def _apply_budget(runs: list[TimeRecording], b: Budget, fs: float,
                   rng: np.random.Generator) -> tuple[list[TimeRecording],
                                                      NDArray[np.float64] | None]:
@@ -398,14 +415,9 @@ def _apply_budget(runs: list[TimeRecording], b: Budget, fs: float,
             f = np.round(f / lsb_f) * lsb_f
         x = np.clip(x, -range_x[:, None], range_x[:, None])
         f = np.clip(f, -range_f, range_f)
-        hits = r.hits
-        if hits:
-            at = [round(h.time * fs) for h in hits] + [r.n_samples]
-            full = (np.any(np.abs(x) >= range_x[:, None] * (1 - 1e-12), axis=0)
-                    | np.any(np.abs(f) >= range_f * (1 - 1e-12), axis=0))
-            hits = tuple(replace(h, clipped=h.clipped or bool(np.any(full[a:z])))
-                         for h, a, z in zip(hits, at[:-1], at[1:], strict=True))
-        out.append(replace(r, forces=f, responses=x, hits=hits))
+        full = (np.any(np.abs(x) >= range_x[:, None] * (1 - 1e-12), axis=0)
+                | np.any(np.abs(f) >= range_f * (1 - 1e-12), axis=0))
+        out.append(replace(r, forces=f, responses=x, hits=_clipped_hits(r.hits, full, fs)))
     ranged = b.bits is not None or b.clip_channels > 0
     return out, (np.asarray(range_x, dtype=np.float64) if ranged else None)
 

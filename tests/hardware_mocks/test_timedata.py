@@ -12,14 +12,17 @@ from numpy.testing import assert_allclose
 from app.io.uff import read_time_uff
 from hardware_mocks.reference.scenarios import Scenario, ScenarioSpec, build_scenario
 from hardware_mocks.reference.timedata import (
+    HIT_LEAD,
     Budget,
     HammerSpec,
+    Hit,
     ShakerSpec,
     good_and_bad,
     hammer_test,
     shaker_test,
     write_uff,
 )
+from hardware_mocks.reference.timedata import _clipped_hits as clipped_hits
 
 
 @cache
@@ -181,7 +184,7 @@ def test_converter_codes_clip_and_label_the_hits() -> None:
     assert np.count_nonzero(at_top) == 2 and np.all(at_top <= 5)
     clipped_hits = 0
     for r in t.runs:
-        at = [round(h.time * t.fs) for h in r.hits] + [r.n_samples]
+        at = [max(round(h.time * t.fs) - HIT_LEAD, 0) for h in r.hits] + [r.n_samples]
         for h, a, z in zip(r.hits, at[:-1], at[1:], strict=True):
             reach = np.any(np.abs(r.responses[:, a:z]) >= ranges[:, None] * (1 - 1e-12))
             assert h.clipped == bool(reach)
@@ -193,6 +196,21 @@ def test_converter_codes_clip_and_label_the_hits() -> None:
         step = np.min(np.diff(levels))
         assert_allclose(levels / step, np.round(levels / step), rtol=0, atol=1e-6)
         assert levels.size <= 2**16
+
+
+def test_a_clip_just_before_a_hit_is_that_hits() -> None:
+    """A sample at a range a sample before a hit's start (its zero-phase filtered response
+    leads the force) labels that hit, not the one before, whose record never holds it (as
+    in a budget test whose third hit's first clipped sample came 3 ms before its start)."""
+    fs = 256.0
+    hits = (Hit(1.0, 100.0, 0.01), Hit(5.0, 100.0, 0.01), Hit(9.0, 100.0, 0.01))
+    full = np.zeros(12 * 256, dtype=bool)
+    full[round(9.0 * fs) - 1] = True
+    assert [h.clipped for h in clipped_hits(hits, full, fs)] == [False, False, True]
+    full[:] = False
+    full[round(5.0 * fs) + 200] = True  # the second hit's ringing, 0.8 s after it
+    assert [h.clipped for h in clipped_hits(hits, full, fs)] == [False, True, False]
+    assert [h.clipped for h in clipped_hits(hits, np.zeros_like(full), fs)] == [False] * 3
 
 
 def test_mains_hum_sits_at_the_mains_lines() -> None:
