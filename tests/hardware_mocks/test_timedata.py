@@ -22,7 +22,7 @@ from hardware_mocks.reference.timedata import (
     shaker_test,
     write_uff,
 )
-from hardware_mocks.reference.timedata import _clipped_hits as clipped_hits
+from hardware_mocks.reference.timedata import _clipped_hits as label_clipped
 
 
 @cache
@@ -206,11 +206,11 @@ def test_a_clip_just_before_a_hit_is_that_hits() -> None:
     hits = (Hit(1.0, 100.0, 0.01), Hit(5.0, 100.0, 0.01), Hit(9.0, 100.0, 0.01))
     full = np.zeros(12 * 256, dtype=bool)
     full[round(9.0 * fs) - 1] = True
-    assert [h.clipped for h in clipped_hits(hits, full, fs)] == [False, False, True]
+    assert [h.clipped for h in label_clipped(hits, full, fs)] == [False, False, True]
     full[:] = False
     full[round(5.0 * fs) + 200] = True  # the second hit's ringing, 0.8 s after it
-    assert [h.clipped for h in clipped_hits(hits, full, fs)] == [False, True, False]
-    assert [h.clipped for h in clipped_hits(hits, np.zeros_like(full), fs)] == [False] * 3
+    assert [h.clipped for h in label_clipped(hits, full, fs)] == [False, True, False]
+    assert [h.clipped for h in label_clipped(hits, np.zeros_like(full), fs)] == [False] * 3
 
 
 def test_mains_hum_sits_at_the_mains_lines() -> None:
