@@ -364,8 +364,6 @@ def _clipped_hits(hits: tuple[Hit, ...], full: NDArray[np.bool_], fs: float,
     """``hits`` with those labelled clipped whose own samples reach a range (``full``, per
     sample): from :data:`HIT_LEAD` samples before the hit's start to as many before the
     next hit's (a sample at a range just before a hit is that hit's, not the last one's)."""
-    if not hits:
-        return hits
     at = [max(round(h.time * fs) - HIT_LEAD, 0) for h in hits] + [full.size]
     return tuple(replace(h, clipped=h.clipped or bool(np.any(full[a:z])))
                  for h, a, z in zip(hits, at[:-1], at[1:], strict=True))
@@ -415,9 +413,12 @@ def _apply_budget(runs: list[TimeRecording], b: Budget, fs: float,
             f = np.round(f / lsb_f) * lsb_f
         x = np.clip(x, -range_x[:, None], range_x[:, None])
         f = np.clip(f, -range_f, range_f)
-        full = (np.any(np.abs(x) >= range_x[:, None] * (1 - 1e-12), axis=0)
-                | np.any(np.abs(f) >= range_f * (1 - 1e-12), axis=0))
-        out.append(replace(r, forces=f, responses=x, hits=_clipped_hits(r.hits, full, fs)))
+        hits = r.hits
+        if hits:  # a hammer run's: which reach a range
+            full = (np.any(np.abs(x) >= range_x[:, None] * (1 - 1e-12), axis=0)
+                    | np.any(np.abs(f) >= range_f * (1 - 1e-12), axis=0))
+            hits = _clipped_hits(hits, full, fs)
+        out.append(replace(r, forces=f, responses=x, hits=hits))
     ranged = b.bits is not None or b.clip_channels > 0
     return out, (np.asarray(range_x, dtype=np.float64) if ranged else None)
 
