@@ -123,6 +123,7 @@ class Generator33500(BenchDrive):
         self.offset = 0.0
         self.load = "50"
         self.output = False
+        self._on_since = time.monotonic()  # when the output last came on
 
     @property
     def resource(self) -> str:
@@ -165,15 +166,18 @@ class Generator33500(BenchDrive):
         return float(self.volt / 2 if self.unit == "VPP" else self.volt * np.sqrt(2))
 
     def force(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Force on the structure (N) at host instants ``t`` (s, ``time.monotonic()``)."""
+        """Force on the structure (N) at host instants ``t`` (s, ``time.monotonic()``); 0 before
+        the output came on (a front end started just before asks for its past)."""
         t = np.asarray(t, dtype=float)
+        out = np.zeros_like(t)
         with self._lock:
             if not self.output:
-                return np.zeros_like(t)
+                return out
             scale = self._peak()
             func, f_sine, band, srate = self.function, self.frequency, self.band, self.srate
             wave = self.arbs.get(self.arb or "")
-        tau = t - self._t_origin
+            on = np.flatnonzero(t >= self._on_since)
+        tau = t[on] - self._t_origin
         if func == "SIN":
             unit = np.sin(2 * np.pi * f_sine * tau)
         elif func == "NOIS":
@@ -185,7 +189,8 @@ class Generator33500(BenchDrive):
             k = np.floor(pos).astype(np.int64)
             frac = pos - k
             unit = wave[k] * (1 - frac) + wave[(k + 1) % wave.size] * frac
-        return np.asarray(self.force_per_volt * scale * unit)
+        out[on] = self.force_per_volt * scale * unit
+        return out
 
     # -- firmware ---------------------------------------------------------------------------------
     def _fail(self, code: int) -> None:
@@ -297,7 +302,10 @@ class Generator33500(BenchDrive):
     def _setting(self, head: str, arg: str) -> None:
         if head == "OUTP":
             if (word := self._choice(arg, ("ON", "OFF", "1", "0"))) is not None:
-                self.output = word in ("ON", "1")
+                on = word in ("ON", "1")
+                if on and not self.output:
+                    self._on_since = time.monotonic()
+                self.output = on
         elif head == "FUNC":
             if (word := self._choice(arg, ("SIN", "NOIS", "ARB"))) is not None:
                 if word == "ARB" and self.arb is None:

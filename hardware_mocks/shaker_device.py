@@ -130,6 +130,7 @@ class ShakerDevice(BenchDrive, SerialMockDevice):
         self.ramp = 1.0
         self.output = False
         self.level_now = 0.0
+        self._rest_until = time.monotonic()  # the last instant seen with the output at 0
         self.watchdog = 0.0
         self._last_heartbeat = time.monotonic()
 
@@ -144,12 +145,14 @@ class ShakerDevice(BenchDrive, SerialMockDevice):
         """Force on the structure (N) at host instants ``t`` (s, ``time.monotonic()``).
 
         The ramp is extrapolated from the device's present state, so a change of
-        output (on, off, level) shows in forces asked for after it.
+        output (on, off, level) shows in forces asked for after it. Before the last
+        instant the device saw its output at rest the force is 0: a front end started
+        just before the output came on asks for its past (one impulse response long).
         """
         t = np.asarray(t, dtype=float)
         with self._lock:
             target = self.level if self.output else 0.0
-            now_level, t_upd = self.level_now, self._last_update
+            now_level, t_upd, rest = self.level_now, self._last_update, self._rest_until
             rate = max(self.level, self.level_now) / self.ramp if self.ramp > 0 else np.inf
             func, f_sine = self.function, self.frequency
             f0, f1, period, duty = self.f_start, self.f_stop, self.period, self.duty
@@ -158,9 +161,12 @@ class ShakerDevice(BenchDrive, SerialMockDevice):
             env = now_level + np.sign(target - now_level) * step
         else:  # no ramp: the level changes at once
             env = np.full_like(t, target)
-        if not np.any(env):
-            return np.zeros_like(t)
-        tau = t - self._t_origin
+        # the wave only where the output is on: a multisine costs its 4096 lines a sample
+        on = np.flatnonzero((env != 0) & (t >= rest))
+        out = np.zeros_like(t)
+        if on.size == 0:
+            return out
+        tau = t[on] - self._t_origin
         if func == "SIN":
             wave = np.sin(2 * np.pi * f_sine * tau)
         elif func == "CHIRP":
@@ -170,7 +176,8 @@ class ShakerDevice(BenchDrive, SerialMockDevice):
             wave = self.multisine(tau, f0, f1)
             if func == "BRAN":
                 wave = wave * (np.mod(tau, period) < duty * period)
-        return np.asarray(self.force_per_volt * env * wave)
+        out[on] = self.force_per_volt * env[on] * wave
+        return out
 
     def amplifier_fault(self) -> None:
         """Trip the amplifier: output off, error 103 queued."""
@@ -202,6 +209,8 @@ class ShakerDevice(BenchDrive, SerialMockDevice):
         elif self.level_now > target:
             down = (self.level_now / self.ramp * dt) if self.ramp > 0 else float("inf")
             self.level_now = max(target, self.level_now - max(step, down, 1e-9))
+        if self.level_now == 0.0:
+            self._rest_until = now
 
     def _run(self) -> None:
         while not self._stop.is_set():

@@ -89,6 +89,20 @@ def test_noise_is_flat_to_its_bandwidth_at_the_rms_set(gen: Generator33500,
     assert spec[freq > 101].sum() < 1e-20 * spec.sum()
 
 
+def test_no_force_before_the_output_came_on(gen: Generator33500, sock: socket.socket) -> None:
+    """A front end started just before the output came on asks for its past: 0 N there (the
+    generator has no ramp), the sine from the instant it switched on."""
+    sock.sendall(b"FUNC SIN\nFREQ 20\nVOLT 2\nOUTP ON\nSYST:ERR?\n")
+    assert _line(sock) == b'+0,"No error"\n'
+    on = gen._on_since
+    t = on + np.arange(-2.0, 0.5, 1 / 1024)
+    f = gen.force(t)
+    assert not np.any(f[t < on])
+    assert_allclose(f[t >= on], 40.0 * np.sin(2 * np.pi * 20.0 * (t[t >= on] - gen._t_origin)))
+    sock.sendall(b"OUTP ON\nSYST:ERR?\n")  # already on: the instant stays
+    assert _line(sock) == b'+0,"No error"\n' and gen._on_since == on
+
+
 def test_faults_silent_error_and_dropped_connection(gen: Generator33500,
                                                     sock: socket.socket) -> None:
     sock.sendall(b"OUTP ON\nOUTP?\n")

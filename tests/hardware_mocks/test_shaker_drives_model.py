@@ -99,6 +99,35 @@ def test_waveforms_ramp_and_attachment(engine_physics_factory) -> None:
         assert physics.continuous_force(t) == {}
 
 
+def test_no_force_before_the_output_came_on(engine_physics_factory, monkeypatch) -> None:
+    """A front end started as the output comes on simulates the shaker's past, one impulse
+    response long (8 s at 1024 Hz): the force is 0 before the output left 0 V, and the
+    multisine (4096 lines a sample) is evaluated only after. Taken as on all along, two
+    shakers' past held the mock front end's thread for 2.2-3.7 s on a loaded machine (its
+    first loop ran after the output came on), and its driver took the device for silent."""
+    physics: BenchPhysics = engine_physics_factory()
+    with ShakerDevice(physics, force_per_volt=10.0) as dev:
+        dev.function, dev.f_start, dev.f_stop = "RAND", 4.0, 400.0
+        dev.level, dev.ramp, dev.output = 1.0, 0.5, True
+        deadline = time.monotonic() + 30.0  # only guards against a hang
+        while dev.level_now == 0.0 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        on = dev._rest_until  # the ramp's start, as the device saw it
+        t = on - 8.0 + np.arange(int(8.2 * 1024)) / 1024.0
+        asked: list[int] = []
+        whole = dev.multisine
+
+        def counted(tau: np.ndarray, f0: float, f1: float) -> np.ndarray:
+            asked.append(tau.size)
+            return whole(tau, f0, f1)
+
+        monkeypatch.setattr(dev, "multisine", counted)
+        f = dev.force(t)
+    after = t >= on
+    assert asked == [np.count_nonzero(after)]
+    assert not np.any(f[~after]) and np.all(f[after] != 0.0)
+
+
 @pytest.mark.slow
 def test_two_shakers_each_on_its_own_force_input(engine_physics_factory,
                                                  request: pytest.FixtureRequest) -> None:
