@@ -154,7 +154,10 @@ class TimeBlock:
     first_sample : int
         Device sample counter of ``data[:, 0]`` since the last start.
     host_time : float or None
-        Host ``time.monotonic()`` estimate of the first sample, s (for clock sync).
+        Host ``time.monotonic()`` by which the first sample had been taken, s: the tightest
+        bound the device's latest frames give (their arrival less the samples after it at
+        the nominal rate); None when unknown. Within a frame's latency of the sample's
+        time; far behind the time of the read when the block comes from a backlog.
     missing : int
         Number of sample instants where at least one channel is NaN.
     overloaded : tuple of str
@@ -441,7 +444,8 @@ class StreamingFrontEnd(AcquisitionFrontEnd):
 
     def _read_block_internal(self, n_samples: int, timeout: float) -> TimeBlock:
         data, first, missing, ovl = self._buffer.take(n_samples, timeout, self.stall_timeout)
-        return TimeBlock(data, self.fs, self.channels, first, None, missing,
+        return TimeBlock(data, self.fs, self.channels, first,
+                         self._buffer.taken_by(first, self.fs), missing,
                          tuple(self.channels[i].name for i in sorted(ovl)))
 
 

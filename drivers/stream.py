@@ -18,6 +18,7 @@ and are read first.
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from collections import deque
@@ -115,6 +116,17 @@ class SampleBuffer:
     @property
     def appended(self) -> int:
         return self._appended
+
+    def taken_by(self, k: int, fs: float, recent: int = 64) -> float | None:
+        """Host time by which sample ``k`` (counted since the reset) had been taken, s: the
+        tightest of the ``recent`` latest frames' bounds (a frame ending sample ``c - 1``
+        arrived at ``t``, so sample ``k`` was taken by ``t - (c - 1 - k) / fs``); None
+        before any frame. Late frames loosen no bound: the earliest arrival decides."""
+        with self._cond:
+            if not self._pairs:
+                return None
+            last = list(itertools.islice(reversed(self._pairs), recent))
+        return min(t - (c - 1 - k) / fs for t, c in last)
 
     def pairs(self) -> list[tuple[float, int]]:
         """``(host arrival time, samples received so far)`` per frame, oldest first."""

@@ -5,10 +5,12 @@
 until the procedure reports the point complete. A hit the procedure never
 reports (its trigger lost in corrupted frames) is repeated once the procedure has
 read ``patience`` s of data since, as an operator who saw nothing happen would: the
-wait runs on the data the run reads (``on_samples``), not on the wall clock, so a
-loaded machine that is slow to judge a hit does not get it twice. Faults can be scripted by hit
-number (double hits, overloads) for tests and demos. :class:`MockShakerOperator`
-attaches the mock shaker's stinger at each point the shaker procedure announces.
+wait runs on the data the run reads (``on_samples``), not on the wall clock, and
+counts only the samples taken after the hit landed (a block's ``t_first``), so a loaded
+machine that is slow to judge a hit, or reads a backlog of older samples, does not get it
+twice. Faults can be scripted by hit number (double hits, overloads) for tests and demos.
+:class:`MockShakerOperator` attaches the mock shaker's stinger at each point the shaker
+procedure announces.
 
 :class:`RemoteOperator` and :class:`RemoteShakerOperator` do the same to a mock
 bench in another process (``insitu mock-bench``), through its control channel
@@ -144,17 +146,19 @@ class MockOperator:
         self._seen: set[int] = set()
         self._waiting: Any = None  # the point of the hit not reported yet
         self._data_seen = 0.0  # s of data the run read since that hit
+        self._hit_at = 0.0  # host time that hit lands
         self._overdue = False
 
     def exc_index(self, point: Any) -> int:
         """The bench excitation DOF of a plan point (by node, then closest direction)."""
         return excitation_index(self.bench, point)
 
-    def _watch(self, point: Any) -> None:
-        """(Re)start the wait for the procedure to report the hit just made."""
+    def _watch(self, point: Any, at: float) -> None:
+        """(Re)start the wait for the procedure to report the hit about to land at host
+        time ``at``."""
         with self._lock:
             self._waiting = point if self.patience > 0 and not self._closed else None
-            self._data_seen, self._overdue = 0.0, False
+            self._data_seen, self._overdue, self._hit_at = 0.0, False, at
 
     def _cancel(self) -> None:
         with self._lock:
@@ -180,7 +184,7 @@ class MockOperator:
         # the wait for the report is armed before the hit can land: on a loaded machine this
         # thread may be held until the hit is reported (even the run finished), whose
         # callbacks then find and cancel it; armed after, it would repeat a reported hit
-        self._watch(point)
+        self._watch(point, now + delay)
         try:
             self.hammer.hit(exc=exc, peak=peak, duration=self.duration, double=double,
                             delay=delay)
@@ -207,14 +211,18 @@ class MockOperator:
 
     def on_samples(self, block: Any) -> None:
         """The run read ``block`` (a :class:`~app.acquire.events.SampleBlock`): past
-        :attr:`patience` s of data since a hit not reported, hit again. Not at the read that
-        crosses it, which may hold the hit (a machine slow to read reads much at once), but
-        at the next: the run judges what it read before it reads again."""
+        :attr:`patience` s of data taken after a hit not reported, hit again. Not at the read
+        that crosses it, which may hold the hit (a machine slow to read reads much at once),
+        but at the next: the run judges what it read before it reads again. A block without
+        its samples' time (``t_first`` None) counts whole."""
         with self._lock:
             point = self._waiting
             if point is None:
                 return
-            self._data_seen += block.data.shape[-1] / block.fs
+            span = block.data.shape[-1] / block.fs
+            if block.t_first is not None:  # only the samples after the hit landed
+                span = min(span, max(0.0, block.t_first + span - self._hit_at))
+            self._data_seen += span
             if self._data_seen < self.patience:
                 return
             if not self._overdue:

@@ -142,12 +142,17 @@ class SampleBlock:
         Channel name of each row.
     t_read : float
         ``time.monotonic()`` when the samples were read, s.
+    t_first : float or None
+        ``time.monotonic()`` by which the first sample had been taken (the reference
+        device's frames, :attr:`drivers.base.TimeBlock.host_time`), s; None when unknown.
+        Behind ``t_read`` by more than the block's length when the run reads a backlog.
     """
 
     data: NDArray[np.float64]
     fs: float
     names: tuple[str, ...]
     t_read: float
+    t_first: float | None = None
 
 
 class Listener:

@@ -187,8 +187,8 @@ class HammerProcedure(RecordingProcedure):
             rec.n_pretrigger, rec.n_samples, rec.trigger_level, sync_row=sync,
             samples=self._samples)
 
-    def _samples(self, data: NDArray[np.float64]) -> None:
-        self.emit_samples(data, self.plan.record.fs, [c.name for c in self.rows])
+    def _samples(self, data: NDArray[np.float64], t_first: float | None) -> None:
+        self.emit_samples(data, self.plan.record.fs, [c.name for c in self.rows], t_first)
 
     def _open_file(self) -> None:
         rec = self.plan.record

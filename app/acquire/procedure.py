@@ -138,10 +138,13 @@ class Procedure:
         """Call listener callback ``name`` on every listener."""
         dispatch(self.listeners, name, *args)
 
-    def emit_samples(self, data: NDArray[np.float64], fs: float, names: Sequence[str]) -> None:
-        """Send ``on_samples`` with the rows just read (skipped when no listener has it)."""
+    def emit_samples(self, data: NDArray[np.float64], fs: float, names: Sequence[str],
+                     t_first: float | None = None) -> None:
+        """Send ``on_samples`` with the rows just read (skipped when no listener has it);
+        ``t_first``: the host time of their first sample, if known."""
         if any(getattr(listener, "on_samples", None) for listener in self.listeners):
-            self.emit("on_samples", SampleBlock(data, fs, tuple(names), time.monotonic()))
+            self.emit("on_samples", SampleBlock(data, fs, tuple(names), time.monotonic(),
+                                                t_first))
 
     def next_to_do(self, items: Iterable[T], done: Callable[[T], bool]) -> T | None:
         """The first of ``items`` not ``done``, or None, once the commands already sent are

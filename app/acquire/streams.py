@@ -111,7 +111,8 @@ class HitStreams:
         of a separate force device is aligned on it to a fraction of a sample.
     samples : callable, optional
         Called after every read with the force and response rows just read, (1 + n_resp,
-        n) at ``ref.fs`` (a separate device's force stretched to ``n``: for display only).
+        n) at ``ref.fs`` (a separate device's force stretched to ``n``: for display only),
+        and the host time of their first sample (``ref``'s estimate, or None).
     """
 
     CHUNK = 0.1  # s per read
@@ -119,7 +120,8 @@ class HitStreams:
     def __init__(self, ref: AcquisitionFrontEnd, resp_rows: list[int],
                  force_dev: AcquisitionFrontEnd, force_row: int, n_before: int, n_record: int,
                  level: float, sync_row: int | None = None,
-                 samples: Callable[[NDArray[np.float64]], None] | None = None) -> None:
+                 samples: Callable[[NDArray[np.float64], float | None], None] | None = None
+                 ) -> None:
         self.ref, self.force_dev = ref, force_dev
         self.samples = samples
         self.separate = force_dev is not ref
@@ -183,7 +185,7 @@ class HitStreams:
             n = ref.data.shape[1]
             force = np.interp(np.linspace(0, f.size - 1, n), np.arange(f.size), f)
         if self.samples is not None:
-            self.samples(np.vstack([force[None], ref.data[self.resp_rows]]))
+            self.samples(np.vstack([force[None], ref.data[self.resp_rows]]), ref.host_time)
 
     def settle(self, seconds: float = 0.7) -> None:
         """Stream ``seconds`` so the clocks can be measured before the first hit."""

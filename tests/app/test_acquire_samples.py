@@ -4,6 +4,7 @@ are cut from the very samples streamed."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,7 @@ def test_hammer_streams_every_read_and_hits_are_cut_from_them(tmp_path: Path) ->
     with InProcessBench("engine-rigid") as bench:
         proc = HammerProcedure(plan, bench.station, tmp_path / "run.h5", partial=True,
                                listeners=[bench.operator, rec, duck])
+        t_start = time.monotonic()
         proc.start()
         assert proc.wait(300) is RunState.FINISHED, proc.message
     names = tuple(c.name for c in proc.rows)
@@ -56,6 +58,9 @@ def test_hammer_streams_every_read_and_hits_are_cut_from_them(tmp_path: Path) ->
     assert all(b.data.shape == (13, 102) for b in rec.blocks)  # 0.1 s reads
     t = np.array([b.t_read for b in rec.blocks])
     assert np.all(np.diff(t) >= 0)
+    # each block's first sample was taken after the run started and before it was read
+    t_first = np.array([b.t_first for b in rec.blocks], dtype=float)
+    assert np.all((t_first >= t_start) & (t_first <= t))
     # the settling reads (0.7 s) came before the first hit, and nothing was skipped since:
     # every record (force and responses) is a slice of the streamed samples
     assert rec.samples_before_first_hit >= 0.7 * 1024

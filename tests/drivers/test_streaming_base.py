@@ -56,6 +56,9 @@ def test_blocks_and_clock_pairs_come_from_the_base() -> None:
         assert first.first_sample == 0 and first.overloaded == ("a",)
         second = dev.read_block(2)
         assert second.first_sample == 4 and second.overloaded == ("a",)
+        # taken by: the earliest bound the frames give (the second frame came late)
+        assert first.host_time == pytest.approx(10.0 - 2 / 1024.0, abs=1e-12)
+        assert second.host_time == pytest.approx(10.0 + 2 / 1024.0, abs=1e-12)
         assert dev.clock_pairs() == [(10.0, 3), (10.5, 6)]
         # nothing more arrives, and this reader never says it polled: the silence counts
         # up to now, and the stall timeout (not the read's 30 s) ends the read

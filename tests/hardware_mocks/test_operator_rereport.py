@@ -3,6 +3,7 @@ again only when the run has read its patience of data without reporting the hit.
 
 from __future__ import annotations
 
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -67,9 +68,10 @@ def test_a_hit_reported_before_the_operator_looks_up_is_not_repeated() -> None:
         op.shutdown()
 
 
-def _block(seconds: float, fs: float = 100.0) -> SimpleNamespace:
-    """What the run read: ``seconds`` of samples at ``fs`` (an on_samples block)."""
-    return SimpleNamespace(data=np.zeros((2, round(seconds * fs))), fs=fs)
+def _block(seconds: float, fs: float = 100.0, t_first: float | None = None) -> SimpleNamespace:
+    """What the run read: ``seconds`` of samples at ``fs`` (an on_samples block), the first
+    taken at host time ``t_first`` (None: not known)."""
+    return SimpleNamespace(data=np.zeros((2, round(seconds * fs))), fs=fs, t_first=t_first)
 
 
 def test_a_hit_never_reported_is_repeated_after_the_patience_in_data() -> None:
@@ -94,5 +96,26 @@ def test_a_hit_never_reported_is_repeated_after_the_patience_in_data() -> None:
             for _ in range(3):
                 op.on_samples(_block(5.0))
             assert op.hits_made == 4 and op.repeats == 1
+        finally:
+            op.shutdown()
+
+
+def test_a_backlog_read_after_the_hit_does_not_count_against_it() -> None:
+    """A loaded machine that held the run reads seconds of samples taken before the hit at
+    once: only the samples taken after the hit landed count towards the patience."""
+    plan = plan_for_bench("engine-rigid", points=[0], hits=2)
+    with HammerDevice(BenchPhysics(get_bench("engine-rigid"))) as hammer:
+        op = MockOperator(hammer, patience=1.0, pause=0.2)
+        try:
+            t = time.monotonic()
+            op.on_next_point(plan.excitations[0])  # lands 0.2 s after t
+            for k in range(4):  # 12 s of backlog, all taken before the hit
+                op.on_samples(_block(3.0, t_first=t - 12.0 + 3.0 * k))
+            op.on_samples(_block(0.4, t_first=t))  # 0.2 s of it after the hit
+            assert op.hits_made == 1 and op.repeats == 0
+            op.on_samples(_block(0.9, t_first=t + 0.4))  # 1.1 s after: crossed ...
+            assert op.hits_made == 1
+            op.on_samples(_block(0.1, t_first=t + 1.3))  # ... and the next read: hit again
+            assert op.hits_made == 2 and op.repeats == 1
         finally:
             op.shutdown()
