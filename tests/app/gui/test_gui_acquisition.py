@@ -94,7 +94,10 @@ def test_whole_test_on_the_mock_bench(qtbot, make_window: Callable[..., MainWind
     qtbot.waitUntil(lambda: _text(station.devices, 0, 4) == "OK", timeout=120000)
     station.monitor_button.click()
     assert station.stream is not None
-    qtbot.waitUntil(lambda: station.levels.frames_new > 3, timeout=120000)
+    try:  # a stream that stopped says why in the message bar
+        qtbot.waitUntil(lambda: station.levels.frames_new > 3, timeout=120000)
+    except qtbot.TimeoutError:
+        pytest.fail(f"{station.levels.frames_new} live frames: {window.messages.text}")
     station.tap_button.click()
     force = list(station.stream.source.names).index("F")  # the hammer
     qtbot.waitUntil(lambda: station.levels.peak_percent()[force] > 1.0, timeout=120000)
