@@ -121,7 +121,9 @@ class SampleBuffer:
         """Host time by which sample ``k`` (counted since the reset) had been taken, s: the
         tightest of the ``recent`` latest frames' bounds (a frame ending sample ``c - 1``
         arrived at ``t``, so sample ``k`` was taken by ``t - (c - 1 - k) / fs``); None
-        before any frame. Late frames loosen no bound: the earliest arrival decides."""
+        before any frame. Late frames loosen no bound: the earliest arrival decides. The
+        lower envelope :func:`drivers.sync.fit_clock` fits over a whole run, taken here
+        at the nominal rate over the latest frames, without a fit: cheap for every read."""
         with self._cond:
             if not self._pairs:
                 return None
