@@ -91,10 +91,13 @@ def free_decay(seg: NDArray[np.float64], n_out: int, sigma: NDArray[np.float64],
 
 def _powers(z: NDArray[Any], first: int, n: int) -> NDArray[np.complex128]:
     """``z ** k`` for k = first .. first + n - 1 (rows) and every pole (columns), as
-    exp(k log z): a third of the time of complex powers."""
+    exp(k log z): a third of the time of complex powers. A decayed pole's powers below the
+    smallest double are 0 (numpy 2.4 flags that underflow in a complex exp; earlier
+    versions did not)."""
     logz = np.log(np.where(z == 0, 1e-300, z))
-    return np.asarray(np.exp(np.arange(first, first + n)[:, None] * logz[None, :]),
-                      dtype=np.complex128)
+    with np.errstate(under="ignore"):
+        return np.asarray(np.exp(np.arange(first, first + n)[:, None] * logz[None, :]),
+                          dtype=np.complex128)
 
 
 def noise_sigma(x: NDArray[np.float64]) -> NDArray[np.float64]:
