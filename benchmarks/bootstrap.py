@@ -67,7 +67,7 @@ from processing.massline import MassLineProblem, stack_real  # noqa: E402
 from processing.measurement import Measurement, Provenance  # noqa: E402
 from processing.physical import constrain_physical  # noqa: E402
 from processing.spectral import SpectralAccumulator, frf  # noqa: E402
-from processing.stages import StiffnessStep, iterate, leakage_shapes, upper_residual_shapes  # noqa: E402
+from processing.stages import StiffnessStep, iterate, leakage_shapes, upper_residual  # noqa: E402
 from processing.stiffness import line_operators  # noqa: E402
 from processing.uncertainty import derived_of_draws  # noqa: E402
 from processing.units import TimeUnits, welch_units  # noqa: E402
@@ -214,8 +214,7 @@ def reference_resample(st: Stages, units: TimeUnits, boot: Bootstrap) -> tuple[
     stiff = np.isin(idx, np.flatnonzero(weights.stiffness_lines))
     msel, ins = weights.mass_lines, bands.in_stiffness
     modelled = fitted.mass_line is not None and fitted.mass_line.shapes is not None
-    shapes = ((leakage_shapes(problem, bands) or upper_residual_shapes(problem.w)) if modelled
-              else [])
+    shapes = (leakage_shapes(problem, bands) or [upper_residual(problem.w)]) if modelled else []
     stacked = np.array([stack_real(sh[msel]) for sh in shapes]) if shapes else None
     solver = dataclasses.replace(problem.solver, tol=max(problem.solver.tol, 1e-9))
     counts = np.split(boot.counts, np.cumsum(boot.units)[:-1], axis=1)

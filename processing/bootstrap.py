@@ -48,7 +48,7 @@ from processing.stages import (
     Fit,
     LineWeights,
     leakage_shapes,
-    upper_residual_shapes,
+    upper_residual,
 )
 from processing.stiffness import (
     DAMPING_BLOCKS,
@@ -625,7 +625,7 @@ def _solve_iterated(problem: Problem, weights: LineWeights, fitted: Fit, bands: 
     msel, ssel, a = weights.mass_lines, weights.stiffness_lines, problem.window_decay
     ml0 = fitted.mass_line
     assert ml0 is not None and ml0.shapes is not None
-    shapes = leakage_shapes(problem, bands) or upper_residual_shapes(problem.w)
+    shapes = leakage_shapes(problem, bands) or [upper_residual(problem.w)]
     shp = np.array(shapes)[ml0.shape_index]  # (n_s, n_f) the kept shapes
     shp_m, shp_s = shp[:, msel], shp[:, ssel]
     s2 = (np.ones(6) if problem.row_scale is None

@@ -97,7 +97,6 @@ __all__ = [
     "solve",
     "stiffness_operators",
     "upper_residual",
-    "upper_residual_shapes",
     "weigh_lines",
 ]
 
@@ -528,19 +527,6 @@ def upper_residual(w: NDArray[np.float64]) -> NDArray[np.complex128]:
     return np.asarray((w / w[-1]) ** 2 + 0j, dtype=np.complex128)
 
 
-def upper_residual_shapes(w: NDArray[np.float64]) -> list[NDArray[np.complex128]]:
-    """The shapes of the upper residual when it is modelled alone (no per-mode leakage
-    terms): :func:`upper_residual` with a free real and a free imaginary coefficient per
-    equation entry. The modes above the band are damped, and the phase the mass line is
-    read with is never exact (what a channel-delay estimate leaves, a few tens of us):
-    with a real coefficient only, the fits on the halves of the mass line, where a ``w^2``
-    term is nearly collinear with the mass, leaned on the imaginary parts, and a common
-    delay of 20 us (0.01 rad on the mass line) took the residual out of the model on a
-    development case (mass 4.8 % off, 0.1 % with it)."""
-    r = upper_residual(w)
-    return [r, 1j * r]
-
-
 def leakage_shapes(problem: Problem, bands: Bands) -> list[NDArray[np.complex128]]:
     """Frequency shapes (all lines) of the modelled leakage: each elastic mode, then w^2."""
     if not bands.leakage:
@@ -678,7 +664,7 @@ def _upper_residual_chosen(problem: Problem, weights: LineWeights,
     if np.count_nonzero(weights.mass_lines) < 8:
         return False, "upper residual not modelled: fewer than 8 mass lines"
     without = _spread(problem, weights, step, [])
-    with_ = _spread(problem, weights, step, upper_residual_shapes(problem.w))
+    with_ = _spread(problem, weights, step, [upper_residual(problem.w)])
     use = with_ < without
     return use, (f"upper residual (w^2 term) {'modelled' if use else 'not modelled'}: "
                  f"half-band disagreement {with_:.2%} with it, {without:.2%} without")
@@ -739,7 +725,7 @@ def settle_mass_band(problem: Problem, bands: Bands, weights: LineWeights,
     ops = operators if operators is not None else stiffness_operators(problem, bands)
     step = StiffnessStep(rough, weights, ops, weights.stiffness_lines[ins])
     shapes = leakage_shapes(problem, bands)
-    models = [shapes] if shapes else [[], upper_residual_shapes(problem.w)]
+    models = [shapes] if shapes else [[], [upper_residual(problem.w)]]
     cands = []
     for top in tops:
         keep = freq[idx] <= top * (1 + 1e-9)
@@ -790,7 +776,7 @@ def solve(problem: Problem, bands: Bands, weights: LineWeights,
     if problem.improved and not shapes and problem.solver.leakage == "auto":
         use, note = _upper_residual_chosen(problem, weights, step)
         if use:
-            shapes = upper_residual_shapes(problem.w)
+            shapes = [upper_residual(problem.w)]
             best = _fit_model(problem, weights, step, shapes)
     damping_note = "damping viscous (K + jwC): the article's model (plain method)"
     if problem.improved and opt.damping == "viscous":
